@@ -1,0 +1,36 @@
+//! The one error type of the core; `python.rs` maps it to Python exceptions in one place.
+use std::fmt;
+
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum CoreError {
+    /// Input that is malformed (shape, range, NaN): becomes `ValueError`.
+    InvalidInput(String),
+    /// The sparsity pattern admits no assignment covering the smaller side: becomes `ValueError`.
+    Infeasible {
+        uncovered: usize,
+        side: &'static str,
+    },
+}
+
+impl fmt::Display for CoreError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            CoreError::InvalidInput(msg) => f.write_str(msg),
+            CoreError::Infeasible { uncovered, side } => write!(
+                f,
+                "no full assignment exists within the sparsity pattern: {uncovered} {side} cannot \
+                 be covered by any one-to-one assignment (add allowed pairs, e.g. each row's \
+                 current match, so every {side_one} has a partner)",
+                side_one = side.trim_end_matches('s')
+            ),
+        }
+    }
+}
+
+impl std::error::Error for CoreError {}
+
+pub type Result<T> = std::result::Result<T, CoreError>;
+
+pub(crate) fn invalid<T>(msg: impl Into<String>) -> Result<T> {
+    Err(CoreError::InvalidInput(msg.into()))
+}

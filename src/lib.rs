@@ -1,0 +1,12 @@
+//! hope_rs core: the compute kernels of HOPE shape matching, free of Python.
+//!
+//! The `python` feature (enabled by maturin) adds the thin `_core` extension module in `python.rs`.
+pub mod csr;
+pub mod error;
+pub mod graph;
+pub mod khop;
+pub mod lmd;
+pub mod overlap;
+
+#[cfg(feature = "python")]
+mod python;

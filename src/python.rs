@@ -1,0 +1,310 @@
+//! The thin `hope_rs._core` extension module: converts NumPy buffers into owned Rust data,
+//! releases the GIL around the kernels, and maps every core error to a Python exception here.
+use crate::csr::{Csr, CsrView};
+use crate::error::CoreError;
+use crate::graph::adjacency_from_faces;
+use crate::khop::HopBalls;
+use crate::lmd::{local_map_distortion, EdgeGraph};
+use crate::overlap::{overlap_cost, BallsAt, OverlapOptions};
+use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use std::panic::{catch_unwind, AssertUnwindSafe};
+
+fn to_py_err(e: CoreError) -> PyErr {
+    PyValueError::new_err(e.to_string())
+}
+
+/// Runs `work` without the GIL; a panic becomes a RuntimeError instead of reaching the user raw.
+fn detached<T: Send>(
+    py: Python<'_>,
+    work: impl FnOnce() -> crate::error::Result<T> + Send,
+) -> PyResult<T> {
+    py.detach(|| catch_unwind(AssertUnwindSafe(work)))
+        .map_err(|_| PyRuntimeError::new_err("internal error in hope_rs (please report it)"))?
+        .map_err(to_py_err)
+}
+
+fn faces_vec(faces: &PyReadonlyArray2<'_, i64>) -> PyResult<Vec<[u32; 3]>> {
+    let a = faces.as_array();
+    if a.ncols() != 3 {
+        return Err(PyValueError::new_err(format!(
+            "faces must be an (M, 3) integer array, got (M, {})",
+            a.ncols()
+        )));
+    }
+    a.outer_iter()
+        .map(|r| {
+            let mut t = [0u32; 3];
+            for (o, &x) in t.iter_mut().zip(r.iter()) {
+                *o = u32::try_from(x).map_err(|_| {
+                    PyValueError::new_err(format!("face index {x} is negative or too large"))
+                })?;
+            }
+            Ok(t)
+        })
+        .collect()
+}
+
+fn points_vec(v: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<[f64; 3]>> {
+    let a = v.as_array();
+    if a.ncols() != 3 {
+        return Err(PyValueError::new_err(format!(
+            "vertices must be an (N, 3) float array, got (N, {})",
+            a.ncols()
+        )));
+    }
+    Ok(a.outer_iter().map(|r| [r[0], r[1], r[2]]).collect())
+}
+
+fn u32_vec(a: &PyReadonlyArray1<'_, i64>, what: &str) -> PyResult<Vec<u32>> {
+    a.as_array()
+        .iter()
+        .map(|&x| {
+            u32::try_from(x)
+                .map_err(|_| PyValueError::new_err(format!("{what} holds {x}, out of range")))
+        })
+        .collect()
+}
+
+fn usize_vec(a: &PyReadonlyArray1<'_, i64>, what: &str) -> PyResult<Vec<usize>> {
+    a.as_array()
+        .iter()
+        .map(|&x| {
+            usize::try_from(x)
+                .map_err(|_| PyValueError::new_err(format!("{what} holds {x}, out of range")))
+        })
+        .collect()
+}
+
+type PyCsr<'py, T> = (
+    Bound<'py, PyArray1<i64>>,
+    Bound<'py, PyArray1<i32>>,
+    Bound<'py, PyArray1<T>>,
+);
+
+/// Hands a CSR to NumPy without copying the big arrays (indices are < 2^31 by construction).
+fn csr_out<T: numpy::Element>(py: Python<'_>, m: Csr<T>) -> PyCsr<'_, T> {
+    let indptr: Vec<i64> = m.indptr.iter().map(|&x| x as i64).collect();
+    let indices: Vec<i32> = m.indices.iter().map(|&x| x as i32).collect();
+    (
+        indptr.into_pyarray(py),
+        indices.into_pyarray(py),
+        m.data.into_pyarray(py),
+    )
+}
+
+/// Owned pattern built from (indptr, indices) arrays.
+fn pattern(
+    indptr: &PyReadonlyArray1<'_, i64>,
+    indices: &PyReadonlyArray1<'_, i64>,
+    n: usize,
+    what: &str,
+) -> PyResult<Csr<()>> {
+    let m = Csr {
+        n_rows: n,
+        n_cols: n,
+        indptr: usize_vec(indptr, what)?,
+        indices: u32_vec(indices, what)?,
+        data: Vec::new(),
+    };
+    m.view().validate(what, false).map_err(to_py_err)?;
+    Ok(m)
+}
+
+/// A mesh's edge graph and hop balls up to `k_max`, built once and reused by every iteration.
+#[pyclass(module = "hope_rs._core", frozen)]
+struct MeshGraph {
+    vertices: Vec<[f64; 3]>,
+    adj: Csr<()>,
+    balls: HopBalls,
+}
+
+#[pymethods]
+impl MeshGraph {
+    #[new]
+    fn new(
+        py: Python<'_>,
+        vertices: PyReadonlyArray2<'_, f64>,
+        faces: PyReadonlyArray2<'_, i64>,
+        k_max: usize,
+    ) -> PyResult<Self> {
+        let vertices = points_vec(&vertices)?;
+        let faces = faces_vec(&faces)?;
+        let (adj, balls) = detached(py, || {
+            let adj = adjacency_from_faces(&faces, vertices.len())?;
+            let balls = HopBalls::new(&adj.view(), k_max)?;
+            Ok((adj, balls))
+        })?;
+        Ok(MeshGraph {
+            vertices,
+            adj,
+            balls,
+        })
+    }
+
+    #[getter]
+    fn n_vertices(&self) -> usize {
+        self.balls.n
+    }
+
+    #[getter]
+    fn k_max(&self) -> usize {
+        self.balls.k_max
+    }
+
+    /// (indptr, indices, data) of the k-hop neighbourhoods, columns sorted.
+    fn khop<'py>(&self, py: Python<'py>, k: usize) -> PyResult<PyCsr<'py, u8>> {
+        if k > self.balls.k_max {
+            return Err(PyValueError::new_err(format!(
+                "k = {k} exceeds this graph's k_max = {}",
+                self.balls.k_max
+            )));
+        }
+        let m = detached(py, || {
+            let p = self.balls.to_csr(k);
+            let nnz = p.nnz();
+            Ok(Csr {
+                n_rows: p.n_rows,
+                n_cols: p.n_cols,
+                indptr: p.indptr,
+                indices: p.indices,
+                data: vec![1u8; nnz],
+            })
+        })?;
+        Ok(csr_out(py, m))
+    }
+
+    /// Mean edge length of the mesh graph.
+    fn mean_edge_length(&self) -> f64 {
+        EdgeGraph {
+            vertices: &self.vertices,
+            adj: self.adj.view(),
+        }
+        .mean_edge_length()
+    }
+}
+
+/// k-hop neighbourhoods of the mesh graph given by `faces` (M x 3) on `n_vertices` vertices.
+#[pyfunction]
+fn khop_neighbourhoods<'py>(
+    py: Python<'py>,
+    faces: PyReadonlyArray2<'py, i64>,
+    k: usize,
+    n_vertices: usize,
+) -> PyResult<PyCsr<'py, u8>> {
+    let faces = faces_vec(&faces)?;
+    let m = detached(py, || {
+        let adj = adjacency_from_faces(&faces, n_vertices)?;
+        let p = HopBalls::new(&adj.view(), k)?.to_csr(k);
+        let nnz = p.nnz();
+        Ok(Csr {
+            n_rows: p.n_rows,
+            n_cols: p.n_cols,
+            indptr: p.indptr,
+            indices: p.indices,
+            data: vec![1u8; nnz],
+        })
+    })?;
+    Ok(csr_out(py, m))
+}
+
+/// Overlap cost from two neighbourhood patterns given as CSR arrays.
+#[pyfunction]
+#[pyo3(signature = (a_indptr, a_indices, n_a, b_indptr, b_indices, n_b, f, witnesses, top_k=None, keep=None))]
+#[allow(clippy::too_many_arguments)]
+fn overlap_cost_csr<'py>(
+    py: Python<'py>,
+    a_indptr: PyReadonlyArray1<'py, i64>,
+    a_indices: PyReadonlyArray1<'py, i64>,
+    n_a: usize,
+    b_indptr: PyReadonlyArray1<'py, i64>,
+    b_indices: PyReadonlyArray1<'py, i64>,
+    n_b: usize,
+    f: PyReadonlyArray1<'py, i64>,
+    witnesses: PyReadonlyArray1<'py, bool>,
+    top_k: Option<usize>,
+    keep: Option<PyReadonlyArray1<'py, i64>>,
+) -> PyResult<PyCsr<'py, u32>> {
+    let a = pattern(&a_indptr, &a_indices, n_a, "nbrs_a")?;
+    let b = pattern(&b_indptr, &b_indices, n_b, "nbrs_b")?;
+    let f = u32_vec(&f, "f")?;
+    let w: Vec<bool> = witnesses.as_array().to_vec();
+    let keep = keep.map(|k| u32_vec(&k, "keep")).transpose()?;
+    let opts = OverlapOptions {
+        top_k,
+        keep: keep.as_deref(),
+    };
+    let m = detached(py, || overlap_cost(&a.view(), &b.view(), &f, &w, opts))?;
+    Ok(csr_out(py, m))
+}
+
+/// Overlap cost at hop radius k between two prebuilt graphs.
+#[pyfunction]
+#[pyo3(signature = (a, b, k, f, witnesses, top_k=None, keep=None))]
+fn overlap_cost_graphs<'py>(
+    py: Python<'py>,
+    a: &MeshGraph,
+    b: &MeshGraph,
+    k: usize,
+    f: PyReadonlyArray1<'py, i64>,
+    witnesses: PyReadonlyArray1<'py, bool>,
+    top_k: Option<usize>,
+    keep: Option<PyReadonlyArray1<'py, i64>>,
+) -> PyResult<PyCsr<'py, u32>> {
+    if k > a.balls.k_max.min(b.balls.k_max) {
+        return Err(PyValueError::new_err("k exceeds the graphs' k_max"));
+    }
+    let f = u32_vec(&f, "f")?;
+    let w: Vec<bool> = witnesses.as_array().to_vec();
+    let keep = keep.map(|k| u32_vec(&k, "keep")).transpose()?;
+    let opts = OverlapOptions {
+        top_k,
+        keep: keep.as_deref(),
+    };
+    let m = detached(py, || {
+        overlap_cost(
+            &BallsAt { balls: &a.balls, k },
+            &BallsAt { balls: &b.balls, k },
+            &f,
+            &w,
+            opts,
+        )
+    })?;
+    Ok(csr_out(py, m))
+}
+
+/// Local map distortion of `f` (A → B): (mean over the 2-ring, fraction of consistent neighbours).
+#[pyfunction]
+fn local_map_distortion_graphs<'py>(
+    py: Python<'py>,
+    a: &MeshGraph,
+    b: &MeshGraph,
+    f: PyReadonlyArray1<'py, i64>,
+    scale_a: f64,
+    scale_b: f64,
+) -> PyResult<(Bound<'py, PyArray1<f32>>, Bound<'py, PyArray1<f32>>)> {
+    let f = u32_vec(&f, "f")?;
+    let (mean, frac) = detached(py, || {
+        let ga = EdgeGraph {
+            vertices: &a.vertices,
+            adj: a.adj.view(),
+        };
+        let gb = EdgeGraph {
+            vertices: &b.vertices,
+            adj: b.adj.view(),
+        };
+        local_map_distortion(&ga, &a.balls, &gb, &f, scale_a, scale_b)
+    })?;
+    Ok((mean.into_pyarray(py), frac.into_pyarray(py)))
+}
+
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<MeshGraph>()?;
+    m.add_function(wrap_pyfunction!(khop_neighbourhoods, m)?)?;
+    m.add_function(wrap_pyfunction!(overlap_cost_csr, m)?)?;
+    m.add_function(wrap_pyfunction!(overlap_cost_graphs, m)?)?;
+    m.add_function(wrap_pyfunction!(local_map_distortion_graphs, m)?)?;
+    Ok(())
+}

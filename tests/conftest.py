@@ -1,0 +1,31 @@
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+DATA = Path(os.environ.get("HOPE_DATA", Path(__file__).resolve().parents[1].parent / "shared" / "data"))
+
+
+def data_path(*parts: str) -> Path:
+    p = DATA.joinpath(*parts)
+    if not p.exists():
+        pytest.skip(f"benchmark data not found at {p} (set HOPE_DATA)")
+    return p
+
+
+@pytest.fixture(scope="session")
+def faust_pair():
+    from hope_rs.mesh import load_mesh
+
+    return (
+        load_mesh(data_path("faust_reg", "tr_reg_012.off")),
+        load_mesh(data_path("faust_reg", "tr_reg_018.off")),
+    )
+
+
+def relabel(faces: np.ndarray, perm: np.ndarray) -> np.ndarray:
+    """Faces of the mesh whose new vertex i is old vertex perm[i]."""
+    inv = np.empty_like(perm)
+    inv[perm] = np.arange(perm.size)
+    return inv[faces]
