@@ -1,127 +1,13 @@
 //! Local map distortion (LMD): how well a map preserves geodesic distances around each vertex.
 //!
-//! Geodesics are shortest paths on the edge graph (Dijkstra), truncated to a small radius. They
-//! overestimate surface distance by a few percent, but LMD compares the same kind of distance on
-//! both shapes at the scale of a 2-ring, so the bias largely cancels; exact surface geodesics would
-//! cost one or two orders of magnitude more per vertex for no measurable gain in witness choice.
-use crate::csr::CsrView;
+//! Geodesics are shortest paths on the edge graph (see `geodesic`), truncated to a small radius.
+//! They overestimate surface distance by a few percent, but LMD compares the same kind of distance
+//! on both shapes at the scale of a 2-ring, so the bias largely cancels; exact surface geodesics
+//! would cost one or two orders of magnitude more per vertex for no measurable gain.
 use crate::error::{invalid, Result};
+use crate::geodesic::{Dijkstra, EdgeGraph};
 use crate::khop::HopBalls;
 use rayon::prelude::*;
-use std::cmp::Reverse;
-use std::collections::BinaryHeap;
-
-/// A mesh's edge graph with Euclidean edge lengths.
-pub struct EdgeGraph<'a> {
-    pub vertices: &'a [[f64; 3]],
-    pub adj: CsrView<'a, ()>,
-}
-
-impl EdgeGraph<'_> {
-    #[inline]
-    fn len(&self, a: usize, b: usize) -> f64 {
-        let (p, q) = (self.vertices[a], self.vertices[b]);
-        ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()
-    }
-
-    /// Mean length of the graph's edges (0 for a graph without edges).
-    pub fn mean_edge_length(&self) -> f64 {
-        let (mut sum, mut count) = (0.0, 0usize);
-        for a in 0..self.adj.n_rows {
-            for &b in self.adj.row(a) {
-                if (b as usize) > a {
-                    sum += self.len(a, b as usize);
-                    count += 1;
-                }
-            }
-        }
-        if count == 0 {
-            0.0
-        } else {
-            sum / count as f64
-        }
-    }
-}
-
-/// Reusable Dijkstra state: `dist[v]` is valid only where `stamp[v] == current`, and
-/// `pending[v] == current` marks a target not yet settled.
-struct Dijkstra {
-    dist: Vec<f64>,
-    stamp: Vec<u32>,
-    pending: Vec<u32>,
-    current: u32,
-    heap: BinaryHeap<Reverse<(u64, u32)>>,
-}
-
-impl Dijkstra {
-    fn new(n: usize) -> Self {
-        Dijkstra {
-            dist: vec![0.0; n],
-            stamp: vec![0; n],
-            pending: vec![0; n],
-            current: 0,
-            heap: BinaryHeap::new(),
-        }
-    }
-
-    /// Distances from `src` to `targets` (infinite where farther than `cutoff`); stops as soon as
-    /// every target is settled, so the search stays local.
-    fn run(&mut self, g: &EdgeGraph, src: usize, targets: &[u32], cutoff: f64, out: &mut Vec<f64>) {
-        self.current = self.current.wrapping_add(1);
-        if self.current == 0 {
-            self.stamp.fill(0);
-            self.pending.fill(0);
-            self.current = 1;
-        }
-        let cur = self.current;
-        let mut remaining = 0usize;
-        for &t in targets {
-            if self.pending[t as usize] != cur {
-                self.pending[t as usize] = cur;
-                remaining += 1;
-            }
-        }
-        self.heap.clear();
-        self.stamp[src] = cur;
-        self.dist[src] = 0.0;
-        // Non-negative f64s order like their bit patterns, so the heap can hold integers.
-        self.heap.push(Reverse((0f64.to_bits(), src as u32)));
-        while remaining > 0 {
-            let Some(Reverse((bits, u))) = self.heap.pop() else {
-                break;
-            };
-            let (du, u) = (f64::from_bits(bits), u as usize);
-            if du > cutoff {
-                break;
-            }
-            if du > self.dist[u] {
-                continue;
-            }
-            if self.pending[u] == cur {
-                self.pending[u] = 0;
-                remaining -= 1;
-            }
-            for &w in g.adj.row(u) {
-                let w = w as usize;
-                let nd = du + g.len(u, w);
-                if self.stamp[w] != cur || nd < self.dist[w] {
-                    self.stamp[w] = cur;
-                    self.dist[w] = nd;
-                    self.heap.push(Reverse((nd.to_bits(), w as u32)));
-                }
-            }
-        }
-        out.clear();
-        out.extend(targets.iter().map(|&t| {
-            let t = t as usize;
-            if self.stamp[t] == cur && self.pending[t] != cur && self.dist[t] <= cutoff {
-                self.dist[t]
-            } else {
-                f64::INFINITY
-            }
-        }));
-    }
-}
 
 /// Per-vertex distortion of the map `f` (A → B) over the 2-ring of each vertex of A.
 ///

@@ -83,27 +83,31 @@ pub fn overlap_cost<A: Rows, B: Rows>(
     let chunks: Vec<(Vec<usize>, Vec<u32>, Vec<u32>)> = (0..n_a.div_ceil(ROWS_PER_TASK))
         .into_par_iter()
         .map_init(
-            || (vec![0u32; n_b], Vec::<u32>::new()),
-            |(count, touched), c| {
+            || (vec![0u32; n_b], vec![0u32; n_b + 1], Vec::<u32>::new()),
+            |(count, first_seen, touched), c| {
                 let lo = c * ROWS_PER_TASK;
                 let hi = (lo + ROWS_PER_TASK).min(n_a);
                 let mut lens = Vec::with_capacity(hi - lo);
                 let mut cols = Vec::new();
                 let mut vals = Vec::new();
                 for p in lo..hi {
+                    let mut n_seen = 0usize;
                     for &v in nbrs_a.row(p) {
                         let v = v as usize;
                         if v >= n_a || !witnesses[v] {
                             continue;
                         }
+                        // The hot loop: branch-free, since whether a column is new is data-
+                        // dependent and unpredictable. Every column is written to the list, and
+                        // the length only advances on a first visit.
                         for &q in nbrs_b.row(f[v] as usize) {
                             let slot = &mut count[q as usize];
-                            if *slot == 0 {
-                                touched.push(q);
-                            }
+                            first_seen[n_seen] = q;
+                            n_seen += (*slot == 0) as usize;
                             *slot += 1;
                         }
                     }
+                    touched.extend_from_slice(&first_seen[..n_seen]);
                     let kept = opts.keep.map(|k| k[p]);
                     if let Some(q) = kept {
                         if count[q as usize] == 0 {

@@ -1,11 +1,14 @@
 //! The thin `hope_rs._core` extension module: converts NumPy buffers into owned Rust data,
 //! releases the GIL around the kernels, and maps every core error to a Python exception here.
-use crate::csr::{Csr, CsrView};
+use crate::auction::{auction_assignment_float, auction_assignment_int};
+use crate::csr::Csr;
 use crate::error::CoreError;
+use crate::geodesic::{pair_distances, EdgeGraph};
 use crate::graph::adjacency_from_faces;
 use crate::khop::HopBalls;
-use crate::lmd::{local_map_distortion, EdgeGraph};
+use crate::lmd::local_map_distortion;
 use crate::overlap::{overlap_cost, BallsAt, OverlapOptions};
+use crate::shot::shot_descriptors;
 use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -175,6 +178,28 @@ impl MeshGraph {
         Ok(csr_out(py, m))
     }
 
+    /// Edge-graph distance of each pair (sources[i], targets[i]); inf where disconnected.
+    fn pair_distances<'py>(
+        &self,
+        py: Python<'py>,
+        sources: PyReadonlyArray1<'py, i64>,
+        targets: PyReadonlyArray1<'py, i64>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let s = u32_vec(&sources, "sources")?;
+        let t = u32_vec(&targets, "targets")?;
+        let d = detached(py, || {
+            pair_distances(
+                &EdgeGraph {
+                    vertices: &self.vertices,
+                    adj: self.adj.view(),
+                },
+                &s,
+                &t,
+            )
+        })?;
+        Ok(d.into_pyarray(py))
+    }
+
     /// Mean edge length of the mesh graph.
     fn mean_edge_length(&self) -> f64 {
         EdgeGraph {
@@ -299,6 +324,74 @@ fn local_map_distortion_graphs<'py>(
     Ok((mean.into_pyarray(py), frac.into_pyarray(py)))
 }
 
+/// Owned sparse cost built from (indptr, indices, data) arrays.
+fn cost_csr<T: numpy::Element + Copy>(
+    indptr: &PyReadonlyArray1<'_, i64>,
+    indices: &PyReadonlyArray1<'_, i64>,
+    data: &PyReadonlyArray1<'_, T>,
+    n_rows: usize,
+    n_cols: usize,
+) -> PyResult<Csr<T>> {
+    let m = Csr {
+        n_rows,
+        n_cols,
+        indptr: usize_vec(indptr, "cost indptr")?,
+        indices: u32_vec(indices, "cost indices")?,
+        data: data.as_array().to_vec(),
+    };
+    m.view().validate("cost", true).map_err(to_py_err)?;
+    Ok(m)
+}
+
+/// Optimal assignment on an integer sparse cost; -1 marks unassigned rows.
+#[pyfunction]
+#[pyo3(name = "auction_assignment_int")]
+fn py_auction_assignment_int<'py>(
+    py: Python<'py>,
+    indptr: PyReadonlyArray1<'py, i64>,
+    indices: PyReadonlyArray1<'py, i64>,
+    data: PyReadonlyArray1<'py, i64>,
+    n_rows: usize,
+    n_cols: usize,
+    maximize: bool,
+) -> PyResult<Bound<'py, PyArray1<i64>>> {
+    let m = cost_csr(&indptr, &indices, &data, n_rows, n_cols)?;
+    let g = detached(py, || auction_assignment_int(&m.view(), maximize))?;
+    Ok(g.into_pyarray(py))
+}
+
+/// Optimal assignment on a float sparse cost; -1 marks unassigned rows.
+#[pyfunction]
+#[pyo3(name = "auction_assignment_float")]
+fn py_auction_assignment_float<'py>(
+    py: Python<'py>,
+    indptr: PyReadonlyArray1<'py, i64>,
+    indices: PyReadonlyArray1<'py, i64>,
+    data: PyReadonlyArray1<'py, f64>,
+    n_rows: usize,
+    n_cols: usize,
+    maximize: bool,
+) -> PyResult<Bound<'py, PyArray1<i64>>> {
+    let m = cost_csr(&indptr, &indices, &data, n_rows, n_cols)?;
+    let g = detached(py, || auction_assignment_float(&m.view(), maximize))?;
+    Ok(g.into_pyarray(py))
+}
+
+/// SHOT descriptors, flat (n * 352) float32.
+#[pyfunction]
+#[pyo3(name = "shot_descriptors")]
+fn py_shot_descriptors<'py>(
+    py: Python<'py>,
+    vertices: PyReadonlyArray2<'py, f64>,
+    faces: PyReadonlyArray2<'py, i64>,
+    radius: f64,
+) -> PyResult<Bound<'py, PyArray1<f32>>> {
+    let v = points_vec(&vertices)?;
+    let f = faces_vec(&faces)?;
+    let d = detached(py, || shot_descriptors(&v, &f, radius))?;
+    Ok(d.into_pyarray(py))
+}
+
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<MeshGraph>()?;
@@ -306,5 +399,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(overlap_cost_csr, m)?)?;
     m.add_function(wrap_pyfunction!(overlap_cost_graphs, m)?)?;
     m.add_function(wrap_pyfunction!(local_map_distortion_graphs, m)?)?;
+    m.add_function(wrap_pyfunction!(py_auction_assignment_int, m)?)?;
+    m.add_function(wrap_pyfunction!(py_auction_assignment_float, m)?)?;
+    m.add_function(wrap_pyfunction!(py_shot_descriptors, m)?)?;
     Ok(())
 }

@@ -1,0 +1,70 @@
+"""Initial maps from per-vertex descriptors: candidates by descriptor distance, then LAP."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import _core
+
+#: Descriptor-space neighbours kept per vertex as assignment candidates.
+N_CANDIDATES = 32
+#: Descriptors are projected on this many principal axes before the neighbour search.
+PCA_DIMS = 64
+
+
+def nearest_candidates(da: np.ndarray, db: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The ``n`` rows of ``db`` closest to each row of ``da``: (indices, squared distances).
+
+    Exact brute force in chunks (no n_a x n_b matrix), after a shared PCA that keeps most of
+    the variance while making the search several times cheaper.
+    """
+    da = np.asarray(da, dtype=np.float32)
+    db = np.asarray(db, dtype=np.float32)
+    if da.shape[1] > PCA_DIMS:
+        both = np.vstack([da, db])
+        mu = both.mean(axis=0)
+        sample = both[:: max(1, both.shape[0] // 20000)] - mu
+        # Eigenvectors of the small d x d covariance: far cheaper than an SVD of the samples.
+        _, vecs = np.linalg.eigh(sample.T.astype(np.float64) @ sample)
+        basis = vecs[:, ::-1][:, :PCA_DIMS].astype(np.float32)
+        da, db = (da - mu) @ basis, (db - mu) @ basis
+    n = min(n, db.shape[0])
+    nb2 = np.einsum("ij,ij->i", db, db)
+    idx = np.empty((da.shape[0], n), dtype=np.int64)
+    dist = np.empty((da.shape[0], n), dtype=np.float32)
+    step = max(1, 2_000_000 // max(db.shape[0], 1))
+    for lo in range(0, da.shape[0], step):
+        chunk = da[lo : lo + step]
+        d2 = nb2[None, :] - 2.0 * chunk @ db.T
+        part = np.argpartition(d2, n - 1, axis=1)[:, :n]
+        pd = np.take_along_axis(d2, part, axis=1)
+        order = np.argsort(pd, axis=1)
+        idx[lo : lo + step] = np.take_along_axis(part, order, axis=1)
+        dist[lo : lo + step] = np.take_along_axis(pd, order, axis=1) + np.einsum(
+            "ij,ij->i", chunk, chunk
+        )[:, None]
+    return idx, np.maximum(dist, 0.0)
+
+
+def initial_map(da: np.ndarray, db: np.ndarray, *, n_candidates: int = N_CANDIDATES) -> np.ndarray:
+    """Map A → B from descriptors: the one-to-one assignment of least total descriptor distance
+    among each vertex's ``n_candidates`` nearest descriptors; vertices the assignment cannot
+    place (A larger than B, or crowded candidates) take their nearest descriptor."""
+    from .refine import injective_completion
+
+    idx, dist = nearest_candidates(da, db, n_candidates)
+    n_a, n_b = da.shape[0], db.shape[0]
+    cost = np.sqrt(dist.astype(np.float64))
+    # A fallback arc per row (an injective completion of the nearest neighbours, at a price above
+    # any candidate) guarantees a full assignment even when candidate sets crowd together.
+    extra = injective_completion(idx[:, 0], n_b)
+    cols = np.concatenate([idx, extra[:, None]], axis=1)
+    vals = np.concatenate([cost, np.full((n_a, 1), 2.0 * cost.max() + 1.0)], axis=1)
+    dup = (cols[:, :-1] == extra[:, None]).any(axis=1)
+    vals[dup, -1] = np.inf  # already a candidate: drop the fallback copy below
+    keep = np.isfinite(vals)
+    indptr = np.concatenate([[0], np.cumsum(keep.sum(axis=1))]).astype(np.int64)
+    g = _core.auction_assignment_float(indptr, cols[keep], vals[keep], n_a, n_b, False)
+    missing = g < 0
+    g[missing] = idx[missing, 0]
+    return g

@@ -1,0 +1,47 @@
+"""Local map distortion (LMD) and the witnesses it selects."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import _core
+from ._validate import as_index_map
+from .shape import Shape
+
+#: A 2-ring neighbour r of p is consistent when |d_A(p, r) - d_B(f(p), f(r))| is below one mean
+#: edge length of A (distances scaled by sqrt(area)); p is a witness when at least this fraction
+#: of its 2-ring is consistent. A fraction rather than the mean distortion keeps witnesses
+#: available under heavy corruption: with 50% of a FAUST map shuffled, no vertex has a mean
+#: distortion below half an edge, while 28% keep a consistent majority (99.9% of them right).
+MIN_CONSISTENT = 0.5
+
+
+def local_map_distortion(a: Shape, b: Shape, f) -> tuple[np.ndarray, np.ndarray]:
+    """Distortion of the map ``f`` (A → B) over the 2-ring of each vertex of A.
+
+    For vertex p and each r in its 2-ring, the edge-graph geodesic d_A(p, r) is compared with
+    d_B(f(p), f(r)), both divided by sqrt(area) of their shape, so scale does not matter.
+
+    Returns
+    -------
+    mean : (n_a,) float32
+        Mean |difference| over the 2-ring, in units of A's mean edge length.
+    consistent : (n_a,) float32
+        Fraction of the 2-ring whose difference is below one mean edge length.
+
+    Notes
+    -----
+    Geodesics are Dijkstra distances on the edge graph, computed locally (each search stops
+    once the 2-ring images are settled, or beyond the 2-ring's radius plus two edges). They
+    overestimate surface distance by a few percent, but the comparison is local and relative,
+    so that bias cancels between the shapes while the cost stays linear in the vertex count.
+    """
+    f = as_index_map(f, a.n_vertices, b.n_vertices, name="f")
+    return _core.local_map_distortion_graphs(a.graph, b.graph, f, a.scale, b.scale)
+
+
+def witnesses(a: Shape, b: Shape, f, *, min_consistent: float = MIN_CONSISTENT) -> np.ndarray:
+    """Boolean mask of the vertices whose match under ``f`` is trusted: at least
+    ``min_consistent`` of their 2-ring keeps its geodesic distance (see :data:`MIN_CONSISTENT`)."""
+    _, consistent = local_map_distortion(a, b, f)
+    return consistent >= min_consistent

@@ -1,0 +1,111 @@
+"""``hope_rs.match``: two meshes in, a dense vertex-to-vertex map out."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ._validate import as_index_map
+from .initial import initial_map
+from .lmd import MIN_CONSISTENT
+from .mesh import Mesh
+from .refine import MAX_PASSES, TOP_K, Iteration, refine
+from .shape import K_MAX, Shape
+
+
+@dataclass
+class MatchResult:
+    """The outcome of :func:`match`.
+
+    Attributes
+    ----------
+    map : (n_a,) int64
+        ``map[i]`` is the vertex of B matched to vertex ``i`` of A. (pyFM's ``p2p_21`` is the
+        other direction: one entry per vertex of shape 2.)
+    init_map : (n_a,) int64
+        The map refinement started from.
+    history : list of Iteration
+        Per refinement step: k, witness fraction, vertices changed, seconds.
+    timings : dict
+        Seconds per stage ("shapes", "descriptors", "init", "refine", "total").
+    """
+
+    map: np.ndarray
+    init_map: np.ndarray
+    history: list[Iteration] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+def _as_shape(x, k_max: int, name: str) -> Shape:
+    if isinstance(x, Shape):
+        if x.k_max < k_max:
+            raise ValueError(f"{name} was built with k_max={x.k_max} < requested k_max={k_max}")
+        return x
+    if isinstance(x, Mesh):
+        return Shape(x, k_max=k_max)
+    if isinstance(x, (tuple, list)) and len(x) == 2:
+        return Shape(Mesh(*x), k_max=k_max)
+    raise TypeError(f"{name} must be a hope_rs.Shape, a hope_rs.Mesh or a (vertices, faces) pair")
+
+
+def match(
+    a,
+    b,
+    *,
+    init="shot",
+    k_max: int = K_MAX,
+    schedule: list[int] | None = None,
+    max_passes: int = MAX_PASSES,
+    min_consistent: float = MIN_CONSISTENT,
+    top_k: int = TOP_K,
+    callback=None,
+) -> MatchResult:
+    """Dense correspondence from shape A to shape B with HOPE.
+
+    Parameters
+    ----------
+    a, b : Shape, Mesh or (vertices, faces)
+        The shapes. Pass :class:`Shape` objects to reuse their precomputation across pairs.
+    init : {"shot", "wks", "hks"} or (n_a,) array_like of int, keyword-only
+        Descriptors for the initial map, or an initial map itself (``init[i]`` a vertex of B).
+    k_max : int
+        Largest hop radius.
+    schedule : list of int, optional
+        Hop radii of one refinement pass; default k_max → 1.
+    max_passes : int
+        Passes of the schedule at most; refinement stops earlier once a pass changes almost
+        nothing.
+    min_consistent : float
+        Witness rule (see :data:`hope_rs.lmd.MIN_CONSISTENT`).
+    top_k : int
+        Candidates kept per vertex in each overlap cost.
+    callback : callable, optional
+        Called with each :class:`~hope_rs.refine.Iteration` as it finishes.
+
+    Returns
+    -------
+    MatchResult
+    """
+    t0 = time.perf_counter()
+    timings: dict[str, float] = {}
+    sa, sb = _as_shape(a, k_max, "a"), _as_shape(b, k_max, "b")
+    timings["shapes"] = time.perf_counter() - t0
+    if isinstance(init, str):
+        t = time.perf_counter()
+        da, db = sa.descriptors(init), sb.descriptors(init)
+        timings["descriptors"] = time.perf_counter() - t
+        t = time.perf_counter()
+        f0 = initial_map(da, db)
+        timings["init"] = time.perf_counter() - t
+    else:
+        f0 = as_index_map(init, sa.n_vertices, sb.n_vertices, name="init")
+    t = time.perf_counter()
+    res = refine(
+        sa, sb, f0, schedule=schedule, max_passes=max_passes, min_consistent=min_consistent,
+        top_k=top_k, callback=callback,
+    )  # fmt: skip
+    timings["refine"] = time.perf_counter() - t
+    timings["total"] = time.perf_counter() - t0
+    return MatchResult(res.map, np.asarray(f0, dtype=np.int64), res.history, timings)

@@ -1,0 +1,137 @@
+"""The HOPE refinement loop: re-assign every vertex to maximise k-hop overlap of witnesses."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import _core
+from .lmd import MIN_CONSISTENT, local_map_distortion
+from .shape import Shape
+
+#: Candidates kept per row of the overlap cost (plus the current match).
+TOP_K = 48
+
+
+def default_schedule(k_max: int) -> list[int]:
+    """One pass: k going k_max → 1. Coarse neighbourhoods first fix large errors, fine ones then
+    sharpen (on FAUST, going 1 → k_max instead reached 73% exact against 96%)."""
+    return list(range(k_max, 0, -1))
+
+
+#: At most this many passes of the schedule.
+MAX_PASSES = 6
+#: Stop after a pass that changed fewer than this fraction of the vertices.
+CONVERGED_FRACTION = 0.01
+
+
+@dataclass
+class Iteration:
+    """What one refinement step did."""
+
+    k: int
+    witness_fraction: float
+    changed: int
+    seconds: float
+
+
+@dataclass
+class RefineResult:
+    map: np.ndarray
+    history: list[Iteration] = field(default_factory=list)
+
+
+def refine(
+    a: Shape,
+    b: Shape,
+    f0: np.ndarray,
+    *,
+    schedule: list[int] | None = None,
+    max_passes: int = MAX_PASSES,
+    min_consistent: float = MIN_CONSISTENT,
+    top_k: int = TOP_K,
+    min_witness_fraction: float = 0.1,
+    callback=None,
+) -> RefineResult:
+    """Refine the map ``f0`` (A → B) with HOPE.
+
+    The schedule (k_max → 1 by default) is repeated until a pass changes fewer than
+    :data:`CONVERGED_FRACTION` of the vertices, or ``max_passes`` passes. Each step selects
+    witnesses by LMD, builds the overlap cost at hop radius k and solves the one-to-one
+    assignment that maximises it. When LMD trusts fewer than ``min_witness_fraction`` of the
+    vertices, every vertex votes instead: wrong votes scatter while right ones agree, so the
+    overlap still points the right way.
+    """
+    k_max = min(a.k_max, b.k_max)
+    schedule = list(schedule) if schedule is not None else default_schedule(k_max)
+    if not schedule or any(not 1 <= k <= k_max for k in schedule):
+        raise ValueError(f"every k of the schedule must be in [1, {k_max}], got {schedule}")
+    f = np.ascontiguousarray(f0, dtype=np.int64)
+    history: list[Iteration] = []
+    for _ in range(max_passes):
+        changed_in_pass = 0
+        for k in schedule:
+            t0 = time.perf_counter()
+            _, consistent = local_map_distortion(a, b, f)
+            w = consistent >= min_consistent
+            if w.mean() < min_witness_fraction:
+                w = np.ones_like(w)
+            f_new = assign_by_overlap(a, b, k, f, w, top_k=top_k)
+            changed = int(np.count_nonzero(f_new != f))
+            changed_in_pass += changed
+            f = f_new
+            history.append(Iteration(k, float(w.mean()), changed, time.perf_counter() - t0))
+            if callback is not None:
+                callback(history[-1])
+        if changed_in_pass < CONVERGED_FRACTION * a.n_vertices:
+            break
+    return RefineResult(f, history)
+
+
+def assign_by_overlap(a: Shape, b: Shape, k: int, f, witnesses, *, top_k: int = TOP_K) -> np.ndarray:
+    """One HOPE step: the one-to-one map maximising the k-hop overlap of the witnesses.
+
+    The current match is worth a quarter of one overlap count, so a vertex moves only when the
+    overlap gains. Every row also keeps one column of an injective completion of ``f``, so a
+    one-to-one assignment always exists even when ``f`` maps several vertices to one. Vertices
+    of A that the assignment leaves out (when A has more vertices than B) take their best
+    candidate.
+    """
+    indptr, indices, counts = _core.overlap_cost_graphs(
+        a.graph, b.graph, k, f, witnesses, top_k, injective_completion(f, b.n_vertices)
+    )
+    rows = np.repeat(np.arange(a.n_vertices), np.diff(indptr))
+    data = counts.astype(np.int64) * 4 + (indices == f[rows])
+    g = _core.auction_assignment_int(indptr, indices.astype(np.int64), data, a.n_vertices, b.n_vertices, True)
+    missing = np.flatnonzero(g < 0)
+    if missing.size:
+        g[missing] = best_in_rows(indptr, indices, data, missing)
+    return g
+
+
+def best_in_rows(indptr, indices, data, rows) -> np.ndarray:
+    """Column of the largest value in each of ``rows`` of a CSR matrix."""
+    out = np.empty(rows.size, dtype=np.int64)
+    for i, r in enumerate(rows):
+        lo, hi = indptr[r], indptr[r + 1]
+        out[i] = indices[lo + int(np.argmax(data[lo:hi]))]
+    return out
+
+
+def injective_completion(f: np.ndarray, n_b: int) -> np.ndarray:
+    """A map as close to ``f`` as possible that is one-to-one on min(n_a, n_b) vertices: the
+    first vertex mapped to each column keeps it, later duplicates take unused columns."""
+    f = np.asarray(f, dtype=np.int64)
+    _, first = np.unique(f, return_index=True)
+    dup = np.ones(f.size, dtype=bool)
+    dup[first] = False
+    dup_rows = np.flatnonzero(dup)
+    used = np.zeros(n_b, dtype=bool)
+    used[f] = True
+    free = np.flatnonzero(~used)
+    g = f.copy()
+    m = min(dup_rows.size, free.size)
+    g[dup_rows[:m]] = free[:m]
+    return g

@@ -1,0 +1,172 @@
+//! Shortest paths on a mesh's edge graph, searched locally (each search stops early).
+use crate::csr::CsrView;
+use crate::error::{invalid, Result};
+use rayon::prelude::*;
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+
+/// A mesh's edge graph with Euclidean edge lengths.
+pub struct EdgeGraph<'a> {
+    pub vertices: &'a [[f64; 3]],
+    pub adj: CsrView<'a, ()>,
+}
+
+impl EdgeGraph<'_> {
+    #[inline]
+    fn len(&self, a: usize, b: usize) -> f64 {
+        let (p, q) = (self.vertices[a], self.vertices[b]);
+        ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()
+    }
+
+    /// Mean length of the graph's edges (0 for a graph without edges).
+    pub fn mean_edge_length(&self) -> f64 {
+        let (mut sum, mut count) = (0.0, 0usize);
+        for a in 0..self.adj.n_rows {
+            for &b in self.adj.row(a) {
+                if (b as usize) > a {
+                    sum += self.len(a, b as usize);
+                    count += 1;
+                }
+            }
+        }
+        if count == 0 {
+            0.0
+        } else {
+            sum / count as f64
+        }
+    }
+}
+
+/// Reusable Dijkstra state: `dist[v]` is valid only where `stamp[v] == current`, and
+/// `pending[v] == current` marks a target not yet settled.
+pub struct Dijkstra {
+    dist: Vec<f64>,
+    stamp: Vec<u32>,
+    pending: Vec<u32>,
+    current: u32,
+    heap: BinaryHeap<Reverse<(u64, u32)>>,
+}
+
+impl Dijkstra {
+    pub fn new(n: usize) -> Self {
+        Dijkstra {
+            dist: vec![0.0; n],
+            stamp: vec![0; n],
+            pending: vec![0; n],
+            current: 0,
+            heap: BinaryHeap::new(),
+        }
+    }
+
+    /// Distances from `src` to `targets` (infinite where farther than `cutoff`); stops as soon as
+    /// every target is settled, so the search stays local.
+    pub fn run(
+        &mut self,
+        g: &EdgeGraph,
+        src: usize,
+        targets: &[u32],
+        cutoff: f64,
+        out: &mut Vec<f64>,
+    ) {
+        self.current = self.current.wrapping_add(1);
+        if self.current == 0 {
+            self.stamp.fill(0);
+            self.pending.fill(0);
+            self.current = 1;
+        }
+        let cur = self.current;
+        let mut remaining = 0usize;
+        for &t in targets {
+            if self.pending[t as usize] != cur {
+                self.pending[t as usize] = cur;
+                remaining += 1;
+            }
+        }
+        self.heap.clear();
+        self.stamp[src] = cur;
+        self.dist[src] = 0.0;
+        // Non-negative f64s order like their bit patterns, so the heap can hold integers.
+        self.heap.push(Reverse((0f64.to_bits(), src as u32)));
+        while remaining > 0 {
+            let Some(Reverse((bits, u))) = self.heap.pop() else {
+                break;
+            };
+            let (du, u) = (f64::from_bits(bits), u as usize);
+            if du > cutoff {
+                break;
+            }
+            if du > self.dist[u] {
+                continue;
+            }
+            if self.pending[u] == cur {
+                self.pending[u] = 0;
+                remaining -= 1;
+            }
+            for &w in g.adj.row(u) {
+                let w = w as usize;
+                let nd = du + g.len(u, w);
+                if self.stamp[w] != cur || nd < self.dist[w] {
+                    self.stamp[w] = cur;
+                    self.dist[w] = nd;
+                    self.heap.push(Reverse((nd.to_bits(), w as u32)));
+                }
+            }
+        }
+        out.clear();
+        out.extend(targets.iter().map(|&t| {
+            let t = t as usize;
+            if self.stamp[t] == cur && self.pending[t] != cur && self.dist[t] <= cutoff {
+                self.dist[t]
+            } else {
+                f64::INFINITY
+            }
+        }));
+    }
+}
+
+/// Edge-graph distance between each pair `(sources[i], targets[i])` (infinite when not
+/// connected). Each search stops once its target is settled, so nearby pairs are cheap.
+pub fn pair_distances(g: &EdgeGraph, sources: &[u32], targets: &[u32]) -> Result<Vec<f64>> {
+    let n = g.adj.n_rows;
+    if sources.len() != targets.len() {
+        return invalid("sources and targets must have the same length");
+    }
+    if sources.iter().chain(targets).any(|&v| v as usize >= n) {
+        return invalid(format!("vertex index out of range for {n} vertices"));
+    }
+    Ok(sources
+        .par_iter()
+        .zip(targets.par_iter())
+        .map_init(
+            || (Dijkstra::new(n), Vec::new()),
+            |(dj, out), (&s, &t)| {
+                dj.run(g, s as usize, &[t], f64::INFINITY, out);
+                out[0]
+            },
+        )
+        .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::graph::adjacency_from_faces;
+
+    #[test]
+    fn distances_along_a_strip() {
+        // Vertices on a line x = i, triangles (i, i+1, i+2): the shortest path hops by two.
+        let v: Vec<[f64; 3]> = (0..10).map(|i| [i as f64, 0.0, 0.0]).collect();
+        let f: Vec<[u32; 3]> = (0..8).map(|i| [i, i + 1, i + 2]).collect();
+        let adj = adjacency_from_faces(&f, 11).unwrap();
+        let mut v11 = v.clone();
+        v11.push([0.0, 5.0, 0.0]);
+        let g = EdgeGraph {
+            vertices: &v11,
+            adj: adj.view(),
+        };
+        let d = pair_distances(&g, &[0, 3, 9, 0], &[9, 3, 0, 10]).unwrap();
+        assert_eq!(&d[..3], &[9.0, 0.0, 9.0]);
+        assert!(d[3].is_infinite());
+        assert!(pair_distances(&g, &[0], &[11]).is_err());
+    }
+}

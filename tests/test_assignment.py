@@ -1,0 +1,167 @@
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.optimize import linear_sum_assignment
+from scipy.sparse.csgraph import min_weight_full_bipartite_matching
+
+import hope_rs
+
+
+def value(cost, g):
+    rows = np.flatnonzero(g >= 0)
+    if sp.issparse(cost):
+        return float(np.asarray(cost.tocsr()[rows, g[rows]]).sum())
+    return float(np.asarray(cost)[rows, g[rows]].sum())
+
+
+def check_valid(g, n_rows, n_cols):
+    assert g.dtype == np.int64 and g.shape == (n_rows,)
+    used = g[g >= 0]
+    assert np.unique(used).size == used.size, "a column is used twice"
+    assert used.size == min(n_rows, n_cols), "the smaller side is not covered"
+    assert np.all(used < n_cols)
+
+
+@st.composite
+def dense_problem(draw):
+    n_rows = draw(st.integers(1, 12))
+    n_cols = draw(st.integers(1, 12))
+    kind = draw(st.sampled_from(["int-ties", "int-wide", "float"]))
+    seed = draw(st.integers(0, 2**32 - 1))
+    rng = np.random.default_rng(seed)
+    if kind == "int-ties":
+        c = rng.integers(0, 3, (n_rows, n_cols))
+    elif kind == "int-wide":
+        c = rng.integers(-(10**6), 10**6, (n_rows, n_cols))
+    else:
+        c = rng.normal(size=(n_rows, n_cols)) * 10 ** rng.uniform(-3, 3)
+    return c
+
+
+@settings(max_examples=300, deadline=None)
+@given(dense_problem(), st.booleans())
+def test_dense_value_equals_scipy(cost, maximize):
+    g = hope_rs.auction_assignment(cost, maximize=maximize)
+    check_valid(g, *cost.shape)
+    r, c = linear_sum_assignment(cost, maximize=maximize)
+    want = float(cost[r, c].sum())
+    tol = 1e-9 * max(1.0, float(np.abs(cost).max())) * cost.shape[0]
+    assert value(cost, g) == pytest.approx(want, abs=tol)
+
+
+@st.composite
+def sparse_problem(draw):
+    n_rows = draw(st.integers(1, 25))
+    n_cols = draw(st.integers(n_rows, 30))
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    density = draw(st.floats(0.05, 0.5))
+    mask = rng.random((n_rows, n_cols)) < density
+    # A hidden perfect matching keeps most instances feasible; single-candidate rows are common.
+    mask[np.arange(n_rows), rng.permutation(n_cols)[:n_rows]] = True
+    if draw(st.booleans()):
+        mask[0] = False
+        mask[0, rng.integers(n_cols)] = True
+    ints = draw(st.booleans())
+    vals = rng.integers(0, 4, mask.shape) if ints else rng.uniform(-5, 5, mask.shape)
+    r, c = np.nonzero(mask)
+    m = sp.csr_matrix((vals[r, c], (r, c)), shape=mask.shape)
+    transpose = draw(st.booleans())
+    return m.T.tocsr() if transpose else m
+
+
+@settings(max_examples=300, deadline=None)
+@given(sparse_problem())
+def test_sparse_value_equals_scipy(cost):
+    n_rows, n_cols = cost.shape
+    small_is_rows = n_rows <= n_cols
+    ref_cost = cost if small_is_rows else cost.T.tocsr()
+    try:
+        # scipy minimises; explicit zeros must survive as allowed pairs, so shift values.
+        shifted = ref_cost.copy()
+        shifted.data = -shifted.data + (np.abs(shifted.data).max() + 1.0)
+        r, c = min_weight_full_bipartite_matching(shifted)
+        feasible = True
+    except ValueError:
+        feasible = False
+    if not feasible:
+        with pytest.raises(ValueError, match="no full assignment"):
+            hope_rs.auction_assignment(cost)
+        return
+    g = hope_rs.auction_assignment(cost)
+    check_valid(g, n_rows, n_cols)
+    assert np.all(np.asarray(cost.tocsr()[np.flatnonzero(g >= 0), g[g >= 0]]).size)
+    want = float(np.asarray(ref_cost[r, c]).sum())
+    tol = 1e-9 * max(1.0, float(np.abs(cost.data).max())) * min(cost.shape)
+    assert value(cost, g) == pytest.approx(want, abs=tol)
+    # Every chosen pair must be an allowed (stored) pair.
+    rows = np.flatnonzero(g >= 0)
+    pattern = cost.tocsr().copy()
+    pattern.data = np.ones_like(pattern.data)
+    assert np.all(np.asarray(pattern[rows, g[rows]]) == 1)
+
+
+def test_explicit_zero_is_allowed_and_missing_is_forbidden():
+    cost = sp.csr_matrix((np.array([0, 5, 1]), np.array([0, 0, 1]), np.array([0, 1, 3])), shape=(2, 2))
+    # Row 0 may only take column 0 (with value 0), so row 1 must take column 1.
+    np.testing.assert_array_equal(hope_rs.auction_assignment(cost), [0, 1])
+
+
+def test_equivariance_under_row_and_column_permutation():
+    rng = np.random.default_rng(3)
+    n = 60
+    cost = rng.integers(0, 10**6, (n, n))  # wide range: the optimum is unique with near certainty
+    g = hope_rs.auction_assignment(cost)
+    pr, pc = rng.permutation(n), rng.permutation(n)
+    g2 = hope_rs.auction_assignment(cost[pr][:, pc])
+    inv_c = np.empty(n, int)
+    inv_c[pc] = np.arange(n)
+    np.testing.assert_array_equal(g2, inv_c[g[pr]])
+
+
+def test_infeasible_reports_uncovered_rows_quickly():
+    n = 100_000
+    # Every row's only candidate is column 0 or 1: n - 2 rows cannot be covered.
+    cols = np.arange(n) % 2
+    cost = sp.csr_matrix((np.ones(n), (np.arange(n), cols)), shape=(n, n))
+    with pytest.raises(ValueError, match=f"{n - 2} rows"):
+        hope_rs.auction_assignment(cost)
+
+
+def test_large_sparse_problem_matches_scipy():
+    rng = np.random.default_rng(5)
+    n, per_row = 3000, 12
+    rows = np.repeat(np.arange(n), per_row)
+    cols = rng.integers(0, n, rows.size)
+    cols[::per_row] = rng.permutation(n)
+    vals = rng.integers(0, 10**6, rows.size)
+    cost = sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
+    cost.sum_duplicates()
+    g = hope_rs.auction_assignment(cost)
+    check_valid(g, n, n)
+    shifted = cost.copy()
+    shifted.data = (10**7 - shifted.data).astype(float)
+    r, c = min_weight_full_bipartite_matching(shifted)
+    assert value(cost, g) == float(np.asarray(cost[r, c]).sum())
+
+
+@pytest.mark.parametrize(
+    "cost, err, match",
+    [
+        (np.array([[1.0, np.nan]]), ValueError, "NaN"),
+        (np.array([[1.0, np.inf]]), ValueError, "NaN or infinite"),
+        (np.ones(3), ValueError, "2-D"),
+        (np.array([["a", "b"]]), TypeError, "integer or float"),
+        (sp.csr_matrix(np.array([[np.nan, 1.0]])), ValueError, "NaN"),
+    ],
+)
+def test_bad_costs(cost, err, match):
+    with pytest.raises(err, match=match):
+        hope_rs.auction_assignment(cost)
+
+
+def test_empty_and_degenerate_shapes():
+    assert hope_rs.auction_assignment(np.zeros((0, 3))).shape == (0,)
+    np.testing.assert_array_equal(hope_rs.auction_assignment(np.zeros((2, 0))), [-1, -1])
+    np.testing.assert_array_equal(hope_rs.auction_assignment(np.array([[7]])), [0])
