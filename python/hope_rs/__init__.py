@@ -5,12 +5,24 @@ other way: it lists, for each vertex of shape 2, a vertex of shape 1.)
 """
 
 from .assignment import auction_assignment
+from .evaluate import geodesic_errors, load_vts, score
 from .kernels import khop_neighbourhoods, overlap_cost
+from .matching import MatchResult, match
+from .mesh import Mesh, load_mesh
+from .shape import Shape
 
 __all__ = [
+    "Mesh",
+    "MatchResult",
+    "Shape",
     "auction_assignment",
+    "geodesic_errors",
     "khop_neighbourhoods",
+    "load_mesh",
+    "load_vts",
+    "match",
     "overlap_cost",
+    "score",
 ]
 
 __version__ = "0.1.0"

@@ -1,0 +1,65 @@
+"""Type stubs of the private native module (see src/python.rs)."""
+
+import numpy as np
+import numpy.typing as npt
+
+_Csr = tuple[npt.NDArray[np.int64], npt.NDArray[np.int32], np.ndarray]
+
+class MeshGraph:
+    def __init__(
+        self, vertices: npt.NDArray[np.float64], faces: npt.NDArray[np.int64], k_max: int
+    ) -> None: ...
+    @property
+    def n_vertices(self) -> int: ...
+    @property
+    def k_max(self) -> int: ...
+    def khop(self, k: int) -> _Csr: ...
+    def pair_distances(
+        self, sources: npt.NDArray[np.int64], targets: npt.NDArray[np.int64]
+    ) -> npt.NDArray[np.float64]: ...
+    def mean_edge_length(self) -> float: ...
+
+def khop_neighbourhoods(faces: npt.NDArray[np.int64], k: int, n_vertices: int) -> _Csr: ...
+def overlap_cost_csr(
+    a_indptr: npt.NDArray[np.int64],
+    a_indices: npt.NDArray[np.int64],
+    n_a: int,
+    b_indptr: npt.NDArray[np.int64],
+    b_indices: npt.NDArray[np.int64],
+    n_b: int,
+    f: npt.NDArray[np.int64],
+    witnesses: npt.NDArray[np.bool_],
+    top_k: int | None = None,
+    keep: npt.NDArray[np.int64] | None = None,
+) -> _Csr: ...
+def overlap_cost_graphs(
+    a: MeshGraph,
+    b: MeshGraph,
+    k: int,
+    f: npt.NDArray[np.int64],
+    witnesses: npt.NDArray[np.bool_],
+    top_k: int | None = None,
+    keep: npt.NDArray[np.int64] | None = None,
+) -> _Csr: ...
+def local_map_distortion_graphs(
+    a: MeshGraph, b: MeshGraph, f: npt.NDArray[np.int64], scale_a: float, scale_b: float
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]: ...
+def auction_assignment_int(
+    indptr: npt.NDArray[np.int64],
+    indices: npt.NDArray[np.int64],
+    data: npt.NDArray[np.int64],
+    n_rows: int,
+    n_cols: int,
+    maximize: bool,
+) -> npt.NDArray[np.int64]: ...
+def auction_assignment_float(
+    indptr: npt.NDArray[np.int64],
+    indices: npt.NDArray[np.int64],
+    data: npt.NDArray[np.float64],
+    n_rows: int,
+    n_cols: int,
+    maximize: bool,
+) -> npt.NDArray[np.int64]: ...
+def shot_descriptors(
+    vertices: npt.NDArray[np.float64], faces: npt.NDArray[np.int64], radius: float
+) -> npt.NDArray[np.float32]: ...

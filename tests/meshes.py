@@ -1,0 +1,28 @@
+"""Generated test meshes."""
+
+import numpy as np
+from scipy.spatial import ConvexHull
+
+
+def bumpy_sphere(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """A random Delaunay-like triangulation of a perturbed sphere: no symmetries to confuse a
+    matcher, and a different triangulation for every seed."""
+    rng = np.random.default_rng(seed)
+    p = rng.normal(size=(n, 3))
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    faces = ConvexHull(p).simplices.astype(np.int64)
+    # Orient faces outwards, then bend the sphere with a smooth random field.
+    c = p[faces].mean(axis=1)
+    nrm = np.cross(p[faces[:, 1]] - p[faces[:, 0]], p[faces[:, 2]] - p[faces[:, 0]])
+    flip = np.einsum("ij,ij->i", nrm, c) < 0
+    faces[flip] = faces[flip][:, ::-1]
+    w = rng.normal(size=(6, 3))
+    r = 1.0 + 0.25 * np.tanh(np.sin(p @ w.T * 2.0).sum(axis=1) / 2)
+    return p * r[:, None] * np.array([1.0, 1.3, 0.8]), faces
+
+
+def random_rigid(rng) -> tuple[np.ndarray, np.ndarray]:
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    if np.linalg.det(q) < 0:
+        q[:, 0] = -q[:, 0]
+    return q, rng.normal(size=3) * 5

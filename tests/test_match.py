@@ -1,0 +1,123 @@
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import hope_rs
+from conftest import relabel
+from meshes import bumpy_sphere, random_rigid
+
+
+def isometric_copy(v, f, rng):
+    """B = A relabelled, rigidly moved and scaled; returns B and the true map A -> B."""
+    perm = rng.permutation(v.shape[0])  # new vertex i of B is old vertex perm[i]
+    inv = np.empty_like(perm)
+    inv[perm] = np.arange(perm.size)
+    rot, shift = random_rigid(rng)
+    scale = rng.uniform(0.5, 2.0)
+    vb = (v[perm] @ rot.T) * scale + shift
+    return hope_rs.Mesh(vb, relabel(f, perm)), inv
+
+
+def half_corrupted(truth, n_b, rng):
+    f0 = truth.copy()
+    bad = rng.random(truth.size) < 0.5
+    f0[bad] = rng.integers(0, n_b, bad.sum())
+    return f0
+
+
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 10**6), st.integers(600, 1500))
+def test_exact_recovery_on_generated_isometric_copies(seed, n):
+    rng = np.random.default_rng(seed)
+    v, f = bumpy_sphere(n, seed)
+    a = hope_rs.Mesh(v, f)
+    b, truth = isometric_copy(v, f, rng)
+    res = hope_rs.match(a, b, init=half_corrupted(truth, b.n_vertices, rng))
+    assert np.mean(res.init_map == truth) < 0.6
+    np.testing.assert_array_equal(res.map, truth)
+
+
+@settings(max_examples=2, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 10**6))
+def test_exact_recovery_on_a_relabelled_faust_shape(faust_pair, seed):
+    rng = np.random.default_rng(seed)
+    a = faust_pair[0]
+    b, truth = isometric_copy(a.vertices, a.faces, rng)
+    res = hope_rs.match(a, b, init=half_corrupted(truth, b.n_vertices, rng))
+    np.testing.assert_array_equal(res.map, truth)
+
+
+def test_faust_pair_with_default_parameters(faust_pair):
+    a, b = faust_pair
+    res = hope_rs.match(a, b)
+    init = hope_rs.score(hope_rs.geodesic_errors(b, res.init_map))
+    final = hope_rs.score(hope_rs.geodesic_errors(b, res.map))
+    assert final.exact >= 0.95, f"{final} (initial map: {init})"
+    assert final.mean < init.mean
+    assert res.history and all(h.k >= 1 for h in res.history)
+    assert set(res.timings) >= {"descriptors", "init", "refine", "total"}
+
+
+def test_relabelling_both_shapes_relabels_the_map(faust_pair):
+    a, b = faust_pair
+    rng = np.random.default_rng(11)
+    pa, pb = rng.permutation(a.n_vertices), rng.permutation(b.n_vertices)
+    inv_b = np.empty_like(pb)
+    inv_b[pb] = np.arange(pb.size)
+    a2 = hope_rs.Mesh(a.vertices[pa], relabel(a.faces, pa))
+    b2 = hope_rs.Mesh(b.vertices[pb], relabel(b.faces, pb))
+    m1 = hope_rs.match(a, b).map
+    m2 = hope_rs.match(a2, b2).map
+    # Both runs are scored against the same ground truth (identity before relabelling).
+    acc1 = np.mean(m1 == np.arange(a.n_vertices))
+    acc2 = np.mean(pb[m2] == pa)
+    assert acc1 == pytest.approx(acc2, abs=0.005)
+    assert np.mean(inv_b[m1[pa]] == m2) > 0.99
+
+
+def test_shapes_are_reusable_and_k_max_is_checked(faust_pair):
+    a, b = faust_pair
+    sa, sb = hope_rs.Shape(a), hope_rs.Shape(b, k_max=4)
+    with pytest.raises(ValueError, match="k_max"):
+        hope_rs.match(sa, sb)
+    res = hope_rs.match(sa, hope_rs.Shape(b), init=np.arange(a.n_vertices), max_passes=1)
+    assert res.map.shape == (a.n_vertices,)
+    assert "shot" not in sa._descriptors  # an explicit init map needs no descriptors
+
+
+def test_different_vertex_counts_every_vertex_gets_a_partner():
+    v, f = bumpy_sphere(900, 1)
+    vb, fb = bumpy_sphere(700, 2)
+    for a, b in [(hope_rs.Mesh(v, f), hope_rs.Mesh(vb, fb)), (hope_rs.Mesh(vb, fb), hope_rs.Mesh(v, f))]:
+        res = hope_rs.match(a, b, max_passes=1)
+        assert res.map.shape == (a.n_vertices,)
+        assert res.map.min() >= 0 and res.map.max() < b.n_vertices
+        if a.n_vertices <= b.n_vertices:
+            assert np.unique(res.map).size == a.n_vertices
+
+
+def test_several_components_and_unreferenced_vertices():
+    v, f = bumpy_sphere(500, 3)
+    v2 = np.vstack([v, v + [5.0, 0, 0], [[9.0, 9.0, 9.0]]])
+    f2 = np.vstack([f, f + v.shape[0]])
+    mesh = hope_rs.Mesh(v2, f2)
+    truth = np.arange(mesh.n_vertices)
+    init = truth.copy()
+    init[::7] = init[::7][::-1]
+    res = hope_rs.match(mesh, mesh, init=init)
+    assert np.mean(res.map == truth) > 0.95
+
+
+@pytest.mark.parametrize(
+    "init, err",
+    [(np.arange(5), ValueError), (np.full(6890, 10**6), ValueError), (np.zeros(6890) + 0.5, TypeError)],
+)
+def test_bad_init_map(faust_pair, init, err):
+    with pytest.raises(err):
+        hope_rs.match(*faust_pair, init=init)
+
+
+def test_bad_init_name(faust_pair):
+    with pytest.raises(ValueError, match="unknown descriptor"):
+        hope_rs.match(*faust_pair, init="sift")
