@@ -11,25 +11,33 @@ import time
 
 
 class Progress:
-    """A one-line progress bar on stderr (silent when stderr is not a terminal unless forced)."""
+    """A one-line progress report on stderr, rewritten after every refinement step.
 
-    def __init__(self, total: int, *, enabled: bool):
-        self.total, self.done, self.enabled, self.t0 = total, 0, enabled, time.perf_counter()
+    The number of passes depends on convergence, so it shows steps done, the current pass's
+    position in the k schedule and the elapsed time rather than a fixed-length bar.
+    """
+
+    def __init__(self, steps_per_pass: int, *, enabled: bool):
+        self.per_pass, self.done, self.enabled = steps_per_pass, 0, enabled
+        self.t0 = time.perf_counter()
 
     def step(self, it) -> None:
         self.done += 1
         if not self.enabled:
             return
-        width = 24
-        fill = int(width * self.done / max(self.total, 1))
+        n_pass, in_pass = divmod(self.done - 1, self.per_pass)
+        width = 16
+        fill = int(width * (in_pass + 1) / self.per_pass)
         sys.stderr.write(
-            f"\rrefining [{'#' * fill}{'.' * (width - fill)}] {self.done}/{self.total} "
-            f"k={it.k} witnesses {100 * it.witness_fraction:4.1f}% changed {it.changed:6d} "
+            f"\rrefining pass {n_pass + 1} [{'#' * fill}{'.' * (width - fill)}] k={it.k} "
+            f"witnesses {100 * it.witness_fraction:4.1f}% changed {it.changed:6d} "
             f"{time.perf_counter() - self.t0:6.1f}s"
         )
-        if self.done == self.total:
-            sys.stderr.write("\n")
         sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.enabled and self.done:
+            sys.stderr.write("\n")
 
 
 def write_map_atomically(path: str, mapping) -> None:
@@ -67,7 +75,10 @@ def cmd_match(args) -> int:
         raise ValueError(f"output {args.output!r} is a folder; give a file name")
     a, b = load_mesh(args.a), load_mesh(args.b)
     progress = Progress(len(default_schedule(args.k_max)), enabled=not args.quiet and sys.stderr.isatty())
-    res = match(a, b, init=args.init, k_max=args.k_max, callback=progress.step)
+    try:
+        res = match(a, b, init=args.init, k_max=args.k_max, callback=progress.step)
+    finally:
+        progress.close()
     if args.output:
         write_map_atomically(args.output, res.map)
     elif not args.json:

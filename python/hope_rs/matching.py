@@ -11,7 +11,7 @@ from ._validate import as_index_map
 from .initial import initial_map
 from .lmd import MIN_CONSISTENT
 from .mesh import Mesh
-from .refine import MAX_PASSES, TOP_K, Iteration, refine
+from .refine import MAX_PASSES, POLISH_K, TOP_K, Iteration, refine
 from .shape import K_MAX, Shape
 
 
@@ -60,6 +60,7 @@ def match(
     max_passes: int = MAX_PASSES,
     min_consistent: float = MIN_CONSISTENT,
     top_k: int = TOP_K,
+    polish_k: int | None = POLISH_K,
     callback=None,
 ) -> MatchResult:
     """Dense correspondence from shape A to shape B with HOPE.
@@ -81,6 +82,9 @@ def match(
         Witness rule (see :data:`hope_rs.lmd.MIN_CONSISTENT`).
     top_k : int
         Candidates kept per vertex in each overlap cost.
+    polish_k : int or None
+        Hop radius of a final step in which each vertex takes its best-overlapping candidate;
+        ``None`` returns the one-to-one map of the last assignment instead.
     callback : callable, optional
         Called with each :class:`~hope_rs.refine.Iteration` as it finishes.
 
@@ -104,7 +108,7 @@ def match(
     t = time.perf_counter()
     res = refine(
         sa, sb, f0, schedule=schedule, max_passes=max_passes, min_consistent=min_consistent,
-        top_k=top_k, callback=callback,
+        top_k=top_k, polish_k=polish_k, callback=callback,
     )  # fmt: skip
     timings["refine"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0

@@ -25,6 +25,8 @@ def default_schedule(k_max: int) -> list[int]:
 MAX_PASSES = 6
 #: Stop after a pass that changed fewer than this fraction of the vertices.
 CONVERGED_FRACTION = 0.01
+#: Hop radius of the final polishing step (each vertex takes its best overlap, not one-to-one).
+POLISH_K = 3
 
 
 @dataclass
@@ -53,6 +55,7 @@ def refine(
     min_consistent: float = MIN_CONSISTENT,
     top_k: int = TOP_K,
     min_witness_fraction: float = 0.1,
+    polish_k: int | None = POLISH_K,
     callback=None,
 ) -> RefineResult:
     """Refine the map ``f0`` (A → B) with HOPE.
@@ -63,6 +66,13 @@ def refine(
     assignment that maximises it. When LMD trusts fewer than ``min_witness_fraction`` of the
     vertices, every vertex votes instead: wrong votes scatter while right ones agree, so the
     overlap still points the right way.
+
+    A last step at hop radius ``polish_k`` lets every vertex take its best-overlapping candidate
+    without the one-to-one constraint. When the shapes are triangulated differently no bijection
+    between their vertices exists, and forcing one leaves many vertices an edge or two off: on
+    FAUST remeshed 000→004 the polish lowers the mean geodesic error from 0.025 to 0.018 (k = 3 was
+    best among 1..8), and on identically triangulated pairs it changes nothing. ``None`` keeps the
+    one-to-one map.
     """
     k_max = min(a.k_max, b.k_max)
     schedule = list(schedule) if schedule is not None else default_schedule(k_max)
@@ -87,6 +97,20 @@ def refine(
                 callback(history[-1])
         if changed_in_pass < CONVERGED_FRACTION * a.n_vertices:
             break
+    if polish_k is not None:
+        t0 = time.perf_counter()
+        k = min(polish_k, k_max)
+        _, consistent = local_map_distortion(a, b, f)
+        w = consistent >= min_consistent
+        if w.mean() < min_witness_fraction:
+            w = np.ones_like(w)
+        f_new = best_overlap(a, b, k, f, w)
+        history.append(
+            Iteration(k, float(w.mean()), int(np.count_nonzero(f_new != f)), time.perf_counter() - t0)
+        )
+        f = f_new
+        if callback is not None:
+            callback(history[-1])
     return RefineResult(f, history)
 
 
@@ -99,25 +123,41 @@ def assign_by_overlap(a: Shape, b: Shape, k: int, f, witnesses, *, top_k: int = 
     of A that the assignment leaves out (when A has more vertices than B) take their best
     candidate.
     """
-    indptr, indices, counts = _core.overlap_cost_graphs(
-        a.graph, b.graph, k, f, witnesses, top_k, injective_completion(f, b.n_vertices)
-    )
-    rows = np.repeat(np.arange(a.n_vertices), np.diff(indptr))
-    data = counts.astype(np.int64) * 4 + (indices == f[rows])
-    g = _core.auction_assignment_int(indptr, indices.astype(np.int64), data, a.n_vertices, b.n_vertices, True)
+    keep = injective_completion(f, b.n_vertices)
+    indptr, indices, data = _overlap_with_bonus(a, b, k, f, witnesses, top_k, keep)
+    g = _core.auction_assignment_int(indptr, indices, data, a.n_vertices, b.n_vertices, True)
     missing = np.flatnonzero(g < 0)
     if missing.size:
         g[missing] = best_in_rows(indptr, indices, data, missing)
     return g
 
 
+def _overlap_with_bonus(a: Shape, b: Shape, k: int, f, witnesses, top_k, keep):
+    """Overlap cost as int64 data worth 4 per count, +1 on each row's current match."""
+    indptr, indices, counts = _core.overlap_cost_graphs(a.graph, b.graph, k, f, witnesses, top_k, keep)
+    rows = np.repeat(np.arange(a.n_vertices), np.diff(indptr))
+    data = counts.astype(np.int64) * 4 + (indices == f[rows])
+    return indptr, indices.astype(np.int64), data
+
+
+def best_overlap(a: Shape, b: Shape, k: int, f, witnesses) -> np.ndarray:
+    """Each vertex's best-overlapping vertex of B (ties kept at the current match)."""
+    indptr, indices, data = _overlap_with_bonus(a, b, k, f, witnesses, TOP_K, f)
+    return best_in_rows(indptr, indices, data, np.arange(a.n_vertices))
+
+
 def best_in_rows(indptr, indices, data, rows) -> np.ndarray:
-    """Column of the largest value in each of ``rows`` of a CSR matrix."""
-    out = np.empty(rows.size, dtype=np.int64)
-    for i, r in enumerate(rows):
-        lo, hi = indptr[r], indptr[r + 1]
-        out[i] = indices[lo + int(np.argmax(data[lo:hi]))]
-    return out
+    """Column of the largest value in each of ``rows`` of a CSR matrix (rows must be non-empty)."""
+    rows = np.asarray(rows, dtype=np.int64)
+    lo, hi = indptr[rows], indptr[rows + 1]
+    n = hi - lo
+    owner = np.repeat(np.arange(rows.size), n)
+    pos = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n) + np.repeat(lo, n)
+    vals = data[pos]
+    # Sort by (row, value) and take each row's last entry: its largest value.
+    order = np.lexsort((vals, owner))
+    last = np.cumsum(n) - 1
+    return indices[pos[order[last]]].astype(np.int64)
 
 
 def injective_completion(f: np.ndarray, n_b: int) -> np.ndarray:
