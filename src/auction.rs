@@ -61,19 +61,24 @@ pub fn auction_assignment_int(cost: &CsrView<i64>, maximize: bool) -> Result<Vec
     if cost.n_rows == 0 || cost.n_cols == 0 {
         return Ok(vec![-1; cost.n_rows]);
     }
-    if cost.n_rows > cost.n_cols {
+    let transposed = cost.n_rows > cost.n_cols;
+    if transposed {
         check_duplicates(cost)?;
-        return int_transposed(cost, maximize);
     }
-    // Rows are the persons: one parallel pass checks duplicates, finds each row's spread and
-    // its initial candidates, so the big arrays are read once before the auction.
-    let data = cost.data;
-    let scans: Vec<RowScan> = (0..cost.n_rows)
+    let (pc, data) = PersonCsr::build(cost)?;
+    // One parallel pass over the persons checks duplicates (rows only: the transposed view was
+    // checked above), finds each person's spread and its initial candidates, so the big arrays
+    // are read once before the auction.
+    let scans: Vec<RowScan> = (0..pc.m)
         .into_par_iter()
         .with_min_len(PAR_ROWS)
-        .map(|r| {
-            let (lo, hi) = (cost.indptr[r], cost.indptr[r + 1]);
-            let dup = duplicate_in(&cost.indices[lo..hi]);
+        .map(|i| {
+            let (lo, hi) = (pc.ptr[i], pc.ptr[i + 1]);
+            let dup = if transposed {
+                None
+            } else {
+                duplicate_in(&cost.indices[lo..hi])
+            };
             let (mn, mx, top) = scan_row(&data[lo..hi], lo, maximize);
             RowScan {
                 dup,
@@ -90,7 +95,6 @@ pub fn auction_assignment_int(cost: &CsrView<i64>, maximize: bool) -> Result<Vec
     {
         return duplicate_error(r, c);
     }
-    let pc = PersonCsr::build(cost)?;
     let (size, hk) = pc.matching();
     if size < pc.m {
         return Err(pc.infeasible(size));
@@ -103,62 +107,11 @@ pub fn auction_assignment_int(cost: &CsrView<i64>, maximize: bool) -> Result<Vec
     let range = range as i64;
     let refv: Vec<i64> = scans.iter().map(|s| s.refv).collect();
     let tops: Vec<TopK> = scans.into_iter().map(|s| s.top).collect();
+    let data: &[i64] = &data;
     let assign = if maximize {
         solve(&pc, &Direct::<true> { data, refv }, range, Some(tops))?
     } else {
         solve(&pc, &Direct::<false> { data, refv }, range, Some(tops))?
-    };
-    Ok(pc.to_rows(&assign))
-}
-
-/// Integer problem with more rows than columns: the columns become the persons.
-fn int_transposed(cost: &CsrView<i64>, maximize: bool) -> Result<Vec<i64>> {
-    let pc = PersonCsr::build(cost)?;
-    let (size, hk) = pc.matching();
-    if size < pc.m {
-        return Err(pc.infeasible(size));
-    }
-    let data = cost.data;
-    let refs: Vec<(i64, i128)> = (0..pc.m)
-        .into_par_iter()
-        .with_min_len(PAR_ROWS)
-        .map(|i| {
-            let (mut lo, mut hi) = (i64::MAX, i64::MIN);
-            for a in pc.ptr[i]..pc.ptr[i + 1] {
-                let c = data[pc.src(a)];
-                lo = lo.min(c);
-                hi = hi.max(c);
-            }
-            if lo > hi {
-                return (0, 0);
-            }
-            (if maximize { hi } else { lo }, hi as i128 - lo as i128)
-        })
-        .collect();
-    let range = refs.iter().map(|r| r.1).max().unwrap_or(0);
-    if range == 0 {
-        return Ok(pc.to_rows(&pc.arcs_of(&hk)));
-    }
-    check_range(range as u128, pc.n_obj)?;
-    let range = range as i64;
-    // Wrapping differences are exact: the true difference fits, as the spread was checked.
-    let shifted = |i: usize, a: usize| -> i64 {
-        let c = data[pc.src(a)];
-        if maximize {
-            c.wrapping_sub(refs[i].0)
-        } else {
-            refs[i].0.wrapping_sub(c)
-        }
-    };
-    let assign = if range <= i32::MAX as i64 {
-        solve(
-            &pc,
-            &Stored(pc.arcs_map(|i, a| shifted(i, a) as i32)),
-            range,
-            None,
-        )?
-    } else {
-        solve(&pc, &Stored(pc.arcs_map(shifted)), range, None)?
     };
     Ok(pc.to_rows(&assign))
 }
@@ -184,12 +137,11 @@ pub fn auction_assignment_float(cost: &CsrView<f64>, maximize: bool) -> Result<V
     if cost.n_rows == 0 || cost.n_cols == 0 {
         return Ok(vec![-1; cost.n_rows]);
     }
-    let pc = PersonCsr::build(cost)?;
+    let (pc, data) = PersonCsr::build(cost)?;
     let (size, hk) = pc.matching();
     if size < pc.m {
         return Err(pc.infeasible(size));
     }
-    let data = cost.data;
     // Halved so that the spread of values near f64::MAX cannot overflow to infinity.
     let value = |k: usize| -> f64 {
         let c = 0.5 * data[k];
@@ -205,7 +157,7 @@ pub fn auction_assignment_float(cost: &CsrView<f64>, maximize: bool) -> Result<V
         .map(|i| {
             let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
             for a in pc.ptr[i]..pc.ptr[i + 1] {
-                let v = value(pc.src(a));
+                let v = value(a);
                 lo = lo.min(v);
                 hi = hi.max(v);
             }
@@ -230,7 +182,7 @@ pub fn auction_assignment_float(cost: &CsrView<f64>, maximize: bool) -> Result<V
     }
     let qf = q as f64;
     let quant = |i: usize, a: usize| -> i64 {
-        let t = (value(pc.src(a)) - refs[i].0) / range;
+        let t = (value(a) - refs[i].0) / range;
         // t is in [-1, 0] up to rounding; the clamp keeps that a guarantee.
         (t * qf).round().clamp(-qf, 0.0) as i64
     };
@@ -406,14 +358,13 @@ struct PersonCsr<'a> {
     transposed: bool,
     ptr: Cow<'a, [usize]>,
     obj: Cow<'a, [u32]>,
-    /// Arc -> index into the original data (None: identity).
-    src: Option<Vec<usize>>,
     /// Compact object -> original column (or row, when transposed); None: identity.
     obj_orig: Option<Vec<u32>>,
 }
 
 impl<'a> PersonCsr<'a> {
-    fn build<T>(cost: &CsrView<'a, T>) -> Result<Self> {
+    /// The person view and the values in its arc order.
+    fn build<T: Copy + Default>(cost: &CsrView<'a, T>) -> Result<(Self, Cow<'a, [T]>)> {
         let (nr, nc) = (cost.n_rows, cost.n_cols);
         if nr.min(nc) >= DUMMY as usize {
             return invalid(format!("cost: {nr} x {nc} is too large for the auction"));
@@ -430,16 +381,16 @@ impl<'a> PersonCsr<'a> {
                 Some(v) => Cow::Owned(v),
                 None => Cow::Borrowed(cost.indices),
             };
-            Ok(PersonCsr {
+            let pc = PersonCsr {
                 m: nr,
                 n_obj,
                 n_rows: nr,
                 transposed: false,
                 ptr: Cow::Borrowed(cost.indptr),
                 obj,
-                src: None,
                 obj_orig,
-            })
+            };
+            Ok((pc, Cow::Borrowed(cost.data)))
         } else {
             // Persons are the columns; objects are the non-empty rows, in row order.
             let m = nc;
@@ -453,7 +404,7 @@ impl<'a> PersonCsr<'a> {
             }
             let mut next = ptr.clone();
             let mut obj = vec![0u32; nnz];
-            let mut src = vec![0usize; nnz];
+            let mut val = vec![T::default(); nnz];
             let mut obj_orig = Vec::new();
             for r in 0..nr {
                 let (lo, hi) = (cost.indptr[r], cost.indptr[r + 1]);
@@ -465,29 +416,24 @@ impl<'a> PersonCsr<'a> {
                 for (k, &c) in cost.indices[lo..hi].iter().enumerate() {
                     let p = &mut next[c as usize];
                     obj[*p] = id;
-                    src[*p] = lo + k;
+                    val[*p] = cost.data[lo + k];
                     *p += 1;
                 }
             }
             if obj_orig.len() >= DUMMY as usize {
                 return invalid(format!("cost: {nr} x {nc} is too large for the auction"));
             }
-            Ok(PersonCsr {
+            let pc = PersonCsr {
                 m,
                 n_obj: obj_orig.len(),
                 n_rows: nr,
                 transposed: true,
                 ptr: Cow::Owned(ptr),
                 obj: Cow::Owned(obj),
-                src: Some(src),
                 obj_orig: Some(obj_orig),
-            })
+            };
+            Ok((pc, Cow::Owned(val)))
         }
-    }
-
-    #[inline]
-    fn src(&self, a: usize) -> usize {
-        self.src.as_ref().map_or(a, |s| s[a])
     }
 
     /// Maps every arc through `f(person, arc)`, in arc order.

@@ -9,6 +9,51 @@ use crate::geodesic::{Dijkstra, EdgeGraph};
 use crate::khop::HopBalls;
 use rayon::prelude::*;
 
+/// Edge-graph distances from each vertex to its 2-ring (in `HopBalls` order), computed once per
+/// shape: LMD needs them for the source shape at every refinement step.
+#[derive(Debug, Clone)]
+pub struct RingDistances {
+    offsets: Vec<usize>,
+    dist: Vec<f64>,
+    /// Mean edge length of the graph.
+    pub mean_edge: f64,
+}
+
+impl RingDistances {
+    pub fn new(g: &EdgeGraph, balls: &HopBalls) -> Result<Self> {
+        if balls.k_max < 2 || balls.n != g.adj.n_rows {
+            return invalid("ring distances need the 2-ring neighbourhoods of the same graph");
+        }
+        let n = balls.n;
+        let per_vertex: Vec<Vec<f64>> = (0..n)
+            .into_par_iter()
+            .map_init(
+                || (Dijkstra::new(n), Vec::new()),
+                |(dj, out), p| {
+                    dj.run(g, p, &balls.ball(p, 2)[1..], f64::INFINITY, out);
+                    out.clone()
+                },
+            )
+            .collect();
+        let mut offsets = Vec::with_capacity(n + 1);
+        offsets.push(0);
+        let mut dist = Vec::new();
+        for d in per_vertex {
+            dist.extend_from_slice(&d);
+            offsets.push(dist.len());
+        }
+        Ok(RingDistances {
+            offsets,
+            dist,
+            mean_edge: g.mean_edge_length(),
+        })
+    }
+
+    fn of(&self, p: usize) -> &[f64] {
+        &self.dist[self.offsets[p]..self.offsets[p + 1]]
+    }
+}
+
 /// Per-vertex distortion of the map `f` (A → B) over the 2-ring of each vertex of A.
 ///
 /// Distances are divided by each shape's `scale` (sqrt of its area) so the measure does not depend
@@ -16,16 +61,16 @@ use rayon::prelude::*;
 /// the mean distortion over its 2-ring and the fraction of its 2-ring whose distortion is below
 /// one mean edge length (a robust score when many neighbours are mismatched).
 pub fn local_map_distortion(
-    a: &EdgeGraph,
     balls_a: &HopBalls,
+    rings_a: &RingDistances,
     b: &EdgeGraph,
     f: &[u32],
     scale_a: f64,
     scale_b: f64,
 ) -> Result<(Vec<f32>, Vec<f32>)> {
-    let n_a = a.adj.n_rows;
+    let n_a = balls_a.n;
     let n_b = b.adj.n_rows;
-    if balls_a.k_max < 2 || balls_a.n != n_a {
+    if balls_a.k_max < 2 || rings_a.offsets.len() != n_a + 1 {
         return invalid("LMD needs the 2-ring neighbourhoods of A");
     }
     if f.len() != n_a || f.iter().any(|&q| q as usize >= n_b) {
@@ -36,26 +81,18 @@ pub fn local_map_distortion(
     if !(scale_a > 0.0 && scale_b > 0.0 && scale_a.is_finite() && scale_b.is_finite()) {
         return invalid("shape scales must be positive and finite");
     }
-    let edge = a.mean_edge_length() / scale_a;
+    let edge = rings_a.mean_edge / scale_a;
     let unit = if edge > 0.0 { edge } else { 1.0 };
     let results: Vec<(f32, f32)> = (0..n_a)
         .into_par_iter()
         .map_init(
-            || {
-                (
-                    Dijkstra::new(n_a),
-                    Dijkstra::new(n_b),
-                    Vec::new(),
-                    Vec::new(),
-                    Vec::new(),
-                )
-            },
-            |(dja, djb, da, db, ftargets), p| {
+            || (Dijkstra::new(n_b), Vec::new(), Vec::new()),
+            |(djb, db, ftargets), p| {
                 let ring = &balls_a.ball(p, 2)[1..];
                 if ring.is_empty() {
                     return (0.0, 1.0);
                 }
-                dja.run(a, p, ring, f64::INFINITY, da);
+                let da = rings_a.of(p);
                 let reach = da.iter().copied().fold(0.0, f64::max) / scale_a + 2.0 * unit;
                 ftargets.clear();
                 ftargets.extend(ring.iter().map(|&r| f[r as usize]));
@@ -116,13 +153,14 @@ mod tests {
             adj: adj.view(),
         };
         let id: Vec<u32> = (0..va.len() as u32).collect();
-        let (mean, frac) = local_map_distortion(&ga, &balls, &gb, &id, 1.0, 1.7).unwrap();
+        let rings = RingDistances::new(&ga, &balls).unwrap();
+        let (mean, frac) = local_map_distortion(&balls, &rings, &gb, &id, 1.0, 1.7).unwrap();
         assert!(mean.iter().all(|&m| m < 1e-6));
         assert!(frac.iter().all(|&x| x == 1.0));
         // Swapping two far-apart vertices distorts exactly the neighbourhoods that see them.
         let mut f = id.clone();
         f.swap(13, 100);
-        let (mean, _) = local_map_distortion(&ga, &balls, &gb, &f, 1.0, 1.7).unwrap();
+        let (mean, _) = local_map_distortion(&balls, &rings, &gb, &f, 1.0, 1.7).unwrap();
         assert!(mean[13] > 1.0 && mean[100] > 1.0);
         let far = 60;
         assert!(mean[far] < 1e-6);

@@ -6,7 +6,7 @@ use crate::error::CoreError;
 use crate::geodesic::{pair_distances, EdgeGraph};
 use crate::graph::adjacency_from_faces;
 use crate::khop::HopBalls;
-use crate::lmd::local_map_distortion;
+use crate::lmd::{local_map_distortion, RingDistances};
 use crate::overlap::{overlap_cost, BallsAt, OverlapOptions};
 use crate::shot::shot_descriptors;
 use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1, PyReadonlyArray2};
@@ -86,10 +86,21 @@ type PyCsr<'py, T> = (
     Bound<'py, PyArray1<T>>,
 );
 
+/// Reinterprets column indices as i32 without copying them (they are < 2^31: every kernel
+/// produces indices below a vertex count that came from a NumPy array of i32-indexable size).
+fn u32_to_i32(v: Vec<u32>) -> Vec<i32> {
+    debug_assert!(v.iter().all(|&x| x <= i32::MAX as u32));
+    let mut v = std::mem::ManuallyDrop::new(v);
+    let (ptr, len, cap) = (v.as_mut_ptr(), v.len(), v.capacity());
+    // SAFETY: u32 and i32 have the same size and alignment, and the allocation is handed over
+    // whole (the original Vec is never dropped).
+    unsafe { Vec::from_raw_parts(ptr as *mut i32, len, cap) }
+}
+
 /// Hands a CSR to NumPy without copying the big arrays (indices are < 2^31 by construction).
 fn csr_out<T: numpy::Element>(py: Python<'_>, m: Csr<T>) -> PyCsr<'_, T> {
     let indptr: Vec<i64> = m.indptr.iter().map(|&x| x as i64).collect();
-    let indices: Vec<i32> = m.indices.iter().map(|&x| x as i32).collect();
+    let indices = u32_to_i32(m.indices);
     (
         indptr.into_pyarray(py),
         indices.into_pyarray(py),
@@ -121,6 +132,8 @@ struct MeshGraph {
     vertices: Vec<[f64; 3]>,
     adj: Csr<()>,
     balls: HopBalls,
+    /// 2-ring distances for LMD; `None` when k_max < 2.
+    rings: Option<RingDistances>,
 }
 
 #[pymethods]
@@ -134,15 +147,25 @@ impl MeshGraph {
     ) -> PyResult<Self> {
         let vertices = points_vec(&vertices)?;
         let faces = faces_vec(&faces)?;
-        let (adj, balls) = detached(py, || {
+        let (adj, balls, rings) = detached(py, || {
             let adj = adjacency_from_faces(&faces, vertices.len())?;
             let balls = HopBalls::new(&adj.view(), k_max)?;
-            Ok((adj, balls))
+            let rings = if k_max >= 2 {
+                let g = EdgeGraph {
+                    vertices: &vertices,
+                    adj: adj.view(),
+                };
+                Some(RingDistances::new(&g, &balls)?)
+            } else {
+                None
+            };
+            Ok((adj, balls, rings))
         })?;
         Ok(MeshGraph {
             vertices,
             adj,
             balls,
+            rings,
         })
     }
 
@@ -310,16 +333,16 @@ fn local_map_distortion_graphs<'py>(
     scale_b: f64,
 ) -> PyResult<(Bound<'py, PyArray1<f32>>, Bound<'py, PyArray1<f32>>)> {
     let f = u32_vec(&f, "f")?;
+    let rings = a
+        .rings
+        .as_ref()
+        .ok_or_else(|| PyValueError::new_err("LMD needs a source graph built with k_max >= 2"))?;
     let (mean, frac) = detached(py, || {
-        let ga = EdgeGraph {
-            vertices: &a.vertices,
-            adj: a.adj.view(),
-        };
         let gb = EdgeGraph {
             vertices: &b.vertices,
             adj: b.adj.view(),
         };
-        local_map_distortion(&ga, &a.balls, &gb, &f, scale_a, scale_b)
+        local_map_distortion(&a.balls, rings, &gb, &f, scale_a, scale_b)
     })?;
     Ok((mean.into_pyarray(py), frac.into_pyarray(py)))
 }
