@@ -37,8 +37,10 @@ const PRICE_CAP: i64 = 1 << 62;
 const EPS_FACTOR: i64 = 4;
 /// The first phase's epsilon is the scaled median gap between best and second best over this,
 const EPS_GAP_DIV: i64 = 4;
-/// or, when every person has a tie at the top, the scaled value range over this.
+/// or, when every person has a tie at the top, the scaled value range over this,
 const EPS_START_DIV: i64 = 64;
+/// and never less than the scaled value range over `EPS_START_DIV * EPS_FLOOR_DIV`.
+const EPS_FLOOR_DIV: i64 = 16;
 /// Candidate arcs kept per person.
 const K: usize = 12;
 /// Rows per rayon task in the parallel passes.
@@ -1055,20 +1057,22 @@ fn solve<V: Values>(
     };
     // First epsilon from the data: a quarter of the median positive gap between persons' two
     // best values. Persons whose best object beats the rest by more than that settle with a
-    // slack no later phase revisits, while ties still get coarse price steps; a start relative
-    // to the whole range instead was several times slower on near-tie problems.
+    // slack no later phase revisits, while ties still get coarse price steps (starting from a
+    // fixed fraction of the range was several times slower on near-tie problems). The floor
+    // bounds the price wars of the first phase when a few values dwarf the typical gap.
     let mut gaps: Vec<i64> = tops
         .iter()
         .filter(|t| t.len >= 2)
         .map(|t| t.vs[0].saturating_sub(t.vs[1]))
         .filter(|&g| g > 0)
         .collect();
+    let floor = range_scaled / EPS_START_DIV;
     let mut eps = if gaps.is_empty() {
-        range_scaled / EPS_START_DIV
+        floor
     } else {
         let mid = gaps.len() / 2;
         let median = *gaps.select_nth_unstable(mid).1;
-        median.saturating_mul(scale) / EPS_GAP_DIV
+        (median.saturating_mul(scale) / EPS_GAP_DIV).max(floor / EPS_FLOOR_DIV)
     }
     .clamp(1, range_scaled.max(1));
     let mut first = true;
@@ -1584,6 +1588,37 @@ mod tests {
             let d = random_dense(&mut rng, nr, nc, 0.9, |r| r.range(0, hi));
             check_int(&d, nc, t % 2 == 0, &mut rng);
         }
+    }
+
+    #[test]
+    fn range_at_the_limit() {
+        // The largest spread the up-front check accepts must solve without tripping the price
+        // guard, on sparse chain-like and dense patterns, square and rectangular.
+        let mut rng = Rng(141);
+        for t in 0..24 {
+            let (nr, nc) = [(60, 60), (40, 70), (70, 40)][t % 3];
+            let n = nr.max(nc) as i128;
+            let lim = ((1i128 << 60) / ((n + 1) * (n + 2))) as i64;
+            let density = [0.08, 0.3, 1.0, 0.05][t % 4];
+            let mut d = random_dense(&mut rng, nr, nc, density, |r| {
+                if r.below(2) == 0 {
+                    r.range(lim - 3, lim)
+                } else {
+                    r.range(0, 3)
+                }
+            });
+            // A diagonal keeps most instances feasible.
+            for (k, row) in d.iter_mut().enumerate().take(nc) {
+                row[k] = Some(if k % 2 == 0 { lim } else { 0 });
+            }
+            check_int(&d, nc, t % 2 == 0, &mut rng);
+        }
+        let d: Dense<i64> = vec![vec![Some(0), Some(1 << 58)], vec![Some(1 << 58), Some(0)]];
+        let csr = to_csr(&d, 2, None);
+        assert!(matches!(
+            auction_assignment_int(&csr.view(), true),
+            Err(CoreError::InvalidInput(m)) if m.contains("cost range too large")
+        ));
     }
 
     #[test]

@@ -112,6 +112,7 @@ pub fn local_map_distortion(
 }
 
 #[cfg(test)]
+#[allow(clippy::needless_range_loop)] // tests index several parallel arrays
 mod tests {
     use super::*;
     use crate::graph::adjacency_from_faces;

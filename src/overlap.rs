@@ -351,6 +351,7 @@ impl Accumulator {
 }
 
 #[cfg(test)]
+#[allow(clippy::needless_range_loop)] // tests index several parallel arrays
 mod tests {
     use super::*;
     use crate::graph::adjacency_from_faces;

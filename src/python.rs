@@ -290,6 +290,7 @@ fn overlap_cost_csr<'py>(
 /// Overlap cost at hop radius k between two prebuilt graphs.
 #[pyfunction]
 #[pyo3(signature = (a, b, k, f, witnesses, top_k=None, keep=None))]
+#[allow(clippy::too_many_arguments)]
 fn overlap_cost_graphs<'py>(
     py: Python<'py>,
     a: &MeshGraph,
@@ -322,6 +323,8 @@ fn overlap_cost_graphs<'py>(
     Ok(csr_out(py, m))
 }
 
+type PerVertexPair<'py> = (Bound<'py, PyArray1<f32>>, Bound<'py, PyArray1<f32>>);
+
 /// Local map distortion of `f` (A → B): (mean over the 2-ring, fraction of consistent neighbours).
 #[pyfunction]
 fn local_map_distortion_graphs<'py>(
@@ -331,7 +334,7 @@ fn local_map_distortion_graphs<'py>(
     f: PyReadonlyArray1<'py, i64>,
     scale_a: f64,
     scale_b: f64,
-) -> PyResult<(Bound<'py, PyArray1<f32>>, Bound<'py, PyArray1<f32>>)> {
+) -> PyResult<PerVertexPair<'py>> {
     let f = u32_vec(&f, "f")?;
     let rings = a
         .rings

@@ -4,7 +4,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-DATA = Path(os.environ.get("HOPE_DATA", Path(__file__).resolve().parents[1].parent / "shared" / "data"))
+DATA = Path(
+    os.environ.get("HOPE_DATA", Path(__file__).resolve().parents[1].parent / "shared" / "data")
+)
 
 
 def data_path(*parts: str) -> Path:

@@ -1,3 +1,4 @@
+import hope_rs
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -5,8 +6,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import linear_sum_assignment
 from scipy.sparse.csgraph import min_weight_full_bipartite_matching
-
-import hope_rs
 
 
 def value(cost, g):
@@ -103,7 +102,9 @@ def test_sparse_value_equals_scipy(cost):
 
 
 def test_explicit_zero_is_allowed_and_missing_is_forbidden():
-    cost = sp.csr_matrix((np.array([0, 5, 1]), np.array([0, 0, 1]), np.array([0, 1, 3])), shape=(2, 2))
+    cost = sp.csr_matrix(
+        (np.array([0, 5, 1]), np.array([0, 0, 1]), np.array([0, 1, 3])), shape=(2, 2)
+    )
     # Row 0 may only take column 0 (with value 0), so row 1 must take column 1.
     np.testing.assert_array_equal(hope_rs.auction_assignment(cost), [0, 1])
 

@@ -1,10 +1,9 @@
 from collections import deque
 
+import hope_rs
 import numpy as np
 import pytest
 import scipy.sparse as sp
-
-import hope_rs
 from conftest import data_path, relabel
 from hope_rs.mesh import load_mesh
 

@@ -1,10 +1,9 @@
+import hope_rs
 import numpy as np
 import pytest
+from conftest import relabel
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-
-import hope_rs
-from conftest import relabel
 from meshes import bumpy_sphere, random_rigid
 
 
@@ -89,7 +88,10 @@ def test_shapes_are_reusable_and_k_max_is_checked(faust_pair):
 def test_different_vertex_counts_every_vertex_gets_a_partner():
     v, f = bumpy_sphere(900, 1)
     vb, fb = bumpy_sphere(700, 2)
-    for a, b in [(hope_rs.Mesh(v, f), hope_rs.Mesh(vb, fb)), (hope_rs.Mesh(vb, fb), hope_rs.Mesh(v, f))]:
+    for a, b in [
+        (hope_rs.Mesh(v, f), hope_rs.Mesh(vb, fb)),
+        (hope_rs.Mesh(vb, fb), hope_rs.Mesh(v, f)),
+    ]:
         res = hope_rs.match(a, b, max_passes=1)
         assert res.map.shape == (a.n_vertices,)
         assert res.map.min() >= 0 and res.map.max() < b.n_vertices
@@ -111,7 +113,11 @@ def test_several_components_and_unreferenced_vertices():
 
 @pytest.mark.parametrize(
     "init, err",
-    [(np.arange(5), ValueError), (np.full(6890, 10**6), ValueError), (np.zeros(6890) + 0.5, TypeError)],
+    [
+        (np.arange(5), ValueError),
+        (np.full(6890, 10**6), ValueError),
+        (np.zeros(6890) + 0.5, TypeError),
+    ],
 )
 def test_bad_init_map(faust_pair, init, err):
     with pytest.raises(err):

@@ -1,9 +1,8 @@
 import json
 
+import hope_rs
 import numpy as np
 import pytest
-
-import hope_rs
 from conftest import data_path
 from hope_rs.cli import main
 from meshes import bumpy_sphere

@@ -12,8 +12,8 @@ from .mesh import Mesh, load_mesh
 from .shape import Shape
 
 __all__ = [
-    "Mesh",
     "MatchResult",
+    "Mesh",
     "Shape",
     "auction_assignment",
     "geodesic_errors",

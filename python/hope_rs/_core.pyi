@@ -2,8 +2,9 @@
 
 import numpy as np
 import numpy.typing as npt
+from typing_extensions import TypeAlias
 
-_Csr = tuple[npt.NDArray[np.int64], npt.NDArray[np.int32], np.ndarray]
+_Csr: TypeAlias = tuple[npt.NDArray[np.int64], npt.NDArray[np.int32], np.ndarray]
 
 class MeshGraph:
     def __init__(

@@ -11,8 +11,10 @@ def as_faces(faces, n_vertices: int | None = None, *, name: str = "faces") -> np
     if arr.ndim != 2 or arr.shape[1] != 3:
         raise ValueError(f"{name} must be an (M, 3) integer array, got shape {arr.shape}")
     if arr.size and not np.issubdtype(arr.dtype, np.integer):
-        if np.issubdtype(arr.dtype, np.floating) and np.all(np.isfinite(arr)) and np.all(
-            arr == np.round(arr)
+        if (
+            np.issubdtype(arr.dtype, np.floating)
+            and np.all(np.isfinite(arr))
+            and np.all(arr == np.round(arr))
         ):
             arr = arr.astype(np.int64)
         else:

@@ -51,7 +51,9 @@ def auction_assignment(cost, *, maximize: bool = True) -> np.ndarray:
     else:
         a = np.asarray(cost)
         if a.ndim != 2:
-            raise ValueError(f"cost must be a 2-D array or a scipy.sparse matrix, got shape {a.shape}")
+            raise ValueError(
+                f"cost must be a 2-D array or a scipy.sparse matrix, got shape {a.shape}"
+            )
         n_rows, n_cols = a.shape
         data = a.reshape(-1)
         indptr = np.arange(0, n_rows * n_cols + 1, max(n_cols, 1), dtype=np.int64)
@@ -68,9 +70,16 @@ def auction_assignment(cost, *, maximize: bool = True) -> np.ndarray:
         if data.dtype == np.uint64 and data.size and data.max() > np.iinfo(np.int64).max:
             raise ValueError("cost values exceed the int64 range")
         return _core.auction_assignment_int(
-            indptr, indices, np.ascontiguousarray(data, dtype=np.int64), n_rows, n_cols, bool(maximize)
+            indptr,
+            indices,
+            np.ascontiguousarray(data, dtype=np.int64),
+            n_rows,
+            n_cols,
+            bool(maximize),
         )
     data = np.ascontiguousarray(data, dtype=np.float64)
     if not np.all(np.isfinite(data)):
-        raise ValueError("cost contains NaN or infinite values; forbid a pair by leaving it out of a sparse cost")
+        raise ValueError(
+            "cost contains NaN or infinite values; forbid a pair by leaving it out of a sparse cost"
+        )
     return _core.auction_assignment_float(indptr, indices, data, n_rows, n_cols, bool(maximize))

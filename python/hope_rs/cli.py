@@ -59,7 +59,12 @@ def _summary(res) -> dict:
     return {
         "n_vertices": int(res.map.size),
         "iterations": [
-            {"k": h.k, "witness_fraction": h.witness_fraction, "changed": h.changed, "seconds": h.seconds}
+            {
+                "k": h.k,
+                "witness_fraction": h.witness_fraction,
+                "changed": h.changed,
+                "seconds": h.seconds,
+            }
             for h in res.history
         ],
         "timings": res.timings,
@@ -74,7 +79,9 @@ def cmd_match(args) -> int:
     if args.output and os.path.isdir(args.output):
         raise ValueError(f"output {args.output!r} is a folder; give a file name")
     a, b = load_mesh(args.a), load_mesh(args.b)
-    progress = Progress(len(default_schedule(args.k_max)), enabled=not args.quiet and sys.stderr.isatty())
+    progress = Progress(
+        len(default_schedule(args.k_max)), enabled=not args.quiet and sys.stderr.isatty()
+    )
     try:
         res = match(a, b, init=args.init, k_max=args.k_max, callback=progress.step)
     finally:
@@ -109,7 +116,9 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--json", action="store_true", help="print timings and a summary as JSON")
     m.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     m.set_defaults(func=cmd_match)
-    d = sub.add_parser("demo", help="match the bundled FAUST pair and score it against ground truth")
+    d = sub.add_parser(
+        "demo", help="match the bundled FAUST pair and score it against ground truth"
+    )
     d.add_argument("--json", action="store_true", help="print the report as JSON")
     d.set_defaults(func=cmd_demo)
     return p

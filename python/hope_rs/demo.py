@@ -44,5 +44,9 @@ def run_demo(*, verbose: bool = True) -> dict:
         print(report["pair"])
         print(f"  initial map (SHOT + LAP): {init}")
         print(f"  HOPE                    : {final}")
-        print(f"  time: {seconds:.2f} s  (" + ", ".join(f"{k} {v:.2f}s" for k, v in res.timings.items()) + ")")
+        print(
+            f"  time: {seconds:.2f} s  ("
+            + ", ".join(f"{k} {v:.2f}s" for k, v in res.timings.items())
+            + ")"
+        )
     return report

@@ -52,7 +52,11 @@ def geodesic_errors(b, mapping, *, a_idx=None, b_idx=None) -> np.ndarray:
     err = np.zeros(a_idx.size)
     wrong = np.flatnonzero(src != b_idx)
     if wrong.size:
-        graph = shape_b.graph if shape_b is not None else _core.MeshGraph(mesh_b.vertices, mesh_b.faces, 0)
+        graph = (
+            shape_b.graph
+            if shape_b is not None
+            else _core.MeshGraph(mesh_b.vertices, mesh_b.faces, 0)
+        )
         err[wrong] = graph.pair_distances(src[wrong], b_idx[wrong]) / mesh_b.scale
     return err
 
@@ -74,8 +78,10 @@ def score(errors: np.ndarray, *, max_error: float = 0.25) -> Score:
     e = np.asarray(errors, dtype=np.float64)
     t = np.linspace(0.0, max_error, 101)
     curve = (e[None, :] <= t[:, None]).mean(axis=1)
-    auc = float(np.trapezoid(curve, t) / max_error) if hasattr(np, "trapezoid") else float(
-        np.trapz(curve, t) / max_error
+    auc = (
+        float(np.trapezoid(curve, t) / max_error)
+        if hasattr(np, "trapezoid")
+        else float(np.trapz(curve, t) / max_error)
     )
     finite = np.where(np.isfinite(e), e, 1.0)
     return Score(float(np.mean(e == 0)), float(finite.mean()), auc)

@@ -40,9 +40,9 @@ def nearest_candidates(da: np.ndarray, db: np.ndarray, n: int) -> tuple[np.ndarr
         pd = np.take_along_axis(d2, part, axis=1)
         order = np.argsort(pd, axis=1)
         idx[lo : lo + step] = np.take_along_axis(part, order, axis=1)
-        dist[lo : lo + step] = np.take_along_axis(pd, order, axis=1) + np.einsum(
-            "ij,ij->i", chunk, chunk
-        )[:, None]
+        dist[lo : lo + step] = (
+            np.take_along_axis(pd, order, axis=1) + np.einsum("ij,ij->i", chunk, chunk)[:, None]
+        )
     return idx, np.maximum(dist, 0.0)
 
 

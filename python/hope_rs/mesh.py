@@ -131,7 +131,7 @@ def _read_with_trimesh(path: str) -> tuple[np.ndarray, np.ndarray]:
 
     try:
         m = trimesh.load(path, process=False, force="mesh")
-    except Exception as e:  # trimesh raises many types for bad files
+    except Exception as e:  # noqa: BLE001 - trimesh raises many types for bad files
         raise ValueError(str(e) or type(e).__name__) from None
     if not hasattr(m, "faces") or len(getattr(m, "faces", [])) == 0:
         raise ValueError("the file holds no triangle faces")

@@ -106,7 +106,9 @@ def refine(
             w = np.ones_like(w)
         f_new = best_overlap(a, b, k, f, w)
         history.append(
-            Iteration(k, float(w.mean()), int(np.count_nonzero(f_new != f)), time.perf_counter() - t0)
+            Iteration(
+                k, float(w.mean()), int(np.count_nonzero(f_new != f)), time.perf_counter() - t0
+            )
         )
         f = f_new
         if callback is not None:
@@ -114,7 +116,9 @@ def refine(
     return RefineResult(f, history)
 
 
-def assign_by_overlap(a: Shape, b: Shape, k: int, f, witnesses, *, top_k: int = TOP_K) -> np.ndarray:
+def assign_by_overlap(
+    a: Shape, b: Shape, k: int, f, witnesses, *, top_k: int = TOP_K
+) -> np.ndarray:
     """One HOPE step: the one-to-one map maximising the k-hop overlap of the witnesses.
 
     The current match is worth a quarter of one overlap count, so a vertex moves only when the
@@ -134,7 +138,9 @@ def assign_by_overlap(a: Shape, b: Shape, k: int, f, witnesses, *, top_k: int = 
 
 def _overlap_with_bonus(a: Shape, b: Shape, k: int, f, witnesses, top_k, keep):
     """Overlap cost as int64 data worth 4 per count, +1 on each row's current match."""
-    indptr, indices, counts = _core.overlap_cost_graphs(a.graph, b.graph, k, f, witnesses, top_k, keep)
+    indptr, indices, counts = _core.overlap_cost_graphs(
+        a.graph, b.graph, k, f, witnesses, top_k, keep
+    )
     rows = np.repeat(np.arange(a.n_vertices), np.diff(indptr))
     data = counts.astype(np.int64) * 4 + (indices == f[rows])
     return indptr, indices.astype(np.int64), data

@@ -30,7 +30,11 @@ class Shape:
                 mesh = Mesh(*mesh)
             else:
                 raise TypeError("Shape needs a hope_rs.Mesh or a (vertices, faces) pair")
-        if isinstance(k_max, bool) or not isinstance(k_max, (int, np.integer)) or not 2 <= k_max <= 64:
+        if (
+            isinstance(k_max, bool)
+            or not isinstance(k_max, (int, np.integer))
+            or not 2 <= k_max <= 64
+        ):
             raise ValueError(f"k_max must be an integer in [2, 64], got {k_max!r}")
         self.mesh = mesh
         self.k_max = int(k_max)
