@@ -47,10 +47,11 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import hope_rs
 import numpy as np
 import scipy
 import scipy.sparse as sp
+
+import hope_rs
 from hope_rs.mesh import load_mesh
 
 BENCH_DIR = Path(__file__).resolve().parent

@@ -60,11 +60,14 @@ fn points_vec(v: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<[f64; 3]>> {
     Ok(a.outer_iter().map(|r| [r[0], r[1], r[2]]).collect())
 }
 
-fn u32_vec(a: &PyReadonlyArray1<'_, i64>, what: &str) -> PyResult<Vec<u32>> {
+fn u32_vec<T>(a: &PyReadonlyArray1<'_, T>, what: &str) -> PyResult<Vec<u32>>
+where
+    T: numpy::Element + Copy + TryInto<u32> + std::fmt::Display,
+{
     a.as_array()
         .iter()
         .map(|&x| {
-            u32::try_from(x)
+            x.try_into()
                 .map_err(|_| PyValueError::new_err(format!("{what} holds {x}, out of range")))
         })
         .collect()
@@ -353,7 +356,7 @@ fn local_map_distortion_graphs<'py>(
 /// Owned sparse cost built from (indptr, indices, data) arrays.
 fn cost_csr<T: numpy::Element + Copy>(
     indptr: &PyReadonlyArray1<'_, i64>,
-    indices: &PyReadonlyArray1<'_, i64>,
+    indices: &PyReadonlyArray1<'_, i32>,
     data: &PyReadonlyArray1<'_, T>,
     n_rows: usize,
     n_cols: usize,
@@ -375,7 +378,7 @@ fn cost_csr<T: numpy::Element + Copy>(
 fn py_auction_assignment_int<'py>(
     py: Python<'py>,
     indptr: PyReadonlyArray1<'py, i64>,
-    indices: PyReadonlyArray1<'py, i64>,
+    indices: PyReadonlyArray1<'py, i32>,
     data: PyReadonlyArray1<'py, i64>,
     n_rows: usize,
     n_cols: usize,
@@ -392,7 +395,7 @@ fn py_auction_assignment_int<'py>(
 fn py_auction_assignment_float<'py>(
     py: Python<'py>,
     indptr: PyReadonlyArray1<'py, i64>,
-    indices: PyReadonlyArray1<'py, i64>,
+    indices: PyReadonlyArray1<'py, i32>,
     data: PyReadonlyArray1<'py, f64>,
     n_rows: usize,
     n_cols: usize,

@@ -1,4 +1,3 @@
-import hope_rs
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -6,6 +5,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import linear_sum_assignment
 from scipy.sparse.csgraph import min_weight_full_bipartite_matching
+
+import hope_rs
 
 
 def value(cost, g):

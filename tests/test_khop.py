@@ -1,10 +1,11 @@
 from collections import deque
 
-import hope_rs
 import numpy as np
 import pytest
 import scipy.sparse as sp
 from conftest import data_path, relabel
+
+import hope_rs
 from hope_rs.mesh import load_mesh
 
 

@@ -1,10 +1,11 @@
-import hope_rs
 import numpy as np
 import pytest
 from conftest import relabel
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from meshes import bumpy_sphere, random_rigid
+
+import hope_rs
 
 
 def isometric_copy(v, f, rng):

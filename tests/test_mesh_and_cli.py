@@ -1,11 +1,12 @@
 import json
 
-import hope_rs
 import numpy as np
 import pytest
 from conftest import data_path
-from hope_rs.cli import main
 from meshes import bumpy_sphere
+
+import hope_rs
+from hope_rs.cli import main
 
 
 def write_off(path, v, f):

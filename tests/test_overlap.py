@@ -1,10 +1,11 @@
-import hope_rs
 import numpy as np
 import pytest
 import scipy.sparse as sp
 from conftest import relabel
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
+import hope_rs
 
 
 def reference(nbrs_a, nbrs_b, f, w):

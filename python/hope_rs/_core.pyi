@@ -47,7 +47,7 @@ def local_map_distortion_graphs(
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]: ...
 def auction_assignment_int(
     indptr: npt.NDArray[np.int64],
-    indices: npt.NDArray[np.int64],
+    indices: npt.NDArray[np.int32],
     data: npt.NDArray[np.int64],
     n_rows: int,
     n_cols: int,
@@ -55,7 +55,7 @@ def auction_assignment_int(
 ) -> npt.NDArray[np.int64]: ...
 def auction_assignment_float(
     indptr: npt.NDArray[np.int64],
-    indices: npt.NDArray[np.int64],
+    indices: npt.NDArray[np.int32],
     data: npt.NDArray[np.float64],
     n_rows: int,
     n_cols: int,

@@ -59,13 +59,15 @@ def auction_assignment(cost, *, maximize: bool = True) -> np.ndarray:
         indptr = np.arange(0, n_rows * n_cols + 1, max(n_cols, 1), dtype=np.int64)
         if n_cols == 0:
             indptr = np.zeros(n_rows + 1, dtype=np.int64)
-        indices = np.tile(np.arange(n_cols, dtype=np.int64), n_rows)
+        indices = np.tile(np.arange(n_cols, dtype=np.int32), n_rows)
     if data.dtype == bool:
         data = data.astype(np.int64)
     if not (np.issubdtype(data.dtype, np.integer) or np.issubdtype(data.dtype, np.floating)):
         raise TypeError(f"cost must hold integer or float values, got dtype {data.dtype}")
     indptr = np.ascontiguousarray(indptr, dtype=np.int64)
-    indices = np.ascontiguousarray(indices, dtype=np.int64)
+    if n_cols > np.iinfo(np.int32).max:
+        raise ValueError(f"at most {np.iinfo(np.int32).max} columns are supported, got {n_cols}")
+    indices = np.ascontiguousarray(indices, dtype=np.int32)
     if np.issubdtype(data.dtype, np.integer):
         if data.dtype == np.uint64 and data.size and data.max() > np.iinfo(np.int64).max:
             raise ValueError("cost values exceed the int64 range")

@@ -64,7 +64,9 @@ def initial_map(da: np.ndarray, db: np.ndarray, *, n_candidates: int = N_CANDIDA
     vals[dup, -1] = np.inf  # already a candidate: drop the fallback copy below
     keep = np.isfinite(vals)
     indptr = np.concatenate([[0], np.cumsum(keep.sum(axis=1))]).astype(np.int64)
-    g = _core.auction_assignment_float(indptr, cols[keep], vals[keep], n_a, n_b, False)
+    g = _core.auction_assignment_float(
+        indptr, cols[keep].astype(np.int32), vals[keep], n_a, n_b, False
+    )
     missing = g < 0
     g[missing] = idx[missing, 0]
     return g

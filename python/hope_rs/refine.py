@@ -143,7 +143,7 @@ def _overlap_with_bonus(a: Shape, b: Shape, k: int, f, witnesses, top_k, keep):
     )
     rows = np.repeat(np.arange(a.n_vertices), np.diff(indptr))
     data = counts.astype(np.int64) * 4 + (indices == f[rows])
-    return indptr, indices.astype(np.int64), data
+    return indptr, indices, data
 
 
 def best_overlap(a: Shape, b: Shape, k: int, f, witnesses) -> np.ndarray:
