@@ -1,7 +1,7 @@
 //! The thin `hope_rs._core` extension module: converts NumPy buffers into owned Rust data,
 //! releases the GIL around the kernels, and maps every core error to a Python exception here.
 use crate::auction::{auction_assignment_float, auction_assignment_int};
-use crate::csr::Csr;
+use crate::csr::{Csr, CsrView};
 use crate::error::CoreError;
 use crate::geodesic::{pair_distances, EdgeGraph};
 use crate::graph::adjacency_from_faces;
@@ -372,6 +372,25 @@ fn cost_csr<T: numpy::Element + Copy>(
     Ok(m)
 }
 
+type CostArrays<'a, 'py, T> = (
+    &'a PyReadonlyArray1<'py, i64>,
+    &'a PyReadonlyArray1<'py, i32>,
+    &'a PyReadonlyArray1<'py, T>,
+);
+
+/// Copies a sparse cost out of NumPy, then runs `solver` on it without the GIL.
+fn solve_assignment<'py, T: numpy::Element + Copy + Send + Sync>(
+    py: Python<'py>,
+    (indptr, indices, data): CostArrays<'_, 'py, T>,
+    (n_rows, n_cols): (usize, usize),
+    maximize: bool,
+    solver: fn(&CsrView<T>, bool) -> crate::error::Result<Vec<i64>>,
+) -> PyResult<Bound<'py, PyArray1<i64>>> {
+    let m = cost_csr(indptr, indices, data, n_rows, n_cols)?;
+    let g = detached(py, || solver(&m.view(), maximize))?;
+    Ok(g.into_pyarray(py))
+}
+
 /// Optimal assignment on an integer sparse cost; -1 marks unassigned rows.
 #[pyfunction]
 #[pyo3(name = "auction_assignment_int")]
@@ -384,9 +403,13 @@ fn py_auction_assignment_int<'py>(
     n_cols: usize,
     maximize: bool,
 ) -> PyResult<Bound<'py, PyArray1<i64>>> {
-    let m = cost_csr(&indptr, &indices, &data, n_rows, n_cols)?;
-    let g = detached(py, || auction_assignment_int(&m.view(), maximize))?;
-    Ok(g.into_pyarray(py))
+    solve_assignment(
+        py,
+        (&indptr, &indices, &data),
+        (n_rows, n_cols),
+        maximize,
+        auction_assignment_int,
+    )
 }
 
 /// Optimal assignment on a float sparse cost; -1 marks unassigned rows.
@@ -401,9 +424,13 @@ fn py_auction_assignment_float<'py>(
     n_cols: usize,
     maximize: bool,
 ) -> PyResult<Bound<'py, PyArray1<i64>>> {
-    let m = cost_csr(&indptr, &indices, &data, n_rows, n_cols)?;
-    let g = detached(py, || auction_assignment_float(&m.view(), maximize))?;
-    Ok(g.into_pyarray(py))
+    solve_assignment(
+        py,
+        (&indptr, &indices, &data),
+        (n_rows, n_cols),
+        maximize,
+        auction_assignment_float,
+    )
 }
 
 /// SHOT descriptors, flat (n * 352) float32.
