@@ -93,14 +93,6 @@ impl HopBalls {
         &self.order[s..s + self.ends[v * (self.k_max + 1) + k] as usize]
     }
 
-    /// Vertices at exactly hop distance k from v.
-    #[inline]
-    pub fn ring(&self, v: usize, k: usize) -> &[u32] {
-        let s = self.indptr[v];
-        let e = &self.ends[v * (self.k_max + 1)..];
-        let lo = if k == 0 { 0 } else { e[k - 1] as usize };
-        &self.order[s + lo..s + e[k] as usize]
-    }
 
     /// B_k as a CSR pattern with sorted column indices (scipy's canonical form).
     pub fn to_csr(&self, k: usize) -> Csr<()> {

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
-from .lmd import MIN_CONSISTENT, local_map_distortion
+from .lmd import MIN_CONSISTENT, witnesses
 from .shape import Shape
 
 #: Candidates kept per row of the overlap cost (plus the current match).
@@ -84,10 +84,7 @@ def refine(
         changed_in_pass = 0
         for k in schedule:
             t0 = time.perf_counter()
-            _, consistent = local_map_distortion(a, b, f)
-            w = consistent >= min_consistent
-            if w.mean() < min_witness_fraction:
-                w = np.ones_like(w)
+            w = voters(a, b, f, min_consistent, min_witness_fraction)
             f_new = assign_by_overlap(a, b, k, f, w, top_k=top_k)
             changed = int(np.count_nonzero(f_new != f))
             changed_in_pass += changed
@@ -100,10 +97,7 @@ def refine(
     if polish_k is not None:
         t0 = time.perf_counter()
         k = min(polish_k, k_max)
-        _, consistent = local_map_distortion(a, b, f)
-        w = consistent >= min_consistent
-        if w.mean() < min_witness_fraction:
-            w = np.ones_like(w)
+        w = voters(a, b, f, min_consistent, min_witness_fraction)
         f_new = best_overlap(a, b, k, f, w)
         history.append(
             Iteration(
@@ -114,6 +108,12 @@ def refine(
         if callback is not None:
             callback(history[-1])
     return RefineResult(f, history)
+
+
+def voters(a: Shape, b: Shape, f, min_consistent: float, min_fraction: float) -> np.ndarray:
+    """The LMD witnesses of ``f``, or every vertex when fewer than ``min_fraction`` qualify."""
+    w = witnesses(a, b, f, min_consistent=min_consistent)
+    return w if w.mean() >= min_fraction else np.ones_like(w)
 
 
 def assign_by_overlap(
