@@ -93,7 +93,6 @@ impl HopBalls {
         &self.order[s..s + self.ends[v * (self.k_max + 1) + k] as usize]
     }
 
-
     /// B_k as a CSR pattern with sorted column indices (scipy's canonical form).
     pub fn to_csr(&self, k: usize) -> Csr<()> {
         let k = k.min(self.k_max);
