@@ -1923,6 +1923,15 @@ mod tests {
         }
     }
 
+    /// HOPE-like weights: high near the diagonal (the true match), noise elsewhere.
+    fn workload_weight(r: &mut Rng, d: usize) -> i64 {
+        if d <= 2 {
+            250 + r.range(0, 50)
+        } else {
+            r.range(0, 200)
+        }
+    }
+
     /// Other shapes, to show nothing degenerates. `cargo test --release -- --ignored --nocapture`.
     #[test]
     #[ignore]
@@ -1931,30 +1940,12 @@ mod tests {
         let ties = band(28_000, 28_000, 500, &mut rng, |r, _| r.range(0, 3));
         timed("28k band, costs 0..3, maximize", &ties, true);
         timed("28k band, costs 0..3, minimize", &ties, false);
-        let w = band(28_000, 28_000, 500, &mut rng, |r, d| {
-            if d <= 2 {
-                250 + r.range(0, 50)
-            } else {
-                r.range(0, 200)
-            }
-        });
+        let w = band(28_000, 28_000, 500, &mut rng, workload_weight);
         timed("28k band, workload weights, minimize", &w, false);
-        let rect = band(14_000, 28_000, 500, &mut rng, |r, d| {
-            if d <= 2 {
-                250 + r.range(0, 50)
-            } else {
-                r.range(0, 200)
-            }
-        });
+        let rect = band(14_000, 28_000, 500, &mut rng, workload_weight);
         timed("14k x 28k band, maximize", &rect, true);
         timed("14k x 28k band, minimize", &rect, false);
-        let rect_t = band(28_000, 14_000, 250, &mut rng, |r, d| {
-            if d <= 2 {
-                250 + r.range(0, 50)
-            } else {
-                r.range(0, 200)
-            }
-        });
+        let rect_t = band(28_000, 14_000, 250, &mut rng, workload_weight);
         timed("28k x 14k band, maximize", &rect_t, true);
         let few = band(100, 28_000, 2000, &mut rng, |r, _| r.range(0, 1000));
         timed("100 x 28k band, maximize", &few, true);

@@ -111,6 +111,18 @@ fn csr_out<T: numpy::Element>(py: Python<'_>, m: Csr<T>) -> PyCsr<'_, T> {
     )
 }
 
+/// A pattern with every stored entry set to 1, as scipy expects of a boolean-like matrix.
+fn ones(p: Csr<()>) -> Csr<u8> {
+    let nnz = p.nnz();
+    Csr {
+        n_rows: p.n_rows,
+        n_cols: p.n_cols,
+        indptr: p.indptr,
+        indices: p.indices,
+        data: vec![1u8; nnz],
+    }
+}
+
 /// Owned pattern built from (indptr, indices) arrays.
 fn pattern(
     indptr: &PyReadonlyArray1<'_, i64>,
@@ -190,17 +202,7 @@ impl MeshGraph {
                 self.balls.k_max
             )));
         }
-        let m = detached(py, || {
-            let p = self.balls.to_csr(k);
-            let nnz = p.nnz();
-            Ok(Csr {
-                n_rows: p.n_rows,
-                n_cols: p.n_cols,
-                indptr: p.indptr,
-                indices: p.indices,
-                data: vec![1u8; nnz],
-            })
-        })?;
+        let m = detached(py, || Ok(ones(self.balls.to_csr(k))))?;
         Ok(csr_out(py, m))
     }
 
@@ -247,15 +249,7 @@ fn khop_neighbourhoods<'py>(
     let faces = faces_vec(&faces)?;
     let m = detached(py, || {
         let adj = adjacency_from_faces(&faces, n_vertices)?;
-        let p = HopBalls::new(&adj.view(), k)?.to_csr(k);
-        let nnz = p.nnz();
-        Ok(Csr {
-            n_rows: p.n_rows,
-            n_cols: p.n_cols,
-            indptr: p.indptr,
-            indices: p.indices,
-            data: vec![1u8; nnz],
-        })
+        Ok(ones(HopBalls::new(&adj.view(), k)?.to_csr(k)))
     })?;
     Ok(csr_out(py, m))
 }
