@@ -64,6 +64,17 @@ pub fn overlap_cost<A: Rows, B: Rows>(
     witnesses: &[bool],
     opts: OverlapOptions<'_>,
 ) -> Result<Csr<u32>> {
+    Ok(overlap_rows(nbrs_a, nbrs_b, f, witnesses, opts)?.into_csr())
+}
+
+/// [`overlap_cost`] before its rows are laid out (see [`OverlapRows`]).
+pub fn overlap_rows<A: Rows, B: Rows>(
+    nbrs_a: &A,
+    nbrs_b: &B,
+    f: &[u32],
+    witnesses: &[bool],
+    opts: OverlapOptions<'_>,
+) -> Result<OverlapRows> {
     let n_a = nbrs_a.n_rows();
     let n_b = nbrs_b.n_rows();
     if f.len() != n_a || witnesses.len() != n_a {
@@ -86,6 +97,13 @@ pub fn overlap_cost<A: Rows, B: Rows>(
     if opts.top_k == Some(0) {
         return invalid("top_k must be at least 1");
     }
+    // The accumulator indexes its counters by B's columns unchecked: make sure they fit.
+    if (0..n_b)
+        .into_par_iter()
+        .any(|q| nbrs_b.row(q).iter().any(|&c| c as usize >= n_b))
+    {
+        return invalid(format!("nbrs_b holds a column outside its {n_b} vertices"));
+    }
     let walk = walk_order(nbrs_a);
     let segments: Vec<Segment> = walk
         .par_chunks(SEGMENT)
@@ -95,7 +113,6 @@ pub fn overlap_cost<A: Rows, B: Rows>(
             |acc, (s, rows)| acc.segment(nbrs_a, nbrs_b, f, witnesses, &opts, s * SEGMENT, rows),
         )
         .collect();
-    // Rows were produced in walk order: lay them out by row index.
     let mut len = vec![0usize; n_a];
     for (seg, rows) in segments.iter().zip(walk.chunks(SEGMENT)) {
         for (i, &p) in rows.iter().enumerate() {
@@ -107,24 +124,86 @@ pub fn overlap_cost<A: Rows, B: Rows>(
     for l in &len {
         indptr.push(indptr.last().unwrap() + l);
     }
-    let nnz = indptr[n_a];
-    let mut indices = vec![0u32; nnz];
-    let mut data = vec![0u32; nnz];
-    for (seg, rows) in segments.into_iter().zip(walk.chunks(SEGMENT)) {
-        for (i, &p) in rows.iter().enumerate() {
-            let (lo, hi) = (seg.starts[i], seg.starts[i + 1]);
-            let at = indptr[p as usize];
-            indices[at..at + hi - lo].copy_from_slice(&seg.cols[lo..hi]);
-            data[at..at + hi - lo].copy_from_slice(&seg.vals[lo..hi]);
+    Ok(OverlapRows {
+        n_cols: n_b,
+        walk,
+        segments,
+        indptr,
+    })
+}
+
+/// The overlap cost as computed: rows in walk order, plus the row pointer of the final CSR.
+/// [`OverlapRows::write_into`] lays the rows out by index into buffers the caller owns (NumPy's,
+/// from Python), so the big arrays are written once.
+pub struct OverlapRows {
+    pub n_cols: usize,
+    walk: Vec<u32>,
+    segments: Vec<Segment>,
+    pub indptr: Vec<usize>,
+}
+
+/// A raw base pointer that parallel tasks write through at disjoint offsets.
+#[derive(Clone, Copy)]
+struct SharedMut<T>(*mut T);
+// SAFETY: only used by `write_into`, where every task writes a disjoint set of rows.
+unsafe impl<T: Send> Send for SharedMut<T> {}
+unsafe impl<T: Send> Sync for SharedMut<T> {}
+
+impl<T> SharedMut<T> {
+    /// A method rather than field access, so closures capture the Send wrapper.
+    fn at(self, offset: usize) -> *mut T {
+        // SAFETY: callers stay within the buffer the pointer came from.
+        unsafe { self.0.add(offset) }
+    }
+}
+
+impl OverlapRows {
+    pub fn nnz(&self) -> usize {
+        *self.indptr.last().unwrap_or(&0)
+    }
+
+    /// Copies every row to its place: `indices` and `data` must have length `nnz()`.
+    pub fn write_into(&self, indices: &mut [u32], data: &mut [u32]) {
+        let nnz = self.nnz();
+        assert!(
+            indices.len() == nnz && data.len() == nnz,
+            "buffers must hold nnz entries"
+        );
+        let (idx, val) = (
+            SharedMut(indices.as_mut_ptr()),
+            SharedMut(data.as_mut_ptr()),
+        );
+        self.segments
+            .par_iter()
+            .zip(self.walk.par_chunks(SEGMENT))
+            .for_each(move |(seg, rows)| {
+                for (i, &p) in rows.iter().enumerate() {
+                    let (lo, hi) = (seg.starts[i], seg.starts[i + 1]);
+                    let at = self.indptr[p as usize];
+                    // SAFETY: the walk is a permutation of the rows, so the ranges
+                    // [indptr[p], indptr[p + 1]) written by different tasks never overlap, and
+                    // each lies inside the buffers (checked above against nnz).
+                    unsafe {
+                        std::ptr::copy_nonoverlapping(seg.cols[lo..].as_ptr(), idx.at(at), hi - lo);
+                        std::ptr::copy_nonoverlapping(seg.vals[lo..].as_ptr(), val.at(at), hi - lo);
+                    }
+                }
+            });
+    }
+
+    pub fn into_csr(self) -> Csr<u32> {
+        let nnz = self.nnz();
+        let mut indices = vec![0u32; nnz];
+        let mut data = vec![0u32; nnz];
+        self.write_into(&mut indices, &mut data);
+        Csr {
+            n_rows: self.walk.len(),
+            n_cols: self.n_cols,
+            indptr: self.indptr,
+            indices,
+            data,
         }
     }
-    Ok(Csr {
-        n_rows: n_a,
-        n_cols: n_b,
-        indptr,
-        indices,
-        data,
-    })
 }
 
 /// An order of A's vertices in which each vertex is, where possible, the first unvisited member
@@ -163,11 +242,15 @@ struct Segment {
     vals: Vec<u32>,
 }
 
+/// Flag bit of `Accumulator::count`: the column is in `support`. Counts are below the number
+/// of witnesses (< 2^31), so the low bits hold the count and one load serves both questions.
+const LISTED: u32 = 1 << 31;
+
 /// Per-thread state: the counts of the current row, kept up to date as the walk moves.
 struct Accumulator {
-    count: Vec<i32>,
-    /// `listed[q]`: q is in `support`, the columns whose count may be nonzero.
-    listed: Vec<bool>,
+    /// Count of each column of B in the current row, `| LISTED` when the column is in
+    /// `support`, the columns whose count may be nonzero.
+    count: Vec<u32>,
     support: Vec<u32>,
     /// `member[v]` = 1 + walk position of the last row that contained v.
     member: Vec<u32>,
@@ -181,7 +264,6 @@ impl Accumulator {
     fn new(n_a: usize, n_b: usize) -> Self {
         Accumulator {
             count: vec![0; n_b],
-            listed: vec![false; n_b],
             support: Vec::new(),
             member: vec![0; n_a],
             entering: Vec::new(),
@@ -191,39 +273,52 @@ impl Accumulator {
         }
     }
 
+    /// Adds one ball of B. The innermost loop of the kernel: branch-free (whether a column is
+    /// new is data-dependent and mispredicts often, so every column is written past the end of
+    /// `support` and the length advances only for new ones) and without bounds checks.
     #[inline]
     fn add(&mut self, ball: &[u32]) {
-        // Branch-free: whether a column is new is data-dependent and mispredicts often, so every
-        // column is written past the end of the list and the length advances only for new ones.
         let mut len = self.support.len();
-        self.support.resize(len + ball.len() + 1, 0);
-        let buf = &mut self.support[..];
+        self.support.reserve(ball.len());
+        let buf = self.support.as_mut_ptr();
+        let count = self.count.as_mut_ptr();
         for &q in ball {
-            let qi = q as usize;
-            self.count[qi] += 1;
-            buf[len] = q;
-            len += !self.listed[qi] as usize;
-            self.listed[qi] = true;
+            debug_assert!((q as usize) < self.count.len());
+            // SAFETY: every column of B is < n_b = count.len() (checked once in `overlap_rows`),
+            // and at most ball.len() entries are written past the old length, which `reserve`
+            // made room for.
+            unsafe {
+                let c = count.add(q as usize);
+                let old = *c;
+                *c = (old | LISTED) + 1;
+                *buf.add(len) = q;
+                len += (old < LISTED) as usize;
+            }
         }
-        self.support.truncate(len);
+        // SAFETY: entries below `len` were all written above or before.
+        unsafe { self.support.set_len(len) };
     }
 
     #[inline]
     fn remove(&mut self, ball: &[u32]) {
+        let count = self.count.as_mut_ptr();
         for &q in ball {
-            self.count[q as usize] -= 1;
+            debug_assert!((q as usize) < self.count.len());
+            // SAFETY: as in `add`; the ball was added before, so the count does not underflow
+            // into the flag.
+            unsafe { *count.add(q as usize) -= 1 };
         }
     }
 
     fn clear(&mut self) {
         for &q in &self.support {
             self.count[q as usize] = 0;
-            self.listed[q as usize] = false;
         }
         self.support.clear();
     }
 
     #[allow(clippy::too_many_arguments)]
+    #[inline(never)] // keeps per-segment work visible to profilers; called once per 256 rows
     fn segment<A: Rows, B: Rows>(
         &mut self,
         nbrs_a: &A,
@@ -298,55 +393,99 @@ impl Accumulator {
 
     /// Appends row p (nonzero counts, plus the kept column) with sorted columns.
     fn emit(&mut self, p: usize, opts: &OverlapOptions<'_>, out: &mut Segment) {
-        let (count, listed) = (&self.count, &mut self.listed);
+        let kept = opts.keep.map(|k| k[p]);
+        match opts.top_k {
+            Some(t) if self.support.len() > t => self.emit_top(t, kept, out),
+            _ => self.emit_all(kept, out),
+        }
+        out.starts.push(out.cols.len());
+    }
+
+    /// Every live column, in order. One pass keeps the live columns in `support` (forgetting
+    /// the dead ones); dense rows are then ordered through a bitset, sparse ones by sorting, and
+    /// `support` ends up as exactly the live columns. At k = 8 (~1000 per row) this is most of
+    /// the output work.
+    fn emit_all(&mut self, kept: Option<u32>, out: &mut Segment) {
+        let count = &mut self.count;
+        let (mut lo, mut hi) = (u32::MAX, 0u32);
         self.support.retain(|&q| {
-            let live = count[q as usize] > 0;
-            listed[q as usize] = live;
+            let live = count[q as usize] > LISTED;
+            if live {
+                lo = lo.min(q);
+                hi = hi.max(q);
+            } else {
+                count[q as usize] = 0;
+            }
             live
         });
-        let kept = opts.keep.map(|k| k[p]);
-        let sel = &mut self.selected;
-        sel.clear();
-        sel.extend_from_slice(&self.support);
-        if let Some(t) = opts.top_k {
-            if sel.len() > t {
-                sel.select_nth_unstable_by_key(t - 1, |&q| {
-                    (std::cmp::Reverse(count[q as usize]), q)
-                });
-                sel.truncate(t);
-            }
+        let extra = kept.filter(|&q| self.count[q as usize] <= LISTED);
+        if let Some(q) = extra {
+            lo = lo.min(q);
+            hi = hi.max(q);
         }
-        if let Some(q) = kept {
-            if count[q as usize] <= 0 || (opts.top_k.is_some() && !sel.contains(&q)) {
-                sel.push(q);
-            }
+        let n = self.support.len() + extra.is_some() as usize;
+        if n == 0 {
+            return;
         }
-        if sel.len() * 8 < self.bits.len() {
-            sel.sort_unstable();
-            for &q in sel.iter() {
-                out.cols.push(q);
-                out.vals.push(count[q as usize].max(0) as u32);
+        let at = out.cols.len();
+        out.cols.resize(at + n, 0);
+        out.vals.resize(at + n, 0);
+        let (cols, vals) = (&mut out.cols[at..], &mut out.vals[at..]);
+        let (lo_w, hi_w) = (lo as usize >> 6, hi as usize >> 6);
+        if n * 8 < hi_w - lo_w + 1 {
+            cols[..self.support.len()].copy_from_slice(&self.support);
+            if let Some(q) = extra {
+                cols[n - 1] = q;
             }
+            cols.sort_unstable();
         } else {
-            // Dense enough that scanning a bitset beats sorting.
-            let (mut lo, mut hi) = (usize::MAX, 0usize);
-            for &q in sel.iter() {
-                let w = q as usize >> 6;
-                self.bits[w] |= 1u64 << (q & 63);
-                lo = lo.min(w);
-                hi = hi.max(w);
+            let bits = &mut self.bits;
+            for &q in self.support.iter().chain(extra.iter()) {
+                bits[q as usize >> 6] |= 1u64 << (q & 63);
             }
-            for w in lo..=hi.min(self.bits.len().saturating_sub(1)) {
-                let mut word = std::mem::take(&mut self.bits[w]);
+            let mut i = 0usize;
+            for (w, word) in bits[lo_w..=hi_w].iter_mut().enumerate() {
+                let mut word = std::mem::take(word);
                 while word != 0 {
-                    let q = (w << 6) | word.trailing_zeros() as usize;
+                    cols[i] = (((lo_w + w) << 6) | word.trailing_zeros() as usize) as u32;
                     word &= word - 1;
-                    out.cols.push(q as u32);
-                    out.vals.push(count[q].max(0) as u32);
+                    i += 1;
                 }
             }
         }
-        out.starts.push(out.cols.len());
+        for (v, &q) in vals.iter_mut().zip(cols.iter()) {
+            *v = self.count[q as usize] & !LISTED;
+        }
+    }
+
+    /// The `t` largest counts (ties: smaller column first) plus the kept column, sorted.
+    fn emit_top(&mut self, t: usize, kept: Option<u32>, out: &mut Segment) {
+        let count = &mut self.count;
+        self.support.retain(|&q| {
+            let live = count[q as usize] > LISTED;
+            if !live {
+                count[q as usize] = 0;
+            }
+            live
+        });
+        let count = &self.count;
+        let sel = &mut self.selected;
+        sel.clear();
+        sel.extend_from_slice(&self.support);
+        if sel.len() > t {
+            sel.select_nth_unstable_by_key(t - 1, |&q| (std::cmp::Reverse(count[q as usize]), q));
+            sel.truncate(t);
+        }
+        if let Some(q) = kept {
+            if !sel.contains(&q) {
+                sel.push(q);
+            }
+        }
+        sel.sort_unstable();
+        for &q in sel.iter() {
+            out.cols.push(q);
+            out.vals.push(count[q as usize] & !LISTED);
+        }
     }
 }
 

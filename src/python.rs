@@ -7,11 +7,12 @@ use crate::geodesic::{pair_distances, EdgeGraph};
 use crate::graph::adjacency_from_faces;
 use crate::khop::HopBalls;
 use crate::lmd::{local_map_distortion, RingDistances};
-use crate::overlap::{overlap_cost, BallsAt, OverlapOptions};
+use crate::overlap::{overlap_rows, BallsAt, OverlapOptions, OverlapRows};
 use crate::shot::shot_descriptors;
-use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
+use rayon::prelude::*;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
 fn to_py_err(e: CoreError) -> PyErr {
@@ -60,27 +61,53 @@ fn points_vec(v: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<[f64; 3]>> {
     Ok(a.outer_iter().map(|r| [r[0], r[1], r[2]]).collect())
 }
 
+/// Copies a 1-D NumPy array out as `U`, one range check per element; contiguous arrays (the
+/// common case) take a parallel slice path with exact-size allocation, because these copies
+/// hold tens of millions of entries for a k = 8 cost.
+fn convert_vec<T, U>(a: &PyReadonlyArray1<'_, T>, what: &str) -> PyResult<Vec<U>>
+where
+    T: numpy::Element + Copy + TryInto<U> + std::fmt::Display + Sync,
+    U: Send,
+{
+    let out_of_range = |x: T| PyValueError::new_err(format!("{what} holds {x}, out of range"));
+    match a.as_slice() {
+        Ok(s) => s
+            .par_iter()
+            .with_min_len(1 << 16)
+            .map(|&x| x.try_into().map_err(|_| out_of_range(x)))
+            .collect(),
+        Err(_) => a
+            .as_array()
+            .iter()
+            .map(|&x| x.try_into().map_err(|_| out_of_range(x)))
+            .collect(),
+    }
+}
+
 fn u32_vec<T>(a: &PyReadonlyArray1<'_, T>, what: &str) -> PyResult<Vec<u32>>
 where
-    T: numpy::Element + Copy + TryInto<u32> + std::fmt::Display,
+    T: numpy::Element + Copy + TryInto<u32> + std::fmt::Display + Sync,
 {
-    a.as_array()
-        .iter()
-        .map(|&x| {
-            x.try_into()
-                .map_err(|_| PyValueError::new_err(format!("{what} holds {x}, out of range")))
-        })
-        .collect()
+    convert_vec(a, what)
 }
 
 fn usize_vec(a: &PyReadonlyArray1<'_, i64>, what: &str) -> PyResult<Vec<usize>> {
-    a.as_array()
-        .iter()
-        .map(|&x| {
-            usize::try_from(x)
-                .map_err(|_| PyValueError::new_err(format!("{what} holds {x}, out of range")))
-        })
-        .collect()
+    convert_vec(a, what)
+}
+
+fn plain_vec<T: numpy::Element + Copy>(a: &PyReadonlyArray1<'_, T>) -> Vec<T> {
+    match a.as_slice() {
+        Ok(s) => s.to_vec(),
+        Err(_) => a.as_array().to_vec(),
+    }
+}
+
+/// A NumPy array that owns its memory. Arrays wrapping a Rust `Vec` have a non-array base,
+/// on which NumPy refuses `flags.writeable = True`, and scipy's fancy indexing sets exactly
+/// that on its broadcast views (`K[rows, result]` raised ValueError), so every result is
+/// handed over as an ordinary array.
+fn owned<'py, T: numpy::Element>(py: Python<'py>, v: &[T]) -> Bound<'py, PyArray1<T>> {
+    PyArray1::from_slice(py, v)
 }
 
 type PyCsr<'py, T> = (
@@ -89,25 +116,22 @@ type PyCsr<'py, T> = (
     Bound<'py, PyArray1<T>>,
 );
 
-/// Reinterprets column indices as i32 without copying them (they are < 2^31: every kernel
-/// produces indices below a vertex count that came from a NumPy array of i32-indexable size).
-fn u32_to_i32(v: Vec<u32>) -> Vec<i32> {
+/// Column indices as NumPy's i32 (scipy's index type for matrices this size).
+fn indices_out<'py>(py: Python<'py>, v: &[u32]) -> Bound<'py, PyArray1<i32>> {
     debug_assert!(v.iter().all(|&x| x <= i32::MAX as u32));
-    let mut v = std::mem::ManuallyDrop::new(v);
-    let (ptr, len, cap) = (v.as_mut_ptr(), v.len(), v.capacity());
-    // SAFETY: u32 and i32 have the same size and alignment, and the allocation is handed over
-    // whole (the original Vec is never dropped).
-    unsafe { Vec::from_raw_parts(ptr as *mut i32, len, cap) }
+    // SAFETY: u32 and i32 have the same size and alignment, and every index is < 2^31: each
+    // kernel produces indices below a vertex count that came from an i32-indexable NumPy array.
+    let as_i32 = unsafe { std::slice::from_raw_parts(v.as_ptr() as *const i32, v.len()) };
+    owned(py, as_i32)
 }
 
-/// Hands a CSR to NumPy without copying the big arrays (indices are < 2^31 by construction).
+/// Hands a CSR to NumPy as scipy's (indptr, indices, data).
 fn csr_out<T: numpy::Element>(py: Python<'_>, m: Csr<T>) -> PyCsr<'_, T> {
     let indptr: Vec<i64> = m.indptr.iter().map(|&x| x as i64).collect();
-    let indices = u32_to_i32(m.indices);
     (
-        indptr.into_pyarray(py),
-        indices.into_pyarray(py),
-        m.data.into_pyarray(py),
+        owned(py, &indptr),
+        indices_out(py, &m.indices),
+        owned(py, &m.data),
     )
 }
 
@@ -225,7 +249,7 @@ impl MeshGraph {
                 &t,
             )
         })?;
-        Ok(d.into_pyarray(py))
+        Ok(owned(py, &d))
     }
 
     /// Mean edge length of the mesh graph.
@@ -254,6 +278,33 @@ fn khop_neighbourhoods<'py>(
     Ok(csr_out(py, m))
 }
 
+/// Lays the cost's rows out straight into NumPy-owned arrays (no intermediate copy of the
+/// tens of millions of entries a k = 8 cost holds), without the GIL.
+fn overlap_out(py: Python<'_>, rows: OverlapRows) -> PyResult<PyCsr<'_, u32>> {
+    let nnz = rows.nnz();
+    let indptr: Vec<i64> = rows.indptr.iter().map(|&x| x as i64).collect();
+    let indices = PyArray1::<i32>::zeros(py, nnz, false);
+    let data = PyArray1::<u32>::zeros(py, nnz, false);
+    {
+        let mut idx = indices.readwrite();
+        let mut val = data.readwrite();
+        let idx = idx
+            .as_slice_mut()
+            .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+        let val = val
+            .as_slice_mut()
+            .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+        // SAFETY: same size and alignment; every column index is below n_b < 2^31.
+        let idx: &mut [u32] =
+            unsafe { std::slice::from_raw_parts_mut(idx.as_mut_ptr() as *mut u32, idx.len()) };
+        detached(py, || {
+            rows.write_into(idx, val);
+            Ok(())
+        })?;
+    }
+    Ok((owned(py, &indptr), indices, data))
+}
+
 /// Overlap cost from two neighbourhood patterns given as CSR arrays.
 #[pyfunction]
 #[pyo3(signature = (a_indptr, a_indices, n_a, b_indptr, b_indices, n_b, f, witnesses, top_k=None, keep=None))]
@@ -274,14 +325,14 @@ fn overlap_cost_csr<'py>(
     let a = pattern(&a_indptr, &a_indices, n_a, "nbrs_a")?;
     let b = pattern(&b_indptr, &b_indices, n_b, "nbrs_b")?;
     let f = u32_vec(&f, "f")?;
-    let w: Vec<bool> = witnesses.as_array().to_vec();
+    let w: Vec<bool> = plain_vec(&witnesses);
     let keep = keep.map(|k| u32_vec(&k, "keep")).transpose()?;
     let opts = OverlapOptions {
         top_k,
         keep: keep.as_deref(),
     };
-    let m = detached(py, || overlap_cost(&a.view(), &b.view(), &f, &w, opts))?;
-    Ok(csr_out(py, m))
+    let rows = detached(py, || overlap_rows(&a.view(), &b.view(), &f, &w, opts))?;
+    overlap_out(py, rows)
 }
 
 /// Overlap cost at hop radius k between two prebuilt graphs.
@@ -302,14 +353,14 @@ fn overlap_cost_graphs<'py>(
         return Err(PyValueError::new_err("k exceeds the graphs' k_max"));
     }
     let f = u32_vec(&f, "f")?;
-    let w: Vec<bool> = witnesses.as_array().to_vec();
+    let w: Vec<bool> = plain_vec(&witnesses);
     let keep = keep.map(|k| u32_vec(&k, "keep")).transpose()?;
     let opts = OverlapOptions {
         top_k,
         keep: keep.as_deref(),
     };
-    let m = detached(py, || {
-        overlap_cost(
+    let rows = detached(py, || {
+        overlap_rows(
             &BallsAt { balls: &a.balls, k },
             &BallsAt { balls: &b.balls, k },
             &f,
@@ -317,7 +368,7 @@ fn overlap_cost_graphs<'py>(
             opts,
         )
     })?;
-    Ok(csr_out(py, m))
+    overlap_out(py, rows)
 }
 
 type PerVertexPair<'py> = (Bound<'py, PyArray1<f32>>, Bound<'py, PyArray1<f32>>);
@@ -344,7 +395,7 @@ fn local_map_distortion_graphs<'py>(
         };
         local_map_distortion(&a.balls, rings, &gb, &f, scale_a, scale_b)
     })?;
-    Ok((mean.into_pyarray(py), frac.into_pyarray(py)))
+    Ok((owned(py, &mean), owned(py, &frac)))
 }
 
 /// Owned sparse cost built from (indptr, indices, data) arrays.
@@ -360,7 +411,7 @@ fn cost_csr<T: numpy::Element + Copy>(
         n_cols,
         indptr: usize_vec(indptr, "cost indptr")?,
         indices: u32_vec(indices, "cost indices")?,
-        data: data.as_array().to_vec(),
+        data: plain_vec(data),
     };
     m.view().validate("cost", true).map_err(to_py_err)?;
     Ok(m)
@@ -382,7 +433,7 @@ fn solve_assignment<'py, T: numpy::Element + Copy + Send + Sync>(
 ) -> PyResult<Bound<'py, PyArray1<i64>>> {
     let m = cost_csr(indptr, indices, data, n_rows, n_cols)?;
     let g = detached(py, || solver(&m.view(), maximize))?;
-    Ok(g.into_pyarray(py))
+    Ok(owned(py, &g))
 }
 
 /// Optimal assignment on an integer sparse cost; -1 marks unassigned rows.
@@ -439,7 +490,7 @@ fn py_shot_descriptors<'py>(
     let v = points_vec(&vertices)?;
     let f = faces_vec(&faces)?;
     let d = detached(py, || shot_descriptors(&v, &f, radius))?;
-    Ok(d.into_pyarray(py))
+    Ok(owned(py, &d))
 }
 
 #[pymodule]

@@ -167,3 +167,15 @@ def test_empty_and_degenerate_shapes():
     assert hope_rs.auction_assignment(np.zeros((0, 3))).shape == (0,)
     np.testing.assert_array_equal(hope_rs.auction_assignment(np.zeros((2, 0))), [-1, -1])
     np.testing.assert_array_equal(hope_rs.auction_assignment(np.array([[7]])), [0])
+
+
+def test_results_are_ordinary_numpy_arrays():
+    # Arrays wrapping Rust memory refuse `flags.writeable = True`, which scipy's fancy indexing
+    # sets on its views: `cost[rows, assignment]` must work on what we return.
+    cost = sp.random(40, 40, density=0.3, random_state=0, format="csr") + sp.eye(40)
+    m = hope_rs.auction_assignment(cost)
+    assert m.flags.owndata and m.flags.writeable
+    vals = np.asarray(cost[np.arange(40), m]).ravel()
+    assert vals.shape == (40,) and np.all(vals > 0)
+    k = hope_rs.khop_neighbourhoods(np.array([[0, 1, 2], [1, 2, 3]]), 1)
+    assert k[np.array([0, 3]), np.array([1, 2])].tolist() == [[1, 1]]
