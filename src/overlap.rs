@@ -11,6 +11,11 @@ use rayon::prelude::*;
 pub trait Rows: Sync {
     fn n_rows(&self) -> usize;
     fn row(&self, r: usize) -> &[u32];
+    /// Whether each row lists its members nearest first (BFS order), so that the first
+    /// unvisited member of a row is a good next step for the walk (see `walk_order`).
+    fn nearest_first(&self) -> bool {
+        false
+    }
 }
 
 impl Rows for CsrView<'_, ()> {
@@ -34,6 +39,9 @@ impl Rows for BallsAt<'_> {
     }
     fn row(&self, r: usize) -> &[u32] {
         self.balls.ball(r, self.k)
+    }
+    fn nearest_first(&self) -> bool {
+        true
     }
 }
 
@@ -206,22 +214,37 @@ impl OverlapRows {
     }
 }
 
-/// An order of A's vertices in which each vertex is, where possible, the first unvisited member
-/// of the previous vertex's neighbourhood (its nearest one, for rows in BFS order).
+/// An order of A's vertices in which each vertex is, where possible, an unvisited member of the
+/// previous vertex's row that is close to it: the first one for rows in BFS order, otherwise the
+/// one whose row looks most like the previous row by MinHash (sorted rows, as scipy patterns
+/// come, would otherwise step to the smallest index, often across the neighbourhood, which
+/// doubled the kernel's work on a 28k-vertex mesh at k = 8).
 fn walk_order<A: Rows>(a: &A) -> Vec<u32> {
     let n = a.n_rows();
+    let sketch = (!a.nearest_first()).then(|| min_hashes(a));
     let mut visited = vec![false; n];
     let mut order = Vec::with_capacity(n);
     let mut scan = 0usize;
     let mut current: Option<usize> = None;
     while order.len() < n {
+        let unvisited = |&&v: &&u32| (v as usize) < n && !visited[v as usize];
         let next = current
             .and_then(|p| {
-                a.row(p)
-                    .iter()
-                    .map(|&v| v as usize)
-                    .find(|&v| v < n && !visited[v])
+                let row = a.row(p);
+                match &sketch {
+                    None => row.iter().find(unvisited).copied(),
+                    Some(h) => {
+                        let hp = &h[p * HASHES..(p + 1) * HASHES];
+                        row.iter().filter(unvisited).copied().max_by_key(|&v| {
+                            let hv = &h[v as usize * HASHES..(v as usize + 1) * HASHES];
+                            // Ties go to the earliest member (max_by_key keeps the last).
+                            let same = hp.iter().zip(hv).filter(|(x, y)| x == y).count();
+                            (same, std::cmp::Reverse(v))
+                        })
+                    }
+                }
             })
+            .map(|v| v as usize)
             .unwrap_or_else(|| {
                 while visited[scan] {
                     scan += 1;
@@ -233,6 +256,33 @@ fn walk_order<A: Rows>(a: &A) -> Vec<u32> {
         current = Some(next);
     }
     order
+}
+
+/// MinHash signatures per row: the fraction of equal entries of two signatures estimates the
+/// Jaccard similarity of the rows.
+const HASHES: usize = 8;
+
+fn min_hashes<A: Rows>(a: &A) -> Vec<u32> {
+    let mut out = vec![u32::MAX; a.n_rows() * HASHES];
+    out.par_chunks_mut(HASHES).enumerate().for_each(|(r, sig)| {
+        for &v in a.row(r) {
+            for (h, s) in sig.iter_mut().enumerate() {
+                *s = (*s).min(mix(v, h as u32));
+            }
+        }
+    });
+    out
+}
+
+/// A cheap 32-bit integer hash (the finaliser of MurmurHash3), seeded per signature entry.
+#[inline]
+fn mix(v: u32, seed: u32) -> u32 {
+    let mut x = v ^ seed.wrapping_mul(0x9e37_79b9);
+    x ^= x >> 16;
+    x = x.wrapping_mul(0x85eb_ca6b);
+    x ^= x >> 13;
+    x = x.wrapping_mul(0xc2b2_ae35);
+    x ^ (x >> 16)
 }
 
 /// The rows of one segment, in walk order.

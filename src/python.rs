@@ -150,7 +150,7 @@ fn ones(p: Csr<()>) -> Csr<u8> {
 /// Owned pattern built from (indptr, indices) arrays.
 fn pattern(
     indptr: &PyReadonlyArray1<'_, i64>,
-    indices: &PyReadonlyArray1<'_, i64>,
+    indices: &PyReadonlyArray1<'_, i32>,
     n: usize,
     what: &str,
 ) -> PyResult<Csr<()>> {
@@ -312,10 +312,10 @@ fn overlap_out(py: Python<'_>, rows: OverlapRows) -> PyResult<PyCsr<'_, u32>> {
 fn overlap_cost_csr<'py>(
     py: Python<'py>,
     a_indptr: PyReadonlyArray1<'py, i64>,
-    a_indices: PyReadonlyArray1<'py, i64>,
+    a_indices: PyReadonlyArray1<'py, i32>,
     n_a: usize,
     b_indptr: PyReadonlyArray1<'py, i64>,
-    b_indices: PyReadonlyArray1<'py, i64>,
+    b_indices: PyReadonlyArray1<'py, i32>,
     n_b: usize,
     f: PyReadonlyArray1<'py, i64>,
     witnesses: PyReadonlyArray1<'py, bool>,

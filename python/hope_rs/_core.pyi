@@ -23,10 +23,10 @@ class MeshGraph:
 def khop_neighbourhoods(faces: npt.NDArray[np.int64], k: int, n_vertices: int) -> _Csr: ...
 def overlap_cost_csr(
     a_indptr: npt.NDArray[np.int64],
-    a_indices: npt.NDArray[np.int64],
+    a_indices: npt.NDArray[np.int32],
     n_a: int,
     b_indptr: npt.NDArray[np.int64],
-    b_indices: npt.NDArray[np.int64],
+    b_indices: npt.NDArray[np.int32],
     n_b: int,
     f: npt.NDArray[np.int64],
     witnesses: npt.NDArray[np.bool_],

@@ -74,8 +74,8 @@ def overlap_cost(
     if keep is not None:
         keep = as_index_map(keep, n_a, n_b, name="keep")
     indptr, indices, data = _core.overlap_cost_csr(
-        a.indptr.astype(np.int64), a.indices.astype(np.int64), n_a,
-        b.indptr.astype(np.int64), b.indices.astype(np.int64), n_b,
+        a.indptr.astype(np.int64), a.indices.astype(np.int32, copy=False), n_a,
+        b.indptr.astype(np.int64), b.indices.astype(np.int32, copy=False), n_b,
         f, w, top_k, keep,
     )  # fmt: skip
     return sp.csr_matrix((data, indices, indptr), shape=(n_a, n_b))
