@@ -55,7 +55,9 @@ def test_faust_pair_with_default_parameters(faust_pair):
     final = hope_rs.score(hope_rs.geodesic_errors(b, res.map))
     assert final.exact >= 0.95, f"{final} (initial map: {init})"
     assert final.mean < init.mean
-    assert res.history and all(h.k >= 1 for h in res.history)
+    # Each pass: one global repair (k = 0), then the k-hop steps.
+    assert res.history[0].k == 0 and all(0 <= h.k <= 8 for h in res.history)
+    assert sum(h.k == 0 for h in res.history) == sum(h.k == 8 for h in res.history)
     assert set(res.timings) >= {"descriptors", "init", "refine", "total"}
 
 

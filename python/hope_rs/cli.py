@@ -79,8 +79,9 @@ def cmd_match(args) -> int:
     if args.output and os.path.isdir(args.output):
         raise ValueError(f"output {args.output!r} is a folder; give a file name")
     a, b = load_mesh(args.a), load_mesh(args.b)
+    # One global repair step (k = 0) starts every pass.
     progress = Progress(
-        len(default_schedule(args.k_max)), enabled=not args.quiet and sys.stderr.isatty()
+        len(default_schedule(args.k_max)) + 1, enabled=not args.quiet and sys.stderr.isatty()
     )
     try:
         res = match(a, b, init=args.init, k_max=args.k_max, callback=progress.step)

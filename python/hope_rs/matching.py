@@ -61,6 +61,7 @@ def match(
     min_consistent: float = MIN_CONSISTENT,
     top_k: int = TOP_K,
     polish_k: int | None = POLISH_K,
+    global_step: bool = True,
     callback=None,
 ) -> MatchResult:
     """Dense correspondence from shape A to shape B with HOPE.
@@ -85,6 +86,9 @@ def match(
     polish_k : int or None
         Hop radius of a final step in which each vertex takes its best-overlapping candidate;
         ``None`` returns the one-to-one map of the last assignment instead.
+    global_step : bool
+        Start each pass by re-placing untrusted vertices by their geodesic distances to trusted
+        ones (see :func:`hope_rs.refine.global_repair`); ``False`` is the paper's loop.
     callback : callable, optional
         Called with each :class:`~hope_rs.refine.Iteration` as it finishes.
 
@@ -108,7 +112,7 @@ def match(
     t = time.perf_counter()
     res = refine(
         sa, sb, f0, schedule=schedule, max_passes=max_passes, min_consistent=min_consistent,
-        top_k=top_k, polish_k=polish_k, callback=callback,
+        top_k=top_k, polish_k=polish_k, global_step=global_step, callback=callback,
     )  # fmt: skip
     timings["refine"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
+from .anchors import anchor_step
 from .lmd import MIN_CONSISTENT, witnesses
 from .shape import Shape
 
@@ -33,6 +34,7 @@ POLISH_K = 3
 class Iteration:
     """What one refinement step did."""
 
+    #: Hop radius of the step; 0 for a global repair step (:func:`global_repair`).
     k: int
     witness_fraction: float
     changed: int
@@ -56,6 +58,7 @@ def refine(
     top_k: int = TOP_K,
     min_witness_fraction: float = 0.1,
     polish_k: int | None = POLISH_K,
+    global_step: bool = True,
     callback=None,
 ) -> RefineResult:
     """Refine the map ``f0`` (A → B) with HOPE.
@@ -73,6 +76,13 @@ def refine(
     FAUST remeshed 000→004 the polish lowers the mean geodesic error from 0.025 to 0.018 (k = 3 was
     best among 1..8), and on identically triangulated pairs it changes nothing. ``None`` keeps the
     one-to-one map.
+
+    With ``global_step`` each pass starts with :func:`global_repair`, which re-places the
+    vertices LMD does not trust by their geodesic distances to trusted ones; it is recorded in
+    the history as a step with k = 0. The k-hop steps alone win back a wrongly matched region
+    a few hops per pass; on FAUST remeshed 002→007 (initial mean error 0.36) six passes left
+    0.117 without the repair and 0.054 with it, on 004→009 0.132 against 0.061, and faust_reg
+    019→020 reached 100% exact in 25 steps instead of 97.9% in 49.
     """
     k_max = min(a.k_max, b.k_max)
     schedule = list(schedule) if schedule is not None else default_schedule(k_max)
@@ -82,6 +92,15 @@ def refine(
     history: list[Iteration] = []
     for _ in range(max_passes):
         changed_in_pass = 0
+        if global_step:
+            t0 = time.perf_counter()
+            f_new, w = global_repair(a, b, f, min_consistent)
+            changed = int(np.count_nonzero(f_new != f))
+            changed_in_pass += changed
+            f = f_new
+            history.append(Iteration(0, float(w.mean()), changed, time.perf_counter() - t0))
+            if callback is not None:
+                callback(history[-1])
         for k in schedule:
             t0 = time.perf_counter()
             w = voters(a, b, f, min_consistent, min_witness_fraction)
@@ -108,6 +127,18 @@ def refine(
         if callback is not None:
             callback(history[-1])
     return RefineResult(f, history)
+
+
+def global_repair(a: Shape, b: Shape, f, min_consistent: float):
+    """:func:`~hope_rs.anchors.anchor_step` on the LMD witnesses of ``f``, keeping a moved vertex
+    only where it then passes LMD itself (the anchor coordinates are coarser than a k-hop step,
+    so elsewhere the old match is at least as good). Returns the map and the witnesses used."""
+    w = witnesses(a, b, f, min_consistent=min_consistent)
+    g = anchor_step(a, b, f, w)
+    if g is f:
+        return f, w
+    ok = witnesses(a, b, g, min_consistent=min_consistent)
+    return np.where(ok | (g == f), g, f), w
 
 
 def voters(a: Shape, b: Shape, f, min_consistent: float, min_fraction: float) -> np.ndarray:

@@ -1,0 +1,88 @@
+"""A global step for HOPE: re-place untrusted vertices by their geodesic distances to witnesses.
+
+HOPE's k-hop steps move a vertex only as far as the witnesses in its k-ball reach, so a region
+whose initial matches are all wrong (a limb mapped to the wrong side) is won back a few hops per
+pass. Geodesic distance to a spread of trusted correspondences ("anchors") is an intrinsic
+coordinate both shapes share, whatever their triangulations: matching untrusted vertices by
+these coordinates repairs such regions in one step, and the k-hop steps then sharpen the result.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import dijkstra
+from scipy.spatial import cKDTree
+
+from .shape import Shape
+
+#: Anchors per global step: farthest-point samples among the witnesses.
+N_ANCHORS = 32
+#: The anchor coordinates are reduced to this many principal axes before the neighbour search
+#: (geodesic distance fields are smooth, so a few axes keep nearly all their variance).
+SEARCH_DIMS = 12
+
+
+def edge_matrix(shape: Shape) -> sp.csr_matrix:
+    """Symmetric sparse matrix of edge lengths / sqrt(area), cached on the shape."""
+    m = getattr(shape, "_edge_matrix", None)
+    if m is None:
+        v, f = shape.mesh.vertices, shape.mesh.faces
+        i = np.concatenate([f[:, 0], f[:, 1], f[:, 2]])
+        j = np.concatenate([f[:, 1], f[:, 2], f[:, 0]])
+        w = np.linalg.norm(v[i] - v[j], axis=1) / shape.scale
+        n = shape.n_vertices
+        m = sp.csr_matrix((w, (i, j)), shape=(n, n))
+        m = m.maximum(m.T).tocsr()
+        m.eliminate_zeros()
+        shape._edge_matrix = m
+    return m
+
+
+def farthest_witnesses(a: Shape, candidates: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` farthest-point samples of ``candidates`` on A and their distance fields (n, n_a)."""
+    g = edge_matrix(a)
+    # Start at the candidate nearest the centroid: a choice that does not depend on vertex
+    # numbering, so relabelling the meshes relabels the result.
+    v = a.mesh.vertices[candidates]
+    chosen = [int(candidates[np.argmin(((v - v.mean(axis=0)) ** 2).sum(axis=1))])]
+    fields = [dijkstra(g, indices=chosen[0])]
+    nearest = fields[0].copy()
+    for _ in range(1, min(n, candidates.size)):
+        d = nearest[candidates]
+        d[~np.isfinite(d)] = -1.0  # other components: never anchors of this one
+        nxt = int(candidates[int(np.argmax(d))])
+        if nearest[nxt] <= 0:
+            break
+        chosen.append(nxt)
+        fields.append(dijkstra(g, indices=nxt))
+        nearest = np.minimum(nearest, fields[-1])
+    return np.array(chosen), np.vstack(fields)
+
+
+def anchor_step(a: Shape, b: Shape, f: np.ndarray, trusted: np.ndarray) -> np.ndarray:
+    """``f`` with every untrusted vertex moved to the vertex of B whose geodesic distances to
+    the anchors' images are closest to its own distances to the anchors.
+
+    Anchors are :data:`N_ANCHORS` farthest-point samples among the trusted vertices; distances
+    are Dijkstra distances on the edge graphs divided by sqrt(area). With fewer than four
+    trusted vertices, or when every vertex is trusted, ``f`` is returned unchanged.
+    """
+    cand = np.flatnonzero(trusted)
+    if cand.size < 4 or cand.size == trusted.size:
+        return f
+    anchors, da = farthest_witnesses(a, cand, N_ANCHORS)
+    db = dijkstra(edge_matrix(b), indices=f[anchors])
+    # Unreachable (other components) counts as far, not infinitely far.
+    big = 4.0
+    da = np.where(np.isfinite(da), da, big).T
+    db = np.where(np.isfinite(db), db, big).T
+    mu = db.mean(axis=0)
+    _, _, vt = np.linalg.svd(db - mu, full_matrices=False)
+    basis = vt[: min(SEARCH_DIMS, vt.shape[0])].T
+    tree = cKDTree((db - mu) @ basis)
+    moved = np.flatnonzero(~trusted)
+    _, q = tree.query((da[moved] - mu) @ basis)
+    g = f.copy()
+    g[moved] = q
+    return g
