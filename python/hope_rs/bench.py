@@ -293,7 +293,7 @@ def _render_extremes(name, shown, method, ups, out: Path) -> None:
     for tag, (mean, pair, f) in (("best", shown[0]), ("worst", shown[-1])):
         render_pair(
             load_mesh(pair.a), load_mesh(pair.b), f, out / f"{name}_{tag}.png",
-            title=f"{name} {pair.name}: {method}, {tag} pair (mean error ×100 {100 * mean:.2f})",
+            title=f"{name} {pair.name}\n{method}, {tag} pair: mean error ×100 {100 * mean:.2f}",
             up=ups.get(name, ups.get("*", "auto")),
         )  # fmt: skip
 
