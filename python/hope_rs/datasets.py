@@ -128,10 +128,11 @@ def pairs_of(folder: str | os.PathLike) -> list[Pair]:
             continue
         if len(words) != 2:
             raise ValueError(f"{listing}:{n}: expected 'SOURCE TARGET', got {line.strip()!r}")
-        vts = []
         for w in words:
             if w not in meshes:
                 raise ValueError(f"{listing}:{n}: no mesh named {w!r} in {str(folder)!r}")
+        vts = []
+        for w in words:
             v = folder / "corres" / f"{w}.vts"
             if not v.exists():
                 raise ValueError(f"{listing}:{n}: ground truth {str(v)!r} is missing")
