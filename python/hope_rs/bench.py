@@ -120,6 +120,8 @@ def _table(rows: list[dict], methods: list[str]) -> str:
 
 
 def _set_markdown(name: str, rows: list[dict], methods: list[str]) -> str:
+    ran = {r["method"] for r in rows}
+    methods = [m for m in methods if m in ran]
     pairs = list(dict.fromkeys(r["pair"] for r in rows))
     main = [m for m in methods if m not in ABLATIONS]
     abl = [m for m in methods if m in ABLATIONS]
@@ -171,13 +173,16 @@ def _plot_curves(name: str, errors: dict[str, list[np.ndarray]], n_pairs: dict, 
     plt.close(fig)
 
 
-def _summary(out: Path) -> None:
+def write_tables(out) -> None:
+    """(Re)write ``SET.md`` and ``summary.md`` from the ``SET.csv`` files in ``out``."""
+    out = Path(out)
     parts = ["# Benchmark results\n"]
     for path in sorted(out.glob("*.csv")):
         rows = _read_csv(path)
         if rows:
-            methods = list(dict.fromkeys(r["method"] for r in rows))
-            parts.append(_set_markdown(path.stem, rows, methods))
+            md = _set_markdown(path.stem, rows, list(dict.fromkeys(r["method"] for r in rows)))
+            path.with_suffix(".md").write_text(md)
+            parts.append(md)
     (out / "summary.md").write_text("\n".join(parts))
 
 
@@ -275,11 +280,10 @@ def run_bench(
                 continue
             all_rows += rows
             n_pairs = {m: len(es) for m, es in errors.items()}
-            (out / f"{folder.name}.md").write_text(_set_markdown(folder.name, rows, methods))
             _plot_curves(folder.name, errors, n_pairs, out / f"{folder.name}_curves.png")
             if render and shown:
                 _render_extremes(folder.name, shown, show_method, ups, out)
-            _summary(out)
+            write_tables(out)
     finally:
         bar.close()
     return all_rows
