@@ -1,6 +1,7 @@
 """End-to-end accuracy and time of ``hope_rs.match`` on the shared benchmark meshes.
 
-For every pair it prints the initial map's and HOPE's figures side by side (fraction exactly right,
+Edge-graph geodesics keep this quick; ``hope-rs bench`` is the full comparison (surface
+geodesics, ZoomOut, ablations, plots). For every pair it prints the initial map's and HOPE's figures side by side (fraction exactly right,
 mean geodesic error divided by sqrt(area) of the target, AUC of the 0..0.25 curve) and the time of
 each stage. Default parameters throughout: one parameter set for every data set.
 
@@ -11,48 +12,26 @@ each stage. Default parameters throughout: one parameter set for every data set.
 from __future__ import annotations
 
 import argparse
-import itertools
 import os
 import time
 from pathlib import Path
 
-import numpy as np
-
 import hope_rs
+from hope_rs.datasets import Pair, pairs_of
 
 DEFAULT_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
 
-def pairs_of(data: Path, name: str) -> list[tuple[Path, Path, Path | None, Path | None]]:
-    """(mesh A, mesh B, vts A, vts B) of a data set; identity ground truth has no vts files."""
-    folder = data / name
-    if (folder / "pairs.txt").exists():
-        out = []
-        for line in (folder / "pairs.txt").read_text().split("\n"):
-            if line.strip():
-                a, b = line.split()
-                out.append(
-                    (folder / f"{a}.off", folder / f"{b}.off",
-                     folder / "corres" / f"{a}.vts", folder / "corres" / f"{b}.vts")
-                )  # fmt: skip
-        return out
-    meshes = sorted(folder.glob("*.off"))
-    return [(a, b, None, None) for a, b in itertools.combinations(meshes, 2)]
-
-
-def run_pair(pa: Path, pb: Path, va: Path | None, vb: Path | None) -> dict:
-    a, b = hope_rs.load_mesh(pa), hope_rs.load_mesh(pb)
+def run_pair(pair: Pair) -> dict:
+    a, b = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
     t0 = time.perf_counter()
     res = hope_rs.match(a, b)
     seconds = time.perf_counter() - t0
-    if va is None:
-        ai = bi = np.arange(a.n_vertices)
-    else:
-        ai, bi = hope_rs.load_vts(va), hope_rs.load_vts(vb)
+    ai, bi = pair.ground_truth(a.n_vertices, b.n_vertices, max_points=None)
     init = hope_rs.score(hope_rs.geodesic_errors(b, res.init_map, a_idx=ai, b_idx=bi))
     final = hope_rs.score(hope_rs.geodesic_errors(b, res.map, a_idx=ai, b_idx=bi))
     return {
-        "pair": f"{pa.stem}->{pb.stem}",
+        "pair": pair.name,
         "n": f"{a.n_vertices}/{b.n_vertices}",
         "init": init,
         "hope": final,
@@ -90,8 +69,8 @@ def main() -> None:
     print(f"load average: {os.getloadavg()}")
     rows = []
     for name in args.sets.split(","):
-        for pa, pb, va, vb in pairs_of(args.data, name)[: args.max_pairs]:
-            r = run_pair(pa, pb, va, vb)
+        for pair in pairs_of(args.data / name)[: args.max_pairs]:
+            r = run_pair(pair)
             r["set"] = name
             rows.append(r)
             print(f"{name} {r['pair']}: init [{r['init']}] HOPE [{r['hope']}] {r['seconds']:.1f}s")

@@ -1,4 +1,5 @@
-"""The ``hope-rs`` command line: ``match`` two mesh files, or run the bundled ``demo``."""
+"""The ``hope-rs`` command line: ``match`` two mesh files, run the bundled ``demo``, ``bench``
+methods on data sets (:mod:`hope_rs.bench`) or ``show`` a map (:mod:`hope_rs.show`)."""
 
 from __future__ import annotations
 
@@ -122,6 +123,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     d.add_argument("--json", action="store_true", help="print the report as JSON")
     d.set_defaults(func=cmd_demo)
+    from . import bench, show  # light imports: matplotlib, pyFM load only when run
+
+    bench.add_parser(sub)
+    show.add_parser(sub)
     return p
 
 

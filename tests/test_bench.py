@@ -1,0 +1,179 @@
+"""Data-set adapters, named methods, the bench runner and the colour-transfer renderer."""
+
+import csv
+
+import numpy as np
+import pytest
+from conftest import data_path, relabel
+from meshes import bumpy_sphere
+from test_mesh_and_cli import write_off
+
+import hope_rs
+from hope_rs.cli import main
+from hope_rs.datasets import Pair, datasets_in, pairs_of
+from hope_rs.methods import PairContext, check_methods, run_method
+
+pytest.importorskip("potpourri3d")
+pytest.importorskip("matplotlib")
+
+
+@pytest.fixture(scope="module")
+def identity_set(tmp_path_factory):
+    """Three bent copies of one triangulation: identity ground truth, no pairs.txt."""
+    root = tmp_path_factory.mktemp("data")
+    folder = root / "spheres"
+    folder.mkdir()
+    v, f = bumpy_sphere(400, 0)
+    for i, s in enumerate((1.0, 1.1, 0.9)):
+        w = v * np.array([1.0, s, 1.0]) + 0.02 * np.sin(3 * v[:, [1, 2, 0]]) * i
+        write_off(folder / f"s{i}.off", w, f)
+    return root
+
+
+@pytest.fixture(scope="module")
+def vts_set(tmp_path_factory):
+    """Two relabelled copies with 1-based .vts landmarks and pairs.txt."""
+    folder = tmp_path_factory.mktemp("vts") / "perm"
+    (folder / "corres").mkdir(parents=True)
+    v, f = bumpy_sphere(300, 1)
+    rng = np.random.default_rng(0)
+    landmarks = rng.choice(300, 50, replace=False)
+    for name in ("p", "q"):
+        perm = rng.permutation(300)  # new vertex i is old vertex perm[i]
+        write_off(folder / f"{name}.off", v[perm], relabel(f, perm))
+        inv = np.argsort(perm)
+        (folder / "corres" / f"{name}.vts").write_text("\n".join(map(str, inv[landmarks] + 1)))
+    (folder / "pairs.txt").write_text("p q\n")
+    return folder
+
+
+def test_identity_folder_pairs_every_two_meshes(identity_set):
+    (folder,) = datasets_in(identity_set)
+    pairs = pairs_of(folder)
+    assert [p.name for p in pairs] == ["s0->s1", "s0->s2", "s1->s2"]
+    ai, bi = pairs[0].ground_truth(400, 400)
+    assert np.array_equal(ai, np.arange(400)) and np.array_equal(ai, bi)
+    ai, _ = pairs[0].ground_truth(400, 400, max_points=100)
+    assert ai.size == 100 and ai[0] == 0 and ai[-1] == 399
+
+
+def test_vts_pairs_are_one_based_and_correspond(vts_set):
+    (pair,) = pairs_of(vts_set)
+    a, b = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
+    ai, bi = pair.ground_truth(a.n_vertices, b.n_vertices)
+    np.testing.assert_allclose(a.vertices[ai], b.vertices[bi])  # the same points of the shape
+
+
+def test_shared_remeshed_sets_are_read(tmp_path):
+    pairs = pairs_of(data_path("faust_r"))
+    assert len(pairs) == 10 and pairs[0].name == "tr_reg_002->tr_reg_007"
+    ai, bi = pairs[0].ground_truth(4999, 5000)
+    assert ai.size == bi.size == 5000
+
+
+def test_bad_data_sets_say_how_to_fix_them(tmp_path, vts_set):
+    with pytest.raises(ValueError, match="no meshes"):
+        pairs_of(tmp_path)
+    v, f = bumpy_sphere(100, 0)
+    write_off(tmp_path / "a.off", v, f)
+    write_off(tmp_path / "b.off", *bumpy_sphere(120, 0))
+    with pytest.raises(ValueError, match="add pairs.txt"):
+        pairs_of(tmp_path)
+    (tmp_path / "pairs.txt").write_text("a c\n")
+    with pytest.raises(ValueError, match="no mesh named 'c'"):
+        pairs_of(tmp_path)
+    (tmp_path / "pairs.txt").write_text("a b\n")
+    with pytest.raises(ValueError, match="ground truth .* is missing"):
+        pairs_of(tmp_path)
+    (tmp_path / "pairs.txt").write_text("a b extra\n")
+    with pytest.raises(ValueError, match="SOURCE TARGET"):
+        pairs_of(tmp_path)
+    with pytest.raises(ValueError, match="refers to vertex"):
+        Pair("x", vts_set / "p.off", vts_set / "q.off", vts_set / "corres" / "p.vts",
+             vts_set / "corres" / "q.vts").ground_truth(10, 300)  # fmt: skip
+
+
+def test_methods_are_checked_and_timed(identity_set):
+    with pytest.raises(ValueError, match="unknown method"):
+        check_methods("hope,zoomin")
+    assert check_methods("init, hope,init") == ["init", "hope"]
+    folder = identity_set / "spheres"
+    ctx = PairContext(hope_rs.load_mesh(folder / "s0.off"), hope_rs.load_mesh(folder / "s1.off"))
+    init = run_method("init", ctx)
+    hope = run_method("hope", ctx)
+    rand = run_method("hope-rand50", ctx)
+    assert init.seconds > 0 and hope.seconds > init.seconds and hope.start == "shot"
+    assert rand.start == "shot-rand50"
+    start = ctx.start_map("shot-rand50")
+    assert 0.3 < np.mean(start != init.map) < 0.7  # about half the entries randomised
+    e = hope_rs.geodesic_errors(ctx.b, hope.map)
+    assert e.mean() <= hope_rs.geodesic_errors(ctx.b, init.map).mean()
+
+
+def test_zoomout_maps_a_to_b():
+    pytest.importorskip("pyFM")
+    v, f = bumpy_sphere(400, 0)
+    a = hope_rs.Mesh(v, f)
+    b = hope_rs.Mesh(v * np.array([1.0, 1.1, 1.0]), f)
+    res = run_method("zoomout", PairContext(a, b))
+    assert res.map.shape == (400,) and res.map.max() < 400
+    assert hope_rs.geodesic_errors(b, res.map).mean() < 0.2
+
+
+def test_bench_command_writes_tables_plots_and_renders(identity_set, tmp_path, capsys):
+    out = tmp_path / "res"
+    argv = [str(identity_set), "--out", str(out), "--methods", "init,hope,hope-k4"]
+    assert main(["bench", *argv, "--max-pairs", "2", "--ablation-pairs", "1", "-q"]) == 0
+    names = {p.name for p in out.iterdir()}
+    assert {"spheres.csv", "spheres.md", "summary.md", "spheres_curves.png"} <= names
+    assert {"spheres_best.png", "spheres_worst.png"} <= names
+    rows = list(csv.DictReader((out / "spheres.csv").read_text().splitlines()))
+    assert [(r["pair"], r["method"]) for r in rows] == [
+        ("s0->s1", "init"), ("s0->s1", "hope"), ("s0->s1", "hope-k4"),
+        ("s0->s2", "init"), ("s0->s2", "hope"),
+    ]  # fmt: skip
+    for r in rows:
+        assert 0 <= float(r["exact"]) <= 1 and float(r["seconds"]) > 0
+        assert float(r["mean_x100"]) == pytest.approx(100 * float(r["mean"]), rel=1e-4)
+    md = (out / "spheres.md").read_text()
+    assert "| hope | 2 |" in md and "Ablations" in md and "| hope-k4 | 1 |" in md
+    assert (out / "spheres_curves.png").read_bytes()[:4] == b"\x89PNG"
+    assert "5 results written" in capsys.readouterr().out
+
+
+def test_bench_refuses_bad_arguments(identity_set, tmp_path, capsys):
+    assert main(["bench", str(identity_set), "--out", str(tmp_path), "--methods", "magic"]) == 2
+    assert "unknown method" in capsys.readouterr().err
+    assert main(["bench", str(identity_set), "--out", str(tmp_path), "--sets", "nope"]) == 2
+    assert "no data set nope" in capsys.readouterr().err
+    assert main(["bench", str(tmp_path / "missing"), "--out", str(tmp_path)]) == 2
+    assert main(["bench", str(identity_set), "--out", str(tmp_path), "--max-pairs", "0"]) == 2
+
+
+def test_colour_transfer_pulls_back_and_fills_gaps():
+    from hope_rs.show import pull_back_colours
+
+    v, f = bumpy_sphere(100, 0)
+    m = hope_rs.Mesh(v, f)
+    c = np.random.default_rng(0).random((100, 3))
+    np.testing.assert_allclose(pull_back_colours(c, np.arange(100), m), c)
+    g = np.arange(100)
+    g[1] = 0  # vertex 0 of B is hit twice, vertex 1 never
+    out = pull_back_colours(c, g, m)
+    np.testing.assert_allclose(out[0], (c[0] + c[1]) / 2)
+    nearest = np.argsort(np.linalg.norm(v - v[1], axis=1))[1]
+    np.testing.assert_allclose(out[1], out[nearest])
+
+
+def test_show_command_renders_a_png(tmp_path, capsys):
+    v, f = bumpy_sphere(300, 0)
+    write_off(tmp_path / "a.off", v, f)
+    write_off(tmp_path / "b.off", v * 1.1, f)
+    (tmp_path / "map.txt").write_text("\n".join(map(str, range(300))))
+    png = tmp_path / "out.png"
+    argv = ["show", str(tmp_path / "a.off"), str(tmp_path / "b.off"), str(tmp_path / "map.txt")]
+    assert main([*argv, "--png", str(png), "--up", "z"]) == 0
+    assert png.read_bytes()[:4] == b"\x89PNG" and png.stat().st_size > 5000
+    (tmp_path / "map.txt").write_text("0\n1\n")
+    assert main([*argv, "--png", str(png)]) == 2
+    assert "has 2 entries but A has 300" in capsys.readouterr().err
