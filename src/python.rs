@@ -1,6 +1,6 @@
 //! The thin `hope_rs._core` extension module: converts NumPy buffers into owned Rust data,
 //! releases the GIL around the kernels, and maps every core error to a Python exception here.
-use crate::auction::{auction_assignment_float, auction_assignment_int};
+use crate::auction::{auction_assignment_float, auction_assignment_int_with, DEFAULT_FLOOR_DIV};
 use crate::csr::{Csr, CsrView};
 use crate::error::CoreError;
 use crate::geodesic::{pair_distances, EdgeGraph};
@@ -428,17 +428,18 @@ fn solve_assignment<'py, T: numpy::Element + Copy + Send + Sync>(
     py: Python<'py>,
     (indptr, indices, data): CostArrays<'_, 'py, T>,
     (n_rows, n_cols): (usize, usize),
-    maximize: bool,
-    solver: fn(&CsrView<T>, bool) -> crate::error::Result<Vec<i64>>,
+    solver: impl FnOnce(&CsrView<T>) -> crate::error::Result<Vec<i64>> + Send,
 ) -> PyResult<Bound<'py, PyArray1<i64>>> {
     let m = cost_csr(indptr, indices, data, n_rows, n_cols)?;
-    let g = detached(py, || solver(&m.view(), maximize))?;
+    let g = detached(py, || solver(&m.view()))?;
     Ok(owned(py, &g))
 }
 
-/// Optimal assignment on an integer sparse cost; -1 marks unassigned rows.
+/// Optimal assignment on an integer sparse cost; -1 marks unassigned rows. `floor_div`: see
+/// `auction_assignment_int_with` (HOPE's refinement passes 16).
 #[pyfunction]
-#[pyo3(name = "auction_assignment_int")]
+#[pyo3(name = "auction_assignment_int", signature = (indptr, indices, data, n_rows, n_cols, maximize, floor_div=DEFAULT_FLOOR_DIV))]
+#[allow(clippy::too_many_arguments)]
 fn py_auction_assignment_int<'py>(
     py: Python<'py>,
     indptr: PyReadonlyArray1<'py, i64>,
@@ -447,14 +448,11 @@ fn py_auction_assignment_int<'py>(
     n_rows: usize,
     n_cols: usize,
     maximize: bool,
+    floor_div: i64,
 ) -> PyResult<Bound<'py, PyArray1<i64>>> {
-    solve_assignment(
-        py,
-        (&indptr, &indices, &data),
-        (n_rows, n_cols),
-        maximize,
-        auction_assignment_int,
-    )
+    solve_assignment(py, (&indptr, &indices, &data), (n_rows, n_cols), |c| {
+        auction_assignment_int_with(c, maximize, floor_div)
+    })
 }
 
 /// Optimal assignment on a float sparse cost; -1 marks unassigned rows.
@@ -469,13 +467,9 @@ fn py_auction_assignment_float<'py>(
     n_cols: usize,
     maximize: bool,
 ) -> PyResult<Bound<'py, PyArray1<i64>>> {
-    solve_assignment(
-        py,
-        (&indptr, &indices, &data),
-        (n_rows, n_cols),
-        maximize,
-        auction_assignment_float,
-    )
+    solve_assignment(py, (&indptr, &indices, &data), (n_rows, n_cols), |c| {
+        auction_assignment_float(c, maximize)
+    })
 }
 
 /// SHOT descriptors, flat (n * 352) float32.

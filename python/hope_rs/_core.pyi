@@ -52,6 +52,7 @@ def auction_assignment_int(
     n_rows: int,
     n_cols: int,
     maximize: bool,
+    floor_div: int = 1024,
 ) -> npt.NDArray[np.int64]: ...
 def auction_assignment_float(
     indptr: npt.NDArray[np.int64],

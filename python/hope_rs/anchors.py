@@ -14,6 +14,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
+from ._blas import single_threaded_blas
 from .shape import Shape
 
 #: Anchors per global step: farthest-point samples among the witnesses.
@@ -78,9 +79,11 @@ def anchor_step(a: Shape, b: Shape, f: np.ndarray, trusted: np.ndarray) -> np.nd
     da = np.where(np.isfinite(da), da, big).T
     db = np.where(np.isfinite(db), db, big).T
     mu = db.mean(axis=0)
-    _, _, vt = np.linalg.svd(db - mu, full_matrices=False)
-    basis = vt[: min(SEARCH_DIMS, vt.shape[0])].T
-    tree = cKDTree((db - mu) @ basis)
+    centred = db - mu
+    with single_threaded_blas():
+        _, vecs = np.linalg.eigh(centred.T @ centred)
+    basis = vecs[:, ::-1][:, :SEARCH_DIMS]
+    tree = cKDTree(centred @ basis)
     moved = np.flatnonzero(~trusted)
     _, q = tree.query((da[moved] - mu) @ basis)
     g = f.copy()

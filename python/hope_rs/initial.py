@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _core
+from ._blas import single_threaded_blas
 
 #: Descriptor-space neighbours kept per vertex as assignment candidates.
 N_CANDIDATES = 32
@@ -25,11 +26,15 @@ def nearest_candidates(da: np.ndarray, db: np.ndarray, n: int) -> tuple[np.ndarr
         mu = both.mean(axis=0)
         sample = both[:: max(1, both.shape[0] // 20000)] - mu
         # Eigenvectors of the small d x d covariance: far cheaper than an SVD of the samples.
-        _, vecs = np.linalg.eigh(sample.T.astype(np.float64) @ sample)
+        cov = sample.T.astype(np.float64) @ sample
+        with single_threaded_blas():
+            _, vecs = np.linalg.eigh(cov)
         basis = vecs[:, ::-1][:, :PCA_DIMS].astype(np.float32)
         da, db = (da - mu) @ basis, (db - mu) @ basis
     n = min(n, db.shape[0])
     nb2 = np.einsum("ij,ij->i", db, db)
+    if n == 1:
+        return _nearest(da, db, nb2)
     idx = np.empty((da.shape[0], n), dtype=np.int64)
     dist = np.empty((da.shape[0], n), dtype=np.float32)
     step = max(1, 2_000_000 // max(db.shape[0], 1))
@@ -46,12 +51,40 @@ def nearest_candidates(da: np.ndarray, db: np.ndarray, n: int) -> tuple[np.ndarr
     return idx, np.maximum(dist, 0.0)
 
 
-def initial_map(da: np.ndarray, db: np.ndarray, *, n_candidates: int = N_CANDIDATES) -> np.ndarray:
-    """Map A → B from descriptors: the one-to-one assignment of least total descriptor distance
-    among each vertex's ``n_candidates`` nearest descriptors; vertices the assignment cannot
-    place (A larger than B, or crowded candidates) take their nearest descriptor."""
+def _nearest(da: np.ndarray, db: np.ndarray, nb2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The single nearest row of ``db`` per row of ``da`` (argmin, no partial sort)."""
+    idx = np.empty((da.shape[0], 1), dtype=np.int64)
+    dist = np.empty((da.shape[0], 1), dtype=np.float32)
+    step = max(1, 4_000_000 // max(db.shape[0], 1))
+    for lo in range(0, da.shape[0], step):
+        chunk = da[lo : lo + step]
+        d2 = nb2[None, :] - 2.0 * chunk @ db.T
+        j = np.argmin(d2, axis=1)
+        idx[lo : lo + step, 0] = j
+        dist[lo : lo + step, 0] = d2[np.arange(j.size), j] + np.einsum("ij,ij->i", chunk, chunk)
+    return idx, np.maximum(dist, 0.0)
+
+
+def initial_map(
+    da: np.ndarray,
+    db: np.ndarray,
+    *,
+    one_to_one: bool = False,
+    n_candidates: int = N_CANDIDATES,
+) -> np.ndarray:
+    """Map A → B from descriptors: each vertex's nearest descriptor.
+
+    With ``one_to_one``, the assignment of least total descriptor distance among each vertex's
+    ``n_candidates`` nearest descriptors instead (vertices it cannot place take their nearest).
+    That is not the default: forcing SHOT matches apart made the initial map worse, not
+    better, on every pair we measured (mean geodesic error on FAUST remeshed 000→004 0.129
+    against 0.079 for nearest neighbours, 002→007 0.358 against 0.332, faust_reg 019→020
+    0.187 against 0.145), and it cost seconds more.
+    """
     from .refine import injective_completion
 
+    if not one_to_one:
+        return nearest_candidates(da, db, 1)[0][:, 0].copy()
     idx, dist = nearest_candidates(da, db, n_candidates)
     n_a, n_b = da.shape[0], db.shape[0]
     cost = np.sqrt(dist.astype(np.float64))
