@@ -1150,49 +1150,6 @@ mod tests {
     use super::*;
     use crate::csr::Csr;
 
-    #[test]
-    fn coarse_first_epsilon_reaches_the_same_optimum() {
-        // Crowded: every row prefers the same few columns, with a 0-valued escape each.
-        let n = 60usize;
-        let (mut indptr, mut indices, mut data) = (vec![0usize], Vec::new(), Vec::new());
-        for r in 0..n {
-            let mut row: Vec<(u32, i64)> = (0..5u32)
-                .map(|c| (c, 100 - (r as i64 * 7 + c as i64 * 13) % 37))
-                .collect();
-            row.push(((5 + r) as u32 % n as u32, 0));
-            row.sort_unstable();
-            row.dedup_by_key(|e| e.0);
-            for (c, v) in row {
-                indices.push(c);
-                data.push(v);
-            }
-            indptr.push(indices.len());
-        }
-        let m = Csr {
-            n_rows: n,
-            n_cols: n,
-            indptr,
-            indices,
-            data,
-        };
-        let total = |g: &[i64]| -> i64 {
-            g.iter()
-                .enumerate()
-                .map(|(r, &c)| {
-                    let v = m.view();
-                    let k = v.row(r).iter().position(|&x| x as i64 == c).unwrap();
-                    v.row_data(r)[k]
-                })
-                .sum()
-        };
-        let a = auction_assignment_int(&m.view(), true).unwrap();
-        let b = auction_assignment_int_with(&m.view(), true, 16).unwrap();
-        let c = auction_assignment_int_with(&m.view(), true, 1).unwrap();
-        assert_eq!(total(&a), total(&b));
-        assert_eq!(total(&a), total(&c));
-        assert!(auction_assignment_int_with(&m.view(), true, 0).is_err());
-    }
-
     struct Rng(u64);
     impl Rng {
         fn next(&mut self) -> u64 {
@@ -1403,6 +1360,35 @@ mod tests {
             count += 1;
         }
         assert_eq!(count, nr.min(nc), "smaller side not fully assigned");
+    }
+
+    #[test]
+    fn coarse_first_epsilon_reaches_the_optimum() {
+        // Crowded: every row prefers the same few columns and has one 0-valued escape.
+        let n = 60usize;
+        let d: Dense<i64> = (0..n)
+            .map(|r| {
+                (0..n)
+                    .map(|c| match c {
+                        0..=4 => Some(100 - (r as i64 * 7 + c as i64 * 13) % 37),
+                        _ if c == 5 + r % (n - 5) => Some(0),
+                        _ => None,
+                    })
+                    .collect()
+            })
+            .collect();
+        let m = to_csr(&d, n, None);
+        let (_, best) = reference_int(&d, n, true);
+        for floor_div in [1, 16, DEFAULT_FLOOR_DIV] {
+            let g = auction_assignment_int_with(&m.view(), true, floor_div).unwrap();
+            let got: i128 = g
+                .iter()
+                .enumerate()
+                .map(|(r, &c)| d[r][c as usize].unwrap() as i128)
+                .sum();
+            assert_eq!(got, best, "floor_div {floor_div}");
+        }
+        assert!(auction_assignment_int_with(&m.view(), true, 0).is_err());
     }
 
     fn side(nr: usize, nc: usize) -> &'static str {
