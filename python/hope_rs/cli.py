@@ -121,6 +121,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     d.add_argument("--json", action="store_true", help="print the report as JSON")
     d.set_defaults(func=cmd_demo)
+    from .batch_cli import add_batch_parser
+
+    add_batch_parser(sub)
     return p
 
 
