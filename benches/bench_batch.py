@@ -81,6 +81,8 @@ def main() -> None:
     p.add_argument("--max-pairs", type=int, default=None)
     p.add_argument("--compare-jobs", type=int, default=0, metavar="N",
                    help="also time 1 vs 2 processes on the first N pairs (warm cache)")  # fmt: skip
+    p.add_argument("--ray-check", type=int, default=0, metavar="N",
+                   help="also run the first N pairs on a local Ray instance and compare the maps")  # fmt: skip
     p.add_argument("--skip-full", action="store_true", help="only the per-shape and jobs parts")
     args = p.parse_args()
     shapes = sorted((args.data / args.set).glob("*.off"))
@@ -111,6 +113,21 @@ def main() -> None:
                 rows.append((f"warm, {len(sub)} pairs, jobs={jobs}", secs, 60 * len(sub) / secs,
                              float("nan"), float("nan")))  # fmt: skip
                 print(f"jobs={jobs}: {secs:.1f} s", flush=True)
+        if args.ray_check:
+            import ray
+
+            sub = pairs[: args.ray_check]
+            secs, local = run(shapes, sub, cache=cache, jobs=args.jobs, out=None)
+            ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+            try:
+                t0 = time.perf_counter()
+                remote = hope_rs.match_many(shapes, sub, cache=cache, backend="ray")
+                rsecs = time.perf_counter() - t0
+            finally:
+                ray.shutdown()
+            same = sum(np.array_equal(a.map, b.map) for a, b in zip(local, remote))
+            print(f"\nRay vs local, {len(sub)} pairs: {same}/{len(sub)} maps identical "
+                  f"(local {secs:.1f} s, Ray {rsecs:.1f} s incl. start-up)")  # fmt: skip
     print("\n| run | seconds | pairs/min | mean exact (vts) | mean error (vts) |")
     print("|---|---|---|---|---|")
     for label, secs, rate, ex, me in rows:

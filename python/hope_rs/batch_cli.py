@@ -19,7 +19,9 @@ def add_batch_parser(sub) -> None:
     p.add_argument("pairs", metavar="PAIRS_FILE", help="text file, one pair of mesh paths a line")
     p.add_argument("--out", required=True, help="output folder (created if missing)")
     p.add_argument("--ext", default="", help="suffix appended to names without it, e.g. .off")
-    p.add_argument("-j", "--jobs", type=int, help="local worker processes (default: one per core)")
+    p.add_argument(
+        "-j", "--jobs", type=int, help="local worker processes (default: one per two cores)"
+    )
     p.add_argument("--backend", default="local", choices=["local", "ray"], help="where to run")
     p.add_argument("--ray-address", help="Ray cluster address (default: ray.init()'s choice)")
     p.add_argument("--cache", help="per-shape cache folder (default: ~/.cache/hope_rs)")
