@@ -5,6 +5,8 @@ other way: it lists, for each vertex of shape 2, a vertex of shape 1.)
 """
 
 from .assignment import auction_assignment
+from .batch import PairResult, match_many, read_pairs
+from .cache import ShapeCache
 from .evaluate import geodesic_errors, load_vts, score
 from .kernels import khop_neighbourhoods, overlap_cost
 from .matching import MatchResult, match
@@ -14,14 +16,18 @@ from .shape import Shape
 __all__ = [
     "MatchResult",
     "Mesh",
+    "PairResult",
     "Shape",
+    "ShapeCache",
     "auction_assignment",
     "geodesic_errors",
     "khop_neighbourhoods",
     "load_mesh",
     "load_vts",
     "match",
+    "match_many",
     "overlap_cost",
+    "read_pairs",
     "score",
 ]
 

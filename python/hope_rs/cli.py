@@ -1,5 +1,6 @@
 """The ``hope-rs`` command line: ``match`` two mesh files, run the bundled ``demo``, ``bench``
-methods on data sets (:mod:`hope_rs.bench`) or ``show`` a map (:mod:`hope_rs.show`)."""
+methods on data sets (:mod:`hope_rs.bench`), ``show`` a map (:mod:`hope_rs.show`) or match a
+``batch`` of pairs (:mod:`hope_rs.batch`)."""
 
 from __future__ import annotations
 
@@ -124,9 +125,11 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--json", action="store_true", help="print the report as JSON")
     d.set_defaults(func=cmd_demo)
     from . import bench, show  # light imports: matplotlib, pyFM load only when run
+    from .batch_cli import add_batch_parser
 
     bench.add_parser(sub)
     show.add_parser(sub)
+    add_batch_parser(sub)
     return p
 
 

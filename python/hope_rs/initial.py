@@ -11,6 +11,11 @@ from ._blas import single_threaded_blas
 N_CANDIDATES = 32
 #: Descriptors are projected on this many principal axes before the neighbour search.
 PCA_DIMS = 64
+#: Above this many target vertices the exact search (quadratic time) gives way to an inverted-file
+#: search (about n^1.5). On FAUST subdivided to 27.5k vertices: exact 18-24 s, inverted file 14 s,
+#: 94% of the 32 candidates and 96% of the nearest ones found, initial map 20.4% exact against
+#: 21.9%; at 110k the exact search was still in its partition after 4 minutes (2 busy cores).
+EXACT_SEARCH_LIMIT = 60_000
 
 
 def nearest_candidates(da: np.ndarray, db: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -32,9 +37,11 @@ def nearest_candidates(da: np.ndarray, db: np.ndarray, n: int) -> tuple[np.ndarr
         basis = vecs[:, ::-1][:, :PCA_DIMS].astype(np.float32)
         da, db = (da - mu) @ basis, (db - mu) @ basis
     n = min(n, db.shape[0])
+    if db.shape[0] > EXACT_SEARCH_LIMIT:
+        return _inverted_file_candidates(da, db, n)
     nb2 = np.einsum("ij,ij->i", db, db)
     if n == 1:
-        return _nearest(da, db, nb2)
+        return _nearest_one(da, db, nb2)
     idx = np.empty((da.shape[0], n), dtype=np.int64)
     dist = np.empty((da.shape[0], n), dtype=np.float32)
     step = max(1, 2_000_000 // max(db.shape[0], 1))
@@ -51,7 +58,72 @@ def nearest_candidates(da: np.ndarray, db: np.ndarray, n: int) -> tuple[np.ndarr
     return idx, np.maximum(dist, 0.0)
 
 
-def _nearest(da: np.ndarray, db: np.ndarray, nb2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _nearest(q: np.ndarray, x: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Exact ``n`` nearest rows of ``x`` for each row of ``q`` (both small), sorted."""
+    d2 = np.einsum("ij,ij->i", x, x)[None, :] - 2.0 * q @ x.T
+    n = min(n, x.shape[0])
+    part = (
+        np.argpartition(d2, n - 1, axis=1)[:, :n]
+        if n < x.shape[0]
+        else np.tile(np.arange(x.shape[0]), (q.shape[0], 1))
+    )
+    pd = np.take_along_axis(d2, part, axis=1)
+    order = np.argsort(pd, axis=1)
+    dist = np.take_along_axis(pd, order, axis=1) + np.einsum("ij,ij->i", q, q)[:, None]
+    return np.take_along_axis(part, order, axis=1), np.maximum(dist, 0.0)
+
+
+#: Inverted file: cells per sqrt(n_b), and cells searched around each query's own cell.
+IVF_CELLS_PER_ROOT = 2
+IVF_PROBES = 12
+
+
+def _inverted_file_candidates(da: np.ndarray, db: np.ndarray, n: int):
+    """Approximate ``n`` nearest rows of ``db`` per row of ``da`` for very large meshes.
+
+    ``db`` is split into cells by k-means (on a sample, fixed seed: the result is
+    deterministic); the queries of each cell are compared with the members of the
+    ``IVF_PROBES`` cells nearest to it, so each query sees about ``IVF_PROBES / cells`` of
+    ``db``. Memory stays linear: one block of a cell's queries times its candidates at a time.
+    """
+    from scipy.cluster.vq import kmeans2
+
+    n_b = db.shape[0]
+    n_cells = max(1, int(IVF_CELLS_PER_ROOT * np.sqrt(n_b)))
+    rng = np.random.default_rng(0)
+    sample = db[rng.choice(n_b, size=min(n_b, 50 * n_cells), replace=False)]
+    centroids, _ = kmeans2(sample.astype(np.float64), n_cells, iter=8, minit="points", seed=rng)
+    centroids = centroids.astype(np.float32)
+    step = max(1, 4_000_000 // n_cells)
+
+    def cell_of(x):
+        return np.concatenate(
+            [_nearest(x[lo : lo + step], centroids, 1)[0][:, 0] for lo in range(0, len(x), step)]
+        )
+
+    cell_b, cell_a = cell_of(db), cell_of(da)
+    members = np.split(
+        np.argsort(cell_b, kind="stable"), np.cumsum(np.bincount(cell_b, minlength=n_cells))[:-1]
+    )
+    probes, _ = _nearest(centroids, centroids, IVF_PROBES)
+    idx = np.empty((da.shape[0], n), dtype=np.int64)
+    dist = np.empty((da.shape[0], n), dtype=np.float32)
+    queries = np.split(
+        np.argsort(cell_a, kind="stable"), np.cumsum(np.bincount(cell_a, minlength=n_cells))[:-1]
+    )
+    for c in range(n_cells):
+        q = queries[c]
+        if q.size == 0:
+            continue
+        cand = np.concatenate([members[p] for p in probes[c]])
+        if cand.size < n:  # tiny cells: widen to the whole set
+            cand = np.arange(n_b)
+        i, d = _nearest(da[q], db[cand], n)
+        idx[q], dist[q] = cand[i], d
+    return idx, dist
+
+
+def _nearest_one(da: np.ndarray, db: np.ndarray, nb2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The single nearest row of ``db`` per row of ``da`` (argmin, no partial sort)."""
     idx = np.empty((da.shape[0], 1), dtype=np.int64)
     dist = np.empty((da.shape[0], 1), dtype=np.float32)

@@ -1,0 +1,201 @@
+"""Per-pair time and peak memory of ``hope_rs.match`` from 5k to 250k vertices.
+
+Large meshes are made by midpoint subdivision of the FAUST registrations tr_reg_012 → tr_reg_018
+(same connectivity on both, so the ground truth is the identity; original vertices keep their
+indices and are the ones scored). Subdividing every face multiplies the vertex count by about 4
+(6890 → 27554 → 110204); for sizes in between, the last level subdivides only the faces on one
+side of a plane (the same faces on both shapes), which leaves a seam of T-junctions there.
+
+Each size runs in its own process; the table gives each stage's seconds and the peak resident
+memory (sampled every 20 ms) during that stage, and the process's overall peak (ru_maxrss).
+
+    python benches/bench_scale.py                          # 5k (faust_r), 28k (TOSCA), 100k, 250k
+    python benches/bench_scale.py --cases faust100k --timeout 600
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+DEFAULT_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+
+#: name -> (data set, mesh A, mesh B, target vertex count or None for the mesh as it is)
+CASES = {
+    "faust_r5k": ("faust_r", "tr_reg_000", "tr_reg_001", None),
+    "faust7k": ("faust_reg", "tr_reg_012", "tr_reg_018", None),
+    "tosca28k": ("tosca", "cat0", "cat6", None),
+    "faust28k": ("faust_reg", "tr_reg_012", "tr_reg_018", 27_554),
+    "faust100k": ("faust_reg", "tr_reg_012", "tr_reg_018", 110_204),
+    "faust250k": ("faust_reg", "tr_reg_012", "tr_reg_018", 250_000),
+}
+
+
+def subdivide_to(va: np.ndarray, vb: np.ndarray, faces: np.ndarray, target: int):
+    """Subdivide two meshes of one connectivity identically until about ``target`` vertices.
+
+    Returns the new vertices of both and the shared faces; the original vertices come first.
+    """
+    from trimesh.remesh import subdivide
+
+    while va.shape[0] < target:
+        n_edges = len({tuple(sorted(e)) for e in faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)})
+        if va.shape[0] + n_edges <= target * 1.02:
+            index = None  # the whole mesh
+        else:
+            # Faces on one side of a plane through A, chosen to add about the missing vertices.
+            c = va[faces].mean(axis=1)
+            axis = np.linalg.svd(c - c.mean(axis=0), full_matrices=False)[2][0]
+            order = np.argsort(c @ axis)
+            frac = (target - va.shape[0]) / n_edges
+            index = np.sort(order[: int(frac * faces.shape[0] * 1.0)])
+        na, fa = subdivide(va, faces, face_index=index)
+        nb, fb = subdivide(vb, faces, face_index=index)
+        assert np.array_equal(fa, fb)
+        va, vb, faces = na, nb, fa
+    return va, vb, faces
+
+
+class PeakSampler(threading.Thread):
+    """Samples this process's resident memory; ``mark(stage)`` closes the previous stage."""
+
+    def __init__(self, period: float = 0.02):
+        super().__init__(daemon=True)
+        self.period, self.peak, self.stages = period, 0, {}
+        self.page = os.sysconf("SC_PAGE_SIZE")
+
+    def rss(self) -> int:
+        with open("/proc/self/statm") as fh:
+            return int(fh.read().split()[1]) * self.page
+
+    def run(self):
+        while True:
+            self.peak = max(self.peak, self.rss())
+            time.sleep(self.period)
+
+    def mark(self, stage: str) -> None:
+        self.stages[stage] = max(self.peak, self.rss())
+        print(f"{time.strftime('%X')} {stage} done", file=sys.stderr, flush=True)
+        self.peak = self.rss()
+
+
+def run_case(name: str, data: Path) -> dict:
+    """One case, in this process: build, match stage by stage, score on original vertices."""
+    import hope_rs
+    from hope_rs.initial import initial_map
+    from hope_rs.refine import refine
+
+    folder, a, b, target = CASES[name]
+    ma = hope_rs.load_mesh(data / folder / f"{a}.off")
+    mb = hope_rs.load_mesh(data / folder / f"{b}.off")
+    n0 = ma.n_vertices
+    if folder == "faust_r":
+        ai = hope_rs.load_vts(data / folder / "corres" / f"{a}.vts")
+        bi = hope_rs.load_vts(data / folder / "corres" / f"{b}.vts")
+    else:
+        ai = bi = np.arange(min(n0, mb.n_vertices))
+    if target is not None:
+        va, vb, f = subdivide_to(ma.vertices, mb.vertices, ma.faces, target)
+        ma, mb = hope_rs.Mesh(va, f), hope_rs.Mesh(vb, f)
+    sampler = PeakSampler()
+    sampler.start()
+    sampler.mark("before")
+    t = {}
+    t0 = time.perf_counter()
+    sa, sb = hope_rs.Shape(ma), hope_rs.Shape(mb)
+    t["shapes"] = time.perf_counter() - t0
+    sampler.mark("shapes")
+    t1 = time.perf_counter()
+    da, db = sa.descriptors("shot"), sb.descriptors("shot")
+    t["descriptors"] = time.perf_counter() - t1
+    sampler.mark("descriptors")
+    t1 = time.perf_counter()
+    f0 = initial_map(da, db)
+    t["init"] = time.perf_counter() - t1
+    sampler.mark("init")
+    t1 = time.perf_counter()
+    res = refine(sa, sb, f0)
+    t["refine"] = time.perf_counter() - t1
+    sampler.mark("refine")
+    t["total"] = time.perf_counter() - t0
+    init = hope_rs.score(hope_rs.geodesic_errors(sb, f0, a_idx=ai, b_idx=bi))
+    final = hope_rs.score(hope_rs.geodesic_errors(sb, res.map, a_idx=ai, b_idx=bi))
+    return {
+        "case": name,
+        "n": f"{ma.n_vertices}/{mb.n_vertices}",
+        "steps": len(res.history),
+        "seconds": t,
+        "peak_gib": {k: v / 2**30 for k, v in sampler.stages.items()},
+        "maxrss_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20,
+        "init": [init.exact, init.mean],
+        "hope": [final.exact, final.mean, final.auc],
+    }
+
+
+def table(rows: list[dict]) -> str:
+    head = (
+        "| case | n | shapes (s) | descr (s) | init (s) | refine (s) | steps | total (s) "
+        "| peak descr / init / refine (GiB) | max RSS (GiB) | init exact / mean | HOPE exact / mean |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|---|\n"
+    )
+    lines = []
+    for r in rows:
+        if "error" in r:
+            lines.append(f"| {r['case']} | | | | | | | | | | | {r['error']} |")
+            continue
+        s, p = r["seconds"], r["peak_gib"]
+        lines.append(
+            f"| {r['case']} | {r['n']} | {s['shapes']:.2f} | {s['descriptors']:.2f} "
+            f"| {s['init']:.2f} | {s['refine']:.2f} | {r['steps']} | {s['total']:.1f} "
+            f"| {p['descriptors']:.2f} / {p['init']:.2f} / {p['refine']:.2f} "
+            f"| {r['maxrss_gib']:.2f} | {100 * r['init'][0]:.1f}% / {r['init'][1]:.4f} "
+            f"| {100 * r['hope'][0]:.1f}% / {r['hope'][1]:.4f} |"
+        )
+    return head + "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--data", type=Path, default=Path(os.environ.get("HOPE_DATA", DEFAULT_DATA)))
+    p.add_argument("--cases", default="faust_r5k,tosca28k,faust100k,faust250k")
+    p.add_argument("--timeout", type=float, default=1200, help="seconds per case")
+    p.add_argument("--out", type=Path, help="also write the Markdown table here")
+    p.add_argument("--child", help=argparse.SUPPRESS)
+    args = p.parse_args()
+    if args.child:
+        print(json.dumps(run_case(args.child, args.data)))
+        return
+    print(f"load average: {os.getloadavg()}", flush=True)
+    rows = []
+    for name in args.cases.split(","):
+        cmd = [sys.executable, __file__, "--child", name, "--data", str(args.data)]
+        try:
+            # stdout carries the result; the child's stderr (stage progress, errors) passes through
+            out = subprocess.run(
+                cmd, check=False, stdout=subprocess.PIPE, text=True, timeout=args.timeout
+            )
+            if out.returncode != 0:
+                row = {"case": name, "error": f"exit status {out.returncode}"}
+            else:
+                row = json.loads(out.stdout.strip().splitlines()[-1])
+        except subprocess.TimeoutExpired:
+            row = {"case": name, "error": f"over {args.timeout:.0f} s"}
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+    md = table(rows)
+    print(md)
+    if args.out:
+        args.out.write_text(md)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,160 @@
+import os
+
+import numpy as np
+import pytest
+from meshes import bumpy_sphere
+from test_mesh_and_cli import write_off
+
+import hope_rs
+from hope_rs.batch import imatch_many, map_name, read_pairs
+from hope_rs.cache import ShapeCache, cached_shape, file_digest
+from hope_rs.cli import main
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory):
+    """Three small generated meshes, a broken one and a pairs file naming them without suffix."""
+    d = tmp_path_factory.mktemp("batch")
+    (d / "m").mkdir()
+    for s in range(3):
+        write_off(d / "m" / f"s{s}.off", *bumpy_sphere(300, s))
+    (d / "m" / "bad.off").write_text("OFF\n3 1 0\n0 0 0\n")
+    (d / "m" / "pairs.txt").write_text("s0 s1\n# a comment\n\ns1 s2\ns2 s0  # trailing\n")
+    (d / "m" / "with_bad.txt").write_text("s0 s1\ns0 bad\nbad s2\ns1 s2\n")
+    return d
+
+
+def test_read_pairs_resolves_relative_paths_against_the_file_and_appends_ext(folder, tmp_path):
+    pairs = read_pairs(folder / "m" / "pairs.txt", ext=".off")
+    m = (folder / "m").resolve()
+    assert pairs == [(m / "s0.off", m / "s1.off"), (m / "s1.off", m / "s2.off"),
+                     (m / "s2.off", m / "s0.off")]  # fmt: skip
+    # Names already carrying the suffix, absolute paths and "off" without the dot.
+    f = tmp_path / "p.txt"
+    f.write_text(f"sub/a.off {m / 's1.off'}\n")
+    assert read_pairs(f, ext="off") == [(tmp_path / "sub" / "a.off", m / "s1.off")]
+    f.write_text("a.off b.off\nonly_one\n")
+    with pytest.raises(ValueError, match=r"p.txt:2: expected two mesh paths"):
+        read_pairs(f)
+    f.write_text("# nothing\n")
+    with pytest.raises(ValueError, match="lists no pairs"):
+        read_pairs(f)
+
+
+def test_maps_are_written_atomically_and_a_rerun_skips_them(folder, tmp_path):
+    pairs = read_pairs(folder / "m" / "pairs.txt", ext=".off")
+    shapes = sorted({p for pr in pairs for p in pr})
+    idx = [(shapes.index(a), shapes.index(b)) for a, b in pairs]
+    out, cache = tmp_path / "out", tmp_path / "cache"
+    first = hope_rs.match_many(shapes, idx, out_dir=out, jobs=1, cache=cache)
+    assert [r.ok and not r.skipped for r in first] == [True] * 3
+    files = sorted(out.iterdir())
+    assert [f.name for f in files] == sorted(map_name(r.a, r.b) for r in first)  # no temp files
+    for r in first:
+        np.testing.assert_array_equal(np.loadtxt(r.path, dtype=np.int64), r.map)
+        ref = hope_rs.match(hope_rs.load_mesh(shapes[idx[r.index][0]]),
+                            hope_rs.load_mesh(shapes[idx[r.index][1]]))  # fmt: skip
+        np.testing.assert_array_equal(r.map, ref.map)
+    stamps = {f: f.stat().st_mtime_ns for f in files}
+    os.remove(files[0])
+    second = hope_rs.match_many(shapes, idx, out_dir=out, jobs=1, cache=cache)
+    assert sum(r.skipped for r in second) == 2
+    for f in files[1:]:
+        assert f.stat().st_mtime_ns == stamps[f]  # not rewritten
+    for a, b in zip(first, second):
+        np.testing.assert_array_equal(a.map, b.map)
+
+
+def test_a_bad_mesh_fails_its_pairs_only(folder, tmp_path):
+    pairs = read_pairs(folder / "m" / "with_bad.txt", ext=".off")
+    shapes = list(dict.fromkeys(p for pr in pairs for p in pr))
+    idx = [(shapes.index(a), shapes.index(b)) for a, b in pairs]
+    seen = []
+    res = hope_rs.match_many(
+        shapes, idx, out_dir=tmp_path, jobs=1, cache=False, progress=seen.append
+    )
+    assert [r.ok for r in res] == [True, False, False, True]
+    assert len(seen) == 4
+    assert "bad.off" in res[1].error and "OFF header" in res[1].error
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s0__s1.txt", "s1__s2.txt"]
+
+
+def test_objects_names_and_a_process_pool_give_the_same_maps(tmp_path):
+    meshes = {f"m{s}": hope_rs.Mesh(*bumpy_sphere(250, 10 + s)) for s in range(3)}
+    shape0 = hope_rs.Shape(meshes["m0"])
+    shape0.descriptors("shot")
+    shapes = {"m0": shape0, "m1": meshes["m1"], "m2": meshes["m2"]}
+    pairs = [("m0", "m1"), ("m2", "m0")]
+    serial = hope_rs.match_many(shapes, pairs, jobs=1, cache=tmp_path)
+    pooled = hope_rs.match_many(shapes, pairs, jobs=2, cache=tmp_path)
+    for s, p, (a, b) in zip(serial, pooled, pairs):
+        assert (s.a, s.b) == (a, b) and s.ok and p.ok
+        np.testing.assert_array_equal(s.map, hope_rs.match(meshes[a], meshes[b]).map)
+        np.testing.assert_array_equal(s.map, p.map)
+    assert len(hope_rs.match_many(list(meshes.values()), jobs=1, cache=False)) == 3  # all pairs
+    with pytest.raises(ValueError, match="neither a shape index nor one of the names"):
+        hope_rs.match_many(shapes, [("m0", "nope")])
+    with pytest.raises(ValueError, match="jobs must be a positive integer"):
+        hope_rs.match_many(shapes, [(0, 1)], jobs=0)
+
+
+def test_cache_hits_are_identical_and_keyed_by_content(folder, tmp_path):
+    src = tmp_path / "s.off"
+    src.write_bytes((folder / "m" / "s0.off").read_bytes())
+    cache = ShapeCache(tmp_path / "c")
+    fresh = cached_shape(src, cache=cache).descriptors("shot")
+    assert (cache.hits, cache.misses) == (0, 2)  # mesh + descriptors computed and stored
+    again = cached_shape(src, cache=cache).descriptors("shot")
+    assert (cache.hits, cache.misses) == (2, 2)
+    np.testing.assert_array_equal(fresh, again)
+    np.testing.assert_array_equal(fresh, hope_rs.Shape(hope_rs.load_mesh(src)).descriptors())
+    # Editing the file changes its digest: nothing stale comes back.
+    v, f = bumpy_sphere(300, 0)
+    old = file_digest(src)
+    write_off(src, v + np.random.default_rng(0).normal(scale=0.02, size=v.shape), f)
+    assert file_digest(src) != old
+    edited = cached_shape(src, cache=cache).descriptors("shot")
+    assert (cache.hits, cache.misses) == (2, 4)
+    assert not np.array_equal(edited, fresh)
+    # A damaged entry is recomputed, not returned.
+    for p in (tmp_path / "c").rglob("shot-*.npz"):
+        p.write_bytes(b"garbage")
+    np.testing.assert_array_equal(cached_shape(src, cache=cache).descriptors("shot"), edited)
+
+
+def test_cli_batch_exit_codes(folder, tmp_path, capsys):
+    cache = ["--cache", str(tmp_path / "c"), "-q", "-j", "1"]
+    args = ["batch", str(folder / "m" / "pairs.txt"), "--ext", ".off", "--out", str(tmp_path / "o")]
+    assert main(args + cache) == 0
+    assert "3 pairs: 3 matched, 0 skipped, 0 failed" in capsys.readouterr().out
+    assert main(args + cache) == 0
+    assert "0 matched, 3 skipped" in capsys.readouterr().out
+    bad = ["batch", str(folder / "m" / "with_bad.txt"), "--ext", ".off", "--out"]
+    assert main(bad + [str(tmp_path / "o2")] + cache) == 1
+    err = capsys.readouterr().err
+    assert "pair failed: s0 -> bad" in err and "pair failed: bad -> s2" in err
+    assert main(["batch", str(tmp_path / "missing.txt"), "--out", str(tmp_path)]) == 2
+    assert "hope-rs: error: no such pairs file" in capsys.readouterr().err
+    assert main(args + ["--no-cache", "--cache", str(tmp_path)]) == 2
+    (tmp_path / "file").write_text("")
+    assert main(["batch", str(folder / "m" / "pairs.txt"), "--out", str(tmp_path / "file")]) == 2
+    assert "is not a folder" in capsys.readouterr().err
+
+
+def test_ray_backend_matches_the_local_run_pair_for_pair(folder, tmp_path):
+    ray = pytest.importorskip("ray")
+    pairs = read_pairs(folder / "m" / "with_bad.txt", ext=".off")
+    shapes = list(dict.fromkeys(p for pr in pairs for p in pr))
+    idx = [(shapes.index(a), shapes.index(b)) for a, b in pairs]
+    local = hope_rs.match_many(shapes, idx, jobs=1, cache=tmp_path / "c")
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        remote = list(imatch_many(shapes, idx, backend="ray", cache=tmp_path / "c2"))
+    finally:
+        ray.shutdown()
+    remote.sort(key=lambda r: r.index)
+    assert [r.ok for r in remote] == [r.ok for r in local] == [True, False, False, True]
+    for a, b in zip(local, remote):
+        assert (a.a, a.b, a.error) == (b.a, b.b, b.error)
+        if a.ok:
+            np.testing.assert_array_equal(a.map, b.map)
