@@ -164,59 +164,6 @@ const COLUMNS: usize = (2 * CELLS_PER_RADIUS + 1) * (2 * CELLS_PER_RADIUS + 1);
 /// Uniform grid over the surface points (vertices with a normal), cells of side slightly larger
 /// than `radius / CELLS_PER_RADIUS`, stored as a sorted list of occupied cells (memory linear in the
 /// number of points whatever the radius); points and normals in cell order, structure-of-arrays.
-/// At most about this many vertices vote in the histograms. The support radius is a fixed share
-/// of the shape's size, so with every vertex voting the cost grows with the square of the vertex
-/// count. Above this count the voters are a spatially even subsample, one per voxel; below it
-/// (every shared benchmark mesh, up to TOSCA's 28k) nothing changes. The price is noisier
-/// histograms: on FAUST 012/018 subdivided to 110k vertices, SHOT for both meshes took 9.9 s
-/// instead of 41.9 s, the descriptors kept a mean cosine of 0.73 to the full ones, and the
-/// nearest-descriptor map hit 4.9% of the original vertices exactly instead of 9.8%.
-const MAX_VOTERS: usize = 65_536;
-
-/// The vertices that vote: every vertex with a normal, or, above `max`, the one nearest the centre
-/// of each voxel of a grid coarse enough to leave at most about `max` voxels occupied. Chosen by
-/// position only, so relabelling the vertices does not change the set.
-fn voters(points: &[V3], normals: &[V3], lo: V3, max: usize) -> Vec<u32> {
-    let all: Vec<u32> = (0..points.len() as u32)
-        .filter(|&i| normals[i as usize] != [0.0; 3])
-        .collect();
-    if all.len() <= max {
-        return all;
-    }
-    let mut hi = lo;
-    for &i in &all {
-        for k in 0..3 {
-            hi[k] = hi[k].max(points[i as usize][k]);
-        }
-    }
-    // A surface of extent L crossed by voxels of edge e occupies about (L / e)^2 of them.
-    let extent = (0..3).map(|k| hi[k] - lo[k]).fold(0.0f64, f64::max);
-    let mut edge = extent / (max as f64).sqrt();
-    loop {
-        let key =
-            |p: V3| -> [i64; 3] { std::array::from_fn(|k| ((p[k] - lo[k]) / edge).floor() as i64) };
-        let mut best: Vec<([i64; 3], f64, u32)> = all
-            .iter()
-            .map(|&i| {
-                let p = points[i as usize];
-                let c = key(p);
-                let d: f64 = (0..3)
-                    .map(|k| (p[k] - (lo[k] + (c[k] as f64 + 0.5) * edge)).powi(2))
-                    .sum();
-                (c, d, i)
-            })
-            .collect();
-        best.sort_unstable_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)).then(a.2.cmp(&b.2)));
-        best.dedup_by_key(|e| e.0);
-        if best.len() <= max {
-            let mut out: Vec<u32> = best.into_iter().map(|e| e.2).collect();
-            out.sort_unstable();
-            return out;
-        }
-        edge *= (best.len() as f64 / max as f64).sqrt().max(1.05);
-    }
-}
-
 struct Grid {
     lo: V3,
     cell: f64,
@@ -254,10 +201,12 @@ impl Grid {
             ny: Vec::new(),
             nz: Vec::new(),
         };
-        let voters = voters(points, normals, lo, MAX_VOTERS);
-        let mut items: Vec<([i64; 3], u32)> = voters
+        let mut items: Vec<([i64; 3], u32)> = points
             .iter()
-            .map(|&i| (grid.key(points[i as usize]), i))
+            .zip(normals)
+            .enumerate()
+            .filter(|(_, (_, n))| **n != [0.0; 3])
+            .map(|(i, (p, _))| (grid.key(*p), i as u32))
             .collect();
         items.sort_unstable();
         for (j, &(key, i)) in items.iter().enumerate() {
@@ -711,49 +660,6 @@ mod tests {
     use super::*;
     use std::collections::HashMap;
     use std::path::Path;
-
-    #[test]
-    fn voters_are_an_even_relabelling_invariant_subsample() {
-        // A 200 x 200 grid on a plane, 40k vertices, all with the same normal.
-        let side = 200usize;
-        let pts: Vec<V3> = (0..side * side)
-            .map(|i| [(i % side) as f64 * 0.01, (i / side) as f64 * 0.01, 0.0])
-            .collect();
-        let normals = vec![[0.0, 0.0, 1.0]; pts.len()];
-        let lo = [0.0; 3];
-        let v = voters(&pts, &normals, lo, 1000);
-        assert!(v.len() <= 1000 && v.len() > 500, "{} voters", v.len());
-        // Even: every vertex has a voter within a few grid steps (voxel edge ~ 2 / sqrt(1000)).
-        let far = pts
-            .iter()
-            .map(|p| {
-                v.iter()
-                    .map(|&j| {
-                        let q = pts[j as usize];
-                        ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt()
-                    })
-                    .fold(f64::INFINITY, f64::min)
-            })
-            .fold(0.0f64, f64::max);
-        assert!(far < 0.12, "farthest vertex from a voter: {far}");
-        // Relabelling: the same positions vote.
-        let perm: Vec<usize> = (0..pts.len()).map(|i| (i * 7919) % pts.len()).collect();
-        let pts2: Vec<V3> = perm.iter().map(|&i| pts[i]).collect();
-        let v2 = voters(&pts2, &normals, lo, 1000);
-        let mut a: Vec<[u64; 3]> = v
-            .iter()
-            .map(|&i| pts[i as usize].map(f64::to_bits))
-            .collect();
-        let mut b: Vec<[u64; 3]> = v2
-            .iter()
-            .map(|&i| pts2[i as usize].map(f64::to_bits))
-            .collect();
-        a.sort_unstable();
-        b.sort_unstable();
-        assert_eq!(a, b);
-        // Below the cap every vertex with a normal votes.
-        assert_eq!(voters(&pts, &normals, lo, pts.len()).len(), pts.len());
-    }
 
     /// The multiple of sqrt(area) recommended in the doc of `shot_descriptors`.
     const RECOMMENDED_RADIUS: f64 = 0.075;
