@@ -42,7 +42,7 @@ def run_demo(*, verbose: bool = True) -> dict:
     }
     if verbose:
         print(report["pair"])
-        print(f"  initial map (SHOT + LAP): {init}")
+        print(f"  initial map (SHOT, NN) : {init}")
         print(f"  HOPE                    : {final}")
         print(
             f"  time: {seconds:.2f} s  ("
