@@ -109,11 +109,12 @@ def refine(
         changed_in_pass = 0
         if global_step:
             t0 = time.perf_counter()
-            f_new, w = global_repair(a, b, f, min_consistent)
+            w = witnesses(a, b, f, min_consistent=min_consistent)
             untrusted, before = 1.0 - w.mean(), 1.0 - last_fraction
             if n_pass >= 3 and untrusted > before * (1.0 - MIN_UNTRUSTED_DROP):
                 break  # the last pass did not gain: keep its map, skip the repair
             last_fraction = float(w.mean())
+            f_new = global_repair(a, b, f, w, min_consistent)
             changed = int(np.count_nonzero(f_new != f))
             changed_in_pass += changed
             f = f_new
@@ -148,16 +149,15 @@ def refine(
     return RefineResult(f, history)
 
 
-def global_repair(a: Shape, b: Shape, f, min_consistent: float):
-    """:func:`~hope_rs.anchors.anchor_step` on the LMD witnesses of ``f``, keeping a moved vertex
-    only where it then passes LMD itself (the anchor coordinates are coarser than a k-hop step,
-    so elsewhere the old match is at least as good). Returns the map and the witnesses used."""
-    w = witnesses(a, b, f, min_consistent=min_consistent)
+def global_repair(a: Shape, b: Shape, f, w, min_consistent: float) -> np.ndarray:
+    """:func:`~hope_rs.anchors.anchor_step` on ``w``, the LMD witnesses of ``f``, keeping a moved
+    vertex only where it then passes LMD itself (the anchor coordinates are coarser than a k-hop
+    step, so elsewhere the old match is at least as good)."""
     g = anchor_step(a, b, f, w)
     if g is f:
-        return f, w
+        return f
     ok = witnesses(a, b, g, min_consistent=min_consistent)
-    return np.where(ok | (g == f), g, f), w
+    return np.where(ok | (g == f), g, f)
 
 
 def voters(a: Shape, b: Shape, f, min_consistent: float, min_fraction: float) -> np.ndarray:
