@@ -124,6 +124,63 @@ impl Dijkstra {
     }
 }
 
+impl Dijkstra {
+    /// Every vertex within `cutoff` of `src`, in the order settled (nondecreasing distance), but
+    /// at most `cap` of them. Returns the radius below which the list is complete: `cutoff` when
+    /// the ball fits, else just under the distance of the first vertex left out.
+    pub fn ball(
+        &mut self,
+        g: &EdgeGraph,
+        src: usize,
+        cutoff: f64,
+        cap: usize,
+        ids: &mut Vec<u32>,
+        dists: &mut Vec<f64>,
+    ) -> f64 {
+        self.current = self.current.wrapping_add(1);
+        if self.current == 0 {
+            self.stamp.fill(0);
+            self.pending.fill(0);
+            self.current = 1;
+        }
+        let cur = self.current;
+        ids.clear();
+        dists.clear();
+        self.heap.clear();
+        self.stamp[src] = cur;
+        self.dist[src] = 0.0;
+        self.heap.push(Reverse((0f64.to_bits(), src as u32)));
+        while let Some(Reverse((bits, u))) = self.heap.pop() {
+            let (du, u) = (f64::from_bits(bits), u as usize);
+            if du > cutoff {
+                break;
+            }
+            // `pending` marks settled vertices here (a popped stale entry of one is skipped).
+            if du > self.dist[u] || self.pending[u] == cur {
+                continue;
+            }
+            if ids.len() == cap {
+                // Everything nearer than du is already listed; du itself may tie with a vertex
+                // left out, hence the largest float below it.
+                return f64::from_bits(bits.saturating_sub(1)).max(0.0);
+            }
+            self.pending[u] = cur;
+            ids.push(u as u32);
+            dists.push(du);
+            for &w in g.adj.row(u) {
+                let w = w as usize;
+                let nd = du + g.len(u, w);
+                if self.stamp[w] != cur || nd < self.dist[w] {
+                    self.stamp[w] = cur;
+                    self.dist[w] = nd;
+                    self.heap.push(Reverse((nd.to_bits(), w as u32)));
+                }
+            }
+        }
+        cutoff
+    }
+}
+
 /// Edge-graph distance between each pair `(sources[i], targets[i])` (infinite when not
 /// connected). Each search stops once its target is settled, so nearby pairs are cheap.
 pub fn pair_distances(g: &EdgeGraph, sources: &[u32], targets: &[u32]) -> Result<Vec<f64>> {

@@ -54,6 +54,113 @@ impl RingDistances {
     }
 }
 
+/// Edge-graph distances from every vertex of a shape to the vertices around it, rows sorted by
+/// vertex id. LMD looks up d_B(f(p), f(r)) here instead of running a search from f(p) at every
+/// refinement step: on a 5k pair the searches took 40 ms per call and a pass makes ten calls,
+/// while a lookup is a binary search in a row of about a hundred entries.
+#[derive(Debug, Clone)]
+pub struct LocalDistances {
+    offsets: Vec<usize>,
+    ids: Vec<u32>,
+    dist: Vec<f64>,
+    /// Per row: every vertex at most this far away is listed.
+    complete: Vec<f64>,
+    /// The search radius the table was built with (unscaled edge-graph units).
+    pub cutoff: f64,
+}
+
+/// Entries per row at most, so a shape far finer than its partner cannot blow up the table;
+/// rows cut short are used only for maps whose 2-ring images they still cover.
+const MAX_ROW: usize = 256;
+
+impl LocalDistances {
+    pub fn new(g: &EdgeGraph, cutoff: f64) -> Self {
+        Self::with_cap(g, cutoff, MAX_ROW)
+    }
+
+    fn with_cap(g: &EdgeGraph, cutoff: f64, cap: usize) -> Self {
+        let n = g.adj.n_rows;
+        let rows: Vec<(Vec<u32>, Vec<f64>, f64)> = (0..n)
+            .into_par_iter()
+            .map_init(
+                || (Dijkstra::new(n), Vec::new(), Vec::new()),
+                |(dj, ids, dists), q| {
+                    let complete = dj.ball(g, q, cutoff, cap.max(1), ids, dists);
+                    let mut row: Vec<(u32, f64)> =
+                        ids.iter().copied().zip(dists.iter().copied()).collect();
+                    row.sort_unstable_by_key(|e| e.0);
+                    let (i, d) = row.into_iter().unzip();
+                    (i, d, complete)
+                },
+            )
+            .collect();
+        let mut offsets = Vec::with_capacity(n + 1);
+        offsets.push(0);
+        let total = rows.iter().map(|r| r.0.len()).sum();
+        let (mut ids, mut dist) = (Vec::with_capacity(total), Vec::with_capacity(total));
+        let mut complete = Vec::with_capacity(n);
+        for (i, d, c) in rows {
+            ids.extend_from_slice(&i);
+            dist.extend_from_slice(&d);
+            complete.push(c);
+            offsets.push(ids.len());
+        }
+        LocalDistances {
+            offsets,
+            ids,
+            dist,
+            complete,
+            cutoff,
+        }
+    }
+
+    /// Number of vertices of the shape the table was built for.
+    pub fn n_vertices(&self) -> usize {
+        self.complete.len()
+    }
+
+    /// Distances from `q` to `targets` as `Dijkstra::run` with this `cutoff` would give them
+    /// (infinite beyond it), or `None` when q's row does not reach that far.
+    fn lookup(&self, q: usize, targets: &[u32], cutoff: f64, out: &mut Vec<f64>) -> bool {
+        if cutoff > self.complete[q] {
+            return false;
+        }
+        let lo = self.offsets[q];
+        let (ids, dist) = (&self.ids[lo..self.offsets[q + 1]], &self.dist[lo..]);
+        out.clear();
+        out.extend(targets.iter().map(|t| match ids.binary_search(t) {
+            Ok(i) if dist[i] <= cutoff => dist[i],
+            _ => f64::INFINITY,
+        }));
+        true
+    }
+}
+
+/// The search radius on B (unscaled) that covers LMD's searches for all but the farthest-reaching
+/// 0.5% of A's vertices (those fall back to a search of their own).
+pub fn lmd_table_cutoff(rings_a: &RingDistances, scale_a: f64, scale_b: f64) -> f64 {
+    let n = rings_a.offsets.len() - 1;
+    let unit = lmd_unit(rings_a, scale_a);
+    let mut reach: Vec<f64> = (0..n)
+        .map(|p| rings_a.of(p).iter().copied().fold(0.0, f64::max) / scale_a + 2.0 * unit)
+        .collect();
+    if reach.is_empty() {
+        return 0.0;
+    }
+    let at = ((reach.len() - 1) as f64 * 0.995) as usize;
+    let (_, r, _) = reach.select_nth_unstable_by(at, f64::total_cmp);
+    *r * scale_b
+}
+
+fn lmd_unit(rings_a: &RingDistances, scale_a: f64) -> f64 {
+    let edge = rings_a.mean_edge / scale_a;
+    if edge > 0.0 {
+        edge
+    } else {
+        1.0
+    }
+}
+
 /// Per-vertex distortion of the map `f` (A → B) over the 2-ring of each vertex of A.
 ///
 /// Distances are divided by each shape's `scale` (sqrt of its area) so the measure does not depend
@@ -67,6 +174,7 @@ pub fn local_map_distortion(
     f: &[u32],
     scale_a: f64,
     scale_b: f64,
+    table: Option<&LocalDistances>,
 ) -> Result<(Vec<f32>, Vec<f32>)> {
     let n_a = balls_a.n;
     let n_b = b.adj.n_rows;
@@ -81,8 +189,10 @@ pub fn local_map_distortion(
     if !(scale_a > 0.0 && scale_b > 0.0 && scale_a.is_finite() && scale_b.is_finite()) {
         return invalid("shape scales must be positive and finite");
     }
-    let edge = rings_a.mean_edge / scale_a;
-    let unit = if edge > 0.0 { edge } else { 1.0 };
+    if table.is_some_and(|t| t.n_vertices() != n_b) {
+        return invalid("the distance table was built for another shape");
+    }
+    let unit = lmd_unit(rings_a, scale_a);
     let results: Vec<(f32, f32)> = (0..n_a)
         .into_par_iter()
         .map_init(
@@ -96,7 +206,10 @@ pub fn local_map_distortion(
                 let reach = da.iter().copied().fold(0.0, f64::max) / scale_a + 2.0 * unit;
                 ftargets.clear();
                 ftargets.extend(ring.iter().map(|&r| f[r as usize]));
-                djb.run(b, f[p] as usize, ftargets, reach * scale_b, db);
+                let q = f[p] as usize;
+                if !table.is_some_and(|t| t.lookup(q, ftargets, reach * scale_b, db)) {
+                    djb.run(b, q, ftargets, reach * scale_b, db);
+                }
                 let (mut sum, mut good) = (0.0, 0usize);
                 for (&x, &y) in da.iter().zip(db.iter()) {
                     let dist = (x / scale_a - (y / scale_b).min(reach)).abs() / unit;
@@ -155,13 +268,13 @@ mod tests {
         };
         let id: Vec<u32> = (0..va.len() as u32).collect();
         let rings = RingDistances::new(&ga, &balls).unwrap();
-        let (mean, frac) = local_map_distortion(&balls, &rings, &gb, &id, 1.0, 1.7).unwrap();
+        let (mean, frac) = local_map_distortion(&balls, &rings, &gb, &id, 1.0, 1.7, None).unwrap();
         assert!(mean.iter().all(|&m| m < 1e-6));
         assert!(frac.iter().all(|&x| x == 1.0));
         // Swapping two far-apart vertices distorts exactly the neighbourhoods that see them.
         let mut f = id.clone();
         f.swap(13, 100);
-        let (mean, _) = local_map_distortion(&balls, &rings, &gb, &f, 1.0, 1.7).unwrap();
+        let (mean, _) = local_map_distortion(&balls, &rings, &gb, &f, 1.0, 1.7, None).unwrap();
         assert!(mean[13] > 1.0 && mean[100] > 1.0);
         let far = 60;
         assert!(mean[far] < 1e-6);
@@ -169,5 +282,46 @@ mod tests {
             let sees = balls.ball(p, 2).contains(&13) || balls.ball(p, 2).contains(&100);
             assert_eq!(mean[p] > 1e-6, sees, "vertex {p}");
         }
+    }
+
+    #[test]
+    fn table_lookups_give_the_searched_distortion() {
+        let (va, fa) = grid(15, 13, 1.0);
+        let (mut vb, _) = grid(15, 13, 2.3);
+        for (i, v) in vb.iter_mut().enumerate() {
+            v[2] += ((i * 37) % 11) as f64 * 0.07;
+        }
+        let adj = adjacency_from_faces(&fa, va.len()).unwrap();
+        let balls = HopBalls::new(&adj.view(), 2).unwrap();
+        let ga = EdgeGraph {
+            vertices: &va,
+            adj: adj.view(),
+        };
+        let gb = EdgeGraph {
+            vertices: &vb,
+            adj: adj.view(),
+        };
+        let rings = RingDistances::new(&ga, &balls).unwrap();
+        let n = va.len();
+        // A map that is right in places, shifted by one vertex in others and scrambled elsewhere.
+        let f: Vec<u32> = (0..n)
+            .map(|i| match i % 5 {
+                0 => ((i * 7919) % n) as u32,
+                1 => ((i + 1) % n) as u32,
+                _ => i as u32,
+            })
+            .collect();
+        let want = local_map_distortion(&balls, &rings, &gb, &f, 1.0, 2.3, None).unwrap();
+        let cutoff = lmd_table_cutoff(&rings, 1.0, 2.3);
+        // Full rows, rows cut short (searches fall back), and a radius that covers too little.
+        for (radius, cap) in [(cutoff, MAX_ROW), (cutoff, 12), (cutoff * 0.5, MAX_ROW)] {
+            let table = LocalDistances::with_cap(&gb, radius, cap);
+            let got = local_map_distortion(&balls, &rings, &gb, &f, 1.0, 2.3, Some(&table));
+            assert_eq!(got.unwrap(), want, "radius {radius}, cap {cap}");
+        }
+        let other = LocalDistances::new(&ga, 1.0);
+        let mut small = other.clone();
+        small.complete.pop();
+        assert!(local_map_distortion(&balls, &rings, &gb, &f, 1.0, 2.3, Some(&small)).is_err());
     }
 }

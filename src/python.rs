@@ -6,7 +6,7 @@ use crate::error::CoreError;
 use crate::geodesic::{pair_distances, EdgeGraph};
 use crate::graph::adjacency_from_faces;
 use crate::khop::HopBalls;
-use crate::lmd::{local_map_distortion, RingDistances};
+use crate::lmd::{lmd_table_cutoff, local_map_distortion, LocalDistances, RingDistances};
 use crate::overlap::{overlap_rows, BallsAt, OverlapOptions, OverlapRows};
 use crate::shot::shot_descriptors;
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
@@ -14,6 +14,7 @@ use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use rayon::prelude::*;
 use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::{Arc, Mutex};
 
 fn to_py_err(e: CoreError) -> PyErr {
     PyValueError::new_err(e.to_string())
@@ -173,6 +174,32 @@ struct MeshGraph {
     balls: HopBalls,
     /// 2-ring distances for LMD; `None` when k_max < 2.
     rings: Option<RingDistances>,
+    /// Local distances for LMD when this graph is the target, built on first use with the
+    /// radius the first partner needed (a wider one replaces it when a partner needs more).
+    lmd_table: Mutex<Option<Arc<LocalDistances>>>,
+}
+
+impl MeshGraph {
+    fn edge_graph(&self) -> EdgeGraph<'_> {
+        EdgeGraph {
+            vertices: &self.vertices,
+            adj: self.adj.view(),
+        }
+    }
+
+    /// The cached distance table, rebuilt when it does not reach `cutoff`.
+    fn lmd_table(&self, cutoff: f64) -> Arc<LocalDistances> {
+        let mut slot = self.lmd_table.lock().unwrap_or_else(|e| e.into_inner());
+        match slot.as_ref() {
+            Some(t) if t.cutoff >= cutoff => t.clone(),
+            _ => {
+                // Some slack, so partners of about the same resolution reuse it.
+                let t = Arc::new(LocalDistances::new(&self.edge_graph(), cutoff * 1.25));
+                *slot = Some(t.clone());
+                t
+            }
+        }
+    }
 }
 
 #[pymethods]
@@ -205,6 +232,7 @@ impl MeshGraph {
             adj,
             balls,
             rings,
+            lmd_table: Mutex::new(None),
         })
     }
 
@@ -389,11 +417,8 @@ fn local_map_distortion_graphs<'py>(
         .as_ref()
         .ok_or_else(|| PyValueError::new_err("LMD needs a source graph built with k_max >= 2"))?;
     let (mean, frac) = detached(py, || {
-        let gb = EdgeGraph {
-            vertices: &b.vertices,
-            adj: b.adj.view(),
-        };
-        local_map_distortion(&a.balls, rings, &gb, &f, scale_a, scale_b)
+        let table = b.lmd_table(lmd_table_cutoff(rings, scale_a, scale_b));
+        local_map_distortion(&a.balls, rings, &b.edge_graph(), &f, scale_a, scale_b, Some(&table))
     })?;
     Ok((owned(py, &mean), owned(py, &frac)))
 }
