@@ -204,6 +204,42 @@ pub fn pair_distances(g: &EdgeGraph, sources: &[u32], targets: &[u32]) -> Result
         .collect())
 }
 
+/// Edge-graph distances from each source to every vertex (infinite where unreachable): row i
+/// of the returned `sources.len() x n` row-major array belongs to `sources[i]`. Sources are
+/// searched in parallel.
+pub fn distance_fields(g: &EdgeGraph, sources: &[u32]) -> Result<Vec<f64>> {
+    let n = g.adj.n_rows;
+    if let Some(&s) = sources.iter().find(|&&s| s as usize >= n) {
+        return invalid(format!("source {s} out of range for {n} vertices"));
+    }
+    let mut out = vec![f64::INFINITY; sources.len() * n];
+    if n == 0 {
+        return Ok(out);
+    }
+    out.par_chunks_mut(n).zip(sources.par_iter()).for_each_init(
+        BinaryHeap::new,
+        |heap, (dist, &s)| {
+            heap.clear();
+            dist[s as usize] = 0.0;
+            heap.push(Reverse((0f64.to_bits(), s)));
+            while let Some(Reverse((bits, u))) = heap.pop() {
+                let (du, u) = (f64::from_bits(bits), u as usize);
+                if du > dist[u] {
+                    continue;
+                }
+                for &w in g.adj.row(u) {
+                    let nd = du + g.len(u, w as usize);
+                    if nd < dist[w as usize] {
+                        dist[w as usize] = nd;
+                        heap.push(Reverse((nd.to_bits(), w)));
+                    }
+                }
+            }
+        },
+    );
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -225,5 +261,42 @@ mod tests {
         assert_eq!(&d[..3], &[9.0, 0.0, 9.0]);
         assert!(d[3].is_infinite());
         assert!(pair_distances(&g, &[0], &[11]).is_err());
+    }
+
+    #[test]
+    fn fields_match_pair_distances() {
+        let v: Vec<[f64; 3]> = (0..12)
+            .map(|i| {
+                [
+                    (i % 4) as f64,
+                    (i / 4) as f64 * 1.3,
+                    ((i * 5) % 3) as f64 * 0.2,
+                ]
+            })
+            .collect();
+        let mut f = Vec::new();
+        for y in 0..2u32 {
+            for x in 0..3u32 {
+                let i = y * 4 + x;
+                f.push([i, i + 1, i + 4]);
+                f.push([i + 1, i + 5, i + 4]);
+            }
+        }
+        let mut v13 = v.clone();
+        v13.push([9.0, 9.0, 9.0]); // isolated
+        let adj = adjacency_from_faces(&f, 13).unwrap();
+        let g = EdgeGraph {
+            vertices: &v13,
+            adj: adj.view(),
+        };
+        let sources = [0u32, 7, 12];
+        let fields = distance_fields(&g, &sources).unwrap();
+        for (i, &s) in sources.iter().enumerate() {
+            let targets: Vec<u32> = (0..13).collect();
+            let d = pair_distances(&g, &vec![s; 13], &targets).unwrap();
+            assert_eq!(&fields[i * 13..(i + 1) * 13], &d[..]);
+        }
+        assert!(fields[13 * 2 + 12] == 0.0 && fields[13 * 2].is_infinite());
+        assert!(distance_fields(&g, &[13]).is_err());
     }
 }

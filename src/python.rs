@@ -3,13 +3,13 @@
 use crate::auction::{auction_assignment_float, auction_assignment_int_with, DEFAULT_FLOOR_DIV};
 use crate::csr::{Csr, CsrView};
 use crate::error::CoreError;
-use crate::geodesic::{pair_distances, EdgeGraph};
+use crate::geodesic::{distance_fields, pair_distances, EdgeGraph};
 use crate::graph::adjacency_from_faces;
 use crate::khop::HopBalls;
 use crate::lmd::{lmd_table_cutoff, local_map_distortion, LocalDistances, RingDistances};
 use crate::overlap::{overlap_rows, BallsAt, OverlapOptions, OverlapRows};
 use crate::shot::shot_descriptors;
-use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use rayon::prelude::*;
@@ -280,6 +280,27 @@ impl MeshGraph {
         Ok(owned(py, &d))
     }
 
+    /// Edge-graph distance from each source to every vertex, (len(sources), n); inf where
+    /// disconnected.
+    fn distance_fields<'py>(
+        &self,
+        py: Python<'py>,
+        sources: PyReadonlyArray1<'py, i64>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let s = u32_vec(&sources, "sources")?;
+        let d = detached(py, || {
+            distance_fields(
+                &EdgeGraph {
+                    vertices: &self.vertices,
+                    adj: self.adj.view(),
+                },
+                &s,
+            )
+        })?;
+        let n = self.balls.n;
+        Ok(owned(py, &d).reshape([s.len(), n])?)
+    }
+
     /// Mean edge length of the mesh graph.
     fn mean_edge_length(&self) -> f64 {
         EdgeGraph {
@@ -418,7 +439,15 @@ fn local_map_distortion_graphs<'py>(
         .ok_or_else(|| PyValueError::new_err("LMD needs a source graph built with k_max >= 2"))?;
     let (mean, frac) = detached(py, || {
         let table = b.lmd_table(lmd_table_cutoff(rings, scale_a, scale_b));
-        local_map_distortion(&a.balls, rings, &b.edge_graph(), &f, scale_a, scale_b, Some(&table))
+        local_map_distortion(
+            &a.balls,
+            rings,
+            &b.edge_graph(),
+            &f,
+            scale_a,
+            scale_b,
+            Some(&table),
+        )
     })?;
     Ok((owned(py, &mean), owned(py, &frac)))
 }

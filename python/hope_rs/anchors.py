@@ -10,8 +10,6 @@ these coordinates repairs such regions in one step, and the k-hop steps then sha
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from ._blas import single_threaded_blas
@@ -24,30 +22,19 @@ N_ANCHORS = 32
 SEARCH_DIMS = 12
 
 
-def edge_matrix(shape: Shape) -> sp.csr_matrix:
-    """Symmetric sparse matrix of edge lengths / sqrt(area), cached on the shape."""
-    m = getattr(shape, "_edge_matrix", None)
-    if m is None:
-        v, f = shape.mesh.vertices, shape.mesh.faces
-        i = np.concatenate([f[:, 0], f[:, 1], f[:, 2]])
-        j = np.concatenate([f[:, 1], f[:, 2], f[:, 0]])
-        w = np.linalg.norm(v[i] - v[j], axis=1) / shape.scale
-        n = shape.n_vertices
-        m = sp.csr_matrix((w, (i, j)), shape=(n, n))
-        m = m.maximum(m.T).tocsr()
-        m.eliminate_zeros()
-        shape._edge_matrix = m
-    return m
+def distance_fields(shape: Shape, sources) -> np.ndarray:
+    """Edge-graph distances / sqrt(area) from each source to every vertex, (len(sources), n)."""
+    src = np.atleast_1d(np.asarray(sources, dtype=np.int64))
+    return shape.graph.distance_fields(src) / shape.scale
 
 
 def farthest_witnesses(a: Shape, candidates: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     """``n`` farthest-point samples of ``candidates`` on A and their distance fields (n, n_a)."""
-    g = edge_matrix(a)
     # Start at the candidate nearest the centroid: a choice that does not depend on vertex
     # numbering, so relabelling the meshes relabels the result.
     v = a.mesh.vertices[candidates]
     chosen = [int(candidates[np.argmin(((v - v.mean(axis=0)) ** 2).sum(axis=1))])]
-    fields = [dijkstra(g, indices=chosen[0])]
+    fields = [distance_fields(a, chosen[0])[0]]
     nearest = fields[0].copy()
     for _ in range(1, min(n, candidates.size)):
         d = nearest[candidates]
@@ -56,7 +43,7 @@ def farthest_witnesses(a: Shape, candidates: np.ndarray, n: int) -> tuple[np.nda
         if nearest[nxt] <= 0:
             break
         chosen.append(nxt)
-        fields.append(dijkstra(g, indices=nxt))
+        fields.append(distance_fields(a, nxt)[0])
         nearest = np.minimum(nearest, fields[-1])
     return np.array(chosen), np.vstack(fields)
 
@@ -66,14 +53,14 @@ def anchor_step(a: Shape, b: Shape, f: np.ndarray, trusted: np.ndarray) -> np.nd
     the anchors' images are closest to its own distances to the anchors.
 
     Anchors are :data:`N_ANCHORS` farthest-point samples among the trusted vertices; distances
-    are Dijkstra distances on the edge graphs divided by sqrt(area). With fewer than four
+    are Dijkstra distances on the edge graphs (searched in parallel in Rust) divided by sqrt(area). With fewer than four
     trusted vertices, or when every vertex is trusted, ``f`` is returned unchanged.
     """
     cand = np.flatnonzero(trusted)
     if cand.size < 4 or cand.size == trusted.size:
         return f
     anchors, da = farthest_witnesses(a, cand, N_ANCHORS)
-    db = dijkstra(edge_matrix(b), indices=f[anchors])
+    db = distance_fields(b, f[anchors])
     # Unreachable (other components) counts as far, not infinitely far.
     big = 4.0
     da = np.where(np.isfinite(da), da, big).T
@@ -85,7 +72,7 @@ def anchor_step(a: Shape, b: Shape, f: np.ndarray, trusted: np.ndarray) -> np.nd
     basis = vecs[:, ::-1][:, :SEARCH_DIMS]
     tree = cKDTree(centred @ basis)
     moved = np.flatnonzero(~trusted)
-    _, q = tree.query((da[moved] - mu) @ basis)
+    _, q = tree.query((da[moved] - mu) @ basis, workers=2)
     g = f.copy()
     g[moved] = q
     return g

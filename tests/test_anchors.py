@@ -1,0 +1,51 @@
+"""The global repair's parts: distance fields and the anchor step."""
+
+import numpy as np
+import pytest
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import dijkstra
+from test_match import isometric_copy
+
+import hope_rs
+from hope_rs.anchors import anchor_step, distance_fields
+from hope_rs.shape import Shape
+
+
+def scipy_fields(mesh, sources):
+    v, f = mesh.vertices, mesh.faces
+    i = np.concatenate([f[:, 0], f[:, 1], f[:, 2]])
+    j = np.concatenate([f[:, 1], f[:, 2], f[:, 0]])
+    w = np.linalg.norm(v[i] - v[j], axis=1)
+    g = csr_matrix((w, (i, j)), shape=(len(v), len(v)))
+    return dijkstra(g.maximum(g.T), indices=sources) / mesh.scale
+
+
+def test_distance_fields_match_scipy_dijkstra(faust_pair):
+    a = Shape(faust_pair[0], k_max=2)
+    src = np.array([0, 17, 4000, 6889])
+    np.testing.assert_allclose(distance_fields(a, src), scipy_fields(a.mesh, src), rtol=1e-12)
+
+
+def test_distance_fields_of_disconnected_parts_are_infinite():
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [5, 5, 5], [6, 5, 5], [5, 6, 5]], float)
+    s = Shape(hope_rs.Mesh(v, np.array([[0, 1, 2], [3, 4, 5]])), k_max=2)
+    d = distance_fields(s, [0, 4])
+    assert np.isfinite(d[0, :3]).all() and np.isinf(d[0, 3:]).all()
+    assert np.isinf(d[1, :3]).all() and d[1, 4] == 0
+    with pytest.raises(ValueError, match="out of range"):
+        distance_fields(s, [6])
+
+
+def test_anchor_step_places_untrusted_vertices_of_an_isometric_copy(faust_pair):
+    rng = np.random.default_rng(3)
+    b_mesh, truth = isometric_copy(faust_pair[0].vertices, faust_pair[0].faces, rng)
+    a, b = Shape(faust_pair[0], k_max=2), Shape(b_mesh, k_max=2)
+    trusted = rng.random(a.n_vertices) > 0.3
+    f = truth.copy()
+    f[~trusted] = rng.integers(0, b.n_vertices, (~trusted).sum())
+    g = anchor_step(a, b, f, trusted)
+    np.testing.assert_array_equal(g[trusted], truth[trusted])  # trusted vertices stay
+    assert np.mean(g[~trusted] == truth[~trusted]) > 0.99
+    # Nothing to anchor on, or nothing to move: the map comes back unchanged.
+    assert anchor_step(a, b, f, np.zeros(a.n_vertices, bool)) is f
+    assert anchor_step(a, b, f, np.ones(a.n_vertices, bool)) is f
