@@ -298,7 +298,7 @@ impl MeshGraph {
             )
         })?;
         let n = self.balls.n;
-        Ok(owned(py, &d).reshape([s.len(), n])?)
+        owned(py, &d).reshape([s.len(), n])
     }
 
     /// Mean edge length of the mesh graph.
