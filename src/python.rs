@@ -1,6 +1,6 @@
 //! The thin `hope_rs._core` extension module: converts NumPy buffers into owned Rust data,
 //! releases the GIL around the kernels, and maps every core error to a Python exception here.
-use crate::auction::{auction_assignment_float, auction_assignment_int_with, DEFAULT_FLOOR_DIV};
+use crate::auction::{auction_assignment_float, auction_assignment_int_hinted, DEFAULT_FLOOR_DIV};
 use crate::csr::{Csr, CsrView};
 use crate::error::CoreError;
 use crate::geodesic::{distance_fields, pair_distances, EdgeGraph};
@@ -490,9 +490,10 @@ fn solve_assignment<'py, T: numpy::Element + Copy + Send + Sync>(
 }
 
 /// Optimal assignment on an integer sparse cost; -1 marks unassigned rows. `floor_div`: see
-/// `auction_assignment_int_with` (HOPE's refinement passes 16).
+/// `auction_assignment_int_with` (HOPE's refinement passes 16); `hint`: a full assignment in
+/// the pattern that proves feasibility (see `auction_assignment_int_hinted`).
 #[pyfunction]
-#[pyo3(name = "auction_assignment_int", signature = (indptr, indices, data, n_rows, n_cols, maximize, floor_div=DEFAULT_FLOOR_DIV))]
+#[pyo3(name = "auction_assignment_int", signature = (indptr, indices, data, n_rows, n_cols, maximize, floor_div=DEFAULT_FLOOR_DIV, hint=None))]
 #[allow(clippy::too_many_arguments)]
 fn py_auction_assignment_int<'py>(
     py: Python<'py>,
@@ -503,9 +504,11 @@ fn py_auction_assignment_int<'py>(
     n_cols: usize,
     maximize: bool,
     floor_div: i64,
+    hint: Option<PyReadonlyArray1<'py, i64>>,
 ) -> PyResult<Bound<'py, PyArray1<i64>>> {
+    let hint = hint.map(|h| plain_vec(&h));
     solve_assignment(py, (&indptr, &indices, &data), (n_rows, n_cols), |c| {
-        auction_assignment_int_with(c, maximize, floor_div)
+        auction_assignment_int_hinted(c, maximize, floor_div, hint.as_deref())
     })
 }
 

@@ -179,8 +179,11 @@ def assign_by_overlap(
     """
     keep = injective_completion(f, b.n_vertices)
     indptr, indices, data = _overlap_with_bonus(a, b, k, f, witnesses, top_k, keep)
+    # ``keep`` is a full assignment inside the pattern, which spares the solver its
+    # feasibility search (a quarter of its time at 28k).
+    hint = keep if a.n_vertices <= b.n_vertices else _hint_rows(keep, b.n_vertices)
     g = _core.auction_assignment_int(
-        indptr, indices, data, a.n_vertices, b.n_vertices, True, AUCTION_FLOOR_DIV
+        indptr, indices, data, a.n_vertices, b.n_vertices, True, AUCTION_FLOOR_DIV, hint
     )
     missing = np.flatnonzero(g < 0)
     if missing.size:
@@ -216,6 +219,15 @@ def best_in_rows(indptr, indices, data, rows) -> np.ndarray:
     order = np.lexsort((vals, owner))
     last = np.cumsum(n) - 1
     return indices[pos[order[last]]].astype(np.int64)
+
+
+def _hint_rows(keep: np.ndarray, n_b: int) -> np.ndarray:
+    """``keep`` with every repeat of a column set to -1: a one-to-one partial assignment that
+    covers all n_b columns when A has more vertices than B."""
+    _, first = np.unique(keep, return_index=True)
+    hint = np.full_like(keep, -1)
+    hint[first] = keep[first]
+    return hint
 
 
 def injective_completion(f: np.ndarray, n_b: int) -> np.ndarray:
