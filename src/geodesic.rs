@@ -58,6 +58,17 @@ impl Dijkstra {
         }
     }
 
+    /// A stamp no entry carries yet: every distance and mark becomes stale at once.
+    fn next_stamp(&mut self) -> u32 {
+        self.current = self.current.wrapping_add(1);
+        if self.current == 0 {
+            self.stamp.fill(0);
+            self.pending.fill(0);
+            self.current = 1;
+        }
+        self.current
+    }
+
     /// Distances from `src` to `targets` (infinite where farther than `cutoff`); stops as soon as
     /// every target is settled, so the search stays local.
     pub fn run(
@@ -68,13 +79,7 @@ impl Dijkstra {
         cutoff: f64,
         out: &mut Vec<f64>,
     ) {
-        self.current = self.current.wrapping_add(1);
-        if self.current == 0 {
-            self.stamp.fill(0);
-            self.pending.fill(0);
-            self.current = 1;
-        }
-        let cur = self.current;
+        let cur = self.next_stamp();
         let mut remaining = 0usize;
         for &t in targets {
             if self.pending[t as usize] != cur {
@@ -137,13 +142,7 @@ impl Dijkstra {
         ids: &mut Vec<u32>,
         dists: &mut Vec<f64>,
     ) -> f64 {
-        self.current = self.current.wrapping_add(1);
-        if self.current == 0 {
-            self.stamp.fill(0);
-            self.pending.fill(0);
-            self.current = 1;
-        }
-        let cur = self.current;
+        let cur = self.next_stamp();
         ids.clear();
         dists.clear();
         self.heap.clear();

@@ -252,20 +252,20 @@ mod tests {
         (v, f)
     }
 
+    fn graph<'a>(v: &'a [[f64; 3]], adj: &'a crate::csr::Csr<()>) -> EdgeGraph<'a> {
+        EdgeGraph {
+            vertices: v,
+            adj: adj.view(),
+        }
+    }
+
     #[test]
     fn identity_has_zero_distortion_and_scale_does_not_matter() {
         let (va, fa) = grid(12, 10, 1.0);
         let (vb, _) = grid(12, 10, 1.7);
         let adj = adjacency_from_faces(&fa, va.len()).unwrap();
         let balls = HopBalls::new(&adj.view(), 2).unwrap();
-        let ga = EdgeGraph {
-            vertices: &va,
-            adj: adj.view(),
-        };
-        let gb = EdgeGraph {
-            vertices: &vb,
-            adj: adj.view(),
-        };
+        let (ga, gb) = (graph(&va, &adj), graph(&vb, &adj));
         let id: Vec<u32> = (0..va.len() as u32).collect();
         let rings = RingDistances::new(&ga, &balls).unwrap();
         let (mean, frac) = local_map_distortion(&balls, &rings, &gb, &id, 1.0, 1.7, None).unwrap();
@@ -293,14 +293,7 @@ mod tests {
         }
         let adj = adjacency_from_faces(&fa, va.len()).unwrap();
         let balls = HopBalls::new(&adj.view(), 2).unwrap();
-        let ga = EdgeGraph {
-            vertices: &va,
-            adj: adj.view(),
-        };
-        let gb = EdgeGraph {
-            vertices: &vb,
-            adj: adj.view(),
-        };
+        let (ga, gb) = (graph(&va, &adj), graph(&vb, &adj));
         let rings = RingDistances::new(&ga, &balls).unwrap();
         let n = va.len();
         // A map that is right in places, shifted by one vertex in others and scrambled elsewhere.

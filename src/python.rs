@@ -267,16 +267,7 @@ impl MeshGraph {
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let s = u32_vec(&sources, "sources")?;
         let t = u32_vec(&targets, "targets")?;
-        let d = detached(py, || {
-            pair_distances(
-                &EdgeGraph {
-                    vertices: &self.vertices,
-                    adj: self.adj.view(),
-                },
-                &s,
-                &t,
-            )
-        })?;
+        let d = detached(py, || pair_distances(&self.edge_graph(), &s, &t))?;
         Ok(owned(py, &d))
     }
 
@@ -288,26 +279,14 @@ impl MeshGraph {
         sources: PyReadonlyArray1<'py, i64>,
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let s = u32_vec(&sources, "sources")?;
-        let d = detached(py, || {
-            distance_fields(
-                &EdgeGraph {
-                    vertices: &self.vertices,
-                    adj: self.adj.view(),
-                },
-                &s,
-            )
-        })?;
+        let d = detached(py, || distance_fields(&self.edge_graph(), &s))?;
         let n = self.balls.n;
         owned(py, &d).reshape([s.len(), n])
     }
 
     /// Mean edge length of the mesh graph.
     fn mean_edge_length(&self) -> f64 {
-        EdgeGraph {
-            vertices: &self.vertices,
-            adj: self.adj.view(),
-        }
-        .mean_edge_length()
+        self.edge_graph().mean_edge_length()
     }
 }
 
