@@ -58,6 +58,20 @@ impl Dijkstra {
         }
     }
 
+    /// Offers every neighbour of the settled vertex `u` a path through it.
+    #[inline]
+    fn relax(&mut self, g: &EdgeGraph, u: usize, du: f64, cur: u32) {
+        for &w in g.adj.row(u) {
+            let w = w as usize;
+            let nd = du + g.len(u, w);
+            if self.stamp[w] != cur || nd < self.dist[w] {
+                self.stamp[w] = cur;
+                self.dist[w] = nd;
+                self.heap.push(Reverse((nd.to_bits(), w as u32)));
+            }
+        }
+    }
+
     /// A stamp no entry carries yet: every distance and mark becomes stale at once.
     fn next_stamp(&mut self) -> u32 {
         self.current = self.current.wrapping_add(1);
@@ -107,15 +121,7 @@ impl Dijkstra {
                 self.pending[u] = 0;
                 remaining -= 1;
             }
-            for &w in g.adj.row(u) {
-                let w = w as usize;
-                let nd = du + g.len(u, w);
-                if self.stamp[w] != cur || nd < self.dist[w] {
-                    self.stamp[w] = cur;
-                    self.dist[w] = nd;
-                    self.heap.push(Reverse((nd.to_bits(), w as u32)));
-                }
-            }
+            self.relax(g, u, du, cur);
         }
         out.clear();
         out.extend(targets.iter().map(|&t| {
@@ -166,15 +172,7 @@ impl Dijkstra {
             self.pending[u] = cur;
             ids.push(u as u32);
             dists.push(du);
-            for &w in g.adj.row(u) {
-                let w = w as usize;
-                let nd = du + g.len(u, w);
-                if self.stamp[w] != cur || nd < self.dist[w] {
-                    self.stamp[w] = cur;
-                    self.dist[w] = nd;
-                    self.heap.push(Reverse((nd.to_bits(), w as u32)));
-                }
-            }
+            self.relax(g, u, du, cur);
         }
         cutoff
     }
