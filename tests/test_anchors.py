@@ -47,5 +47,38 @@ def test_anchor_step_places_untrusted_vertices_of_an_isometric_copy(faust_pair):
     np.testing.assert_array_equal(g[trusted], truth[trusted])  # trusted vertices stay
     assert np.mean(g[~trusted] == truth[~trusted]) > 0.99
     # Nothing to anchor on, or nothing to move: the map comes back unchanged.
+    everything = np.ones(a.n_vertices, bool)
     assert anchor_step(a, b, f, np.zeros(a.n_vertices, bool)) is f
-    assert anchor_step(a, b, f, np.ones(a.n_vertices, bool)) is f
+    assert anchor_step(a, b, f, everything, global_check=False) is f
+    assert anchor_step(a, b, truth, everything, global_check=True) is truth
+
+
+def test_global_check_finds_wrong_matches_that_are_marked_trusted(faust_pair):
+    """The long-range check sees wrong matches however they are marked: here the scrambled
+    vertices are all called trusted, and it still finds and re-places them."""
+    rng = np.random.default_rng(5)
+    b_mesh, truth = isometric_copy(faust_pair[0].vertices, faust_pair[0].faces, rng)
+    a, b = Shape(faust_pair[0], k_max=2), Shape(b_mesh, k_max=2)
+    bad = rng.random(a.n_vertices) < 0.2
+    f = truth.copy()
+    f[bad] = rng.integers(0, b.n_vertices, bad.sum())
+    g = anchor_step(a, b, f, np.ones(a.n_vertices, bool), global_check=True)
+    np.testing.assert_array_equal(g[~bad], truth[~bad])
+    assert np.mean(g[bad] == truth[bad]) > 0.9
+    # The rest are draws that landed near enough to their true partner to pass the check,
+    # whose tolerance grows with distance (a random draw is typically 0.5 away).
+    left = np.flatnonzero(bad & (g != truth))
+    off = distance_fields(b, truth[left])[np.arange(left.size), g[left]]
+    assert off.max() < 0.25, off.max()
+
+
+def test_global_check_ignores_a_few_scattered_disagreements(faust_pair):
+    """Below GLOBAL_MIN_FLAGGED of the trusted vertices the flags are taken for stretch, not a
+    misplaced region, and nothing moves."""
+    rng = np.random.default_rng(6)
+    b_mesh, truth = isometric_copy(faust_pair[0].vertices, faust_pair[0].faces, rng)
+    a, b = Shape(faust_pair[0], k_max=2), Shape(b_mesh, k_max=2)
+    bad = rng.random(a.n_vertices) < 0.03
+    f = truth.copy()
+    f[bad] = rng.integers(0, b.n_vertices, bad.sum())
+    assert anchor_step(a, b, f, np.ones(a.n_vertices, bool), global_check=True) is f
