@@ -45,9 +45,9 @@ MIN_UNTRUSTED_DROP = 0.1
 #: (:func:`~hope_rs.anchors.anchor_step`): LMD looks at 2-rings only, so a region mapped
 #: consistently onto its mirror image passes it. Measured on every remeshed FAUST and TOSCA
 #: pair: faust_r mean error 0.0525 → 0.0459 (007→008 0.131 → 0.066, 002→003 0.101 → 0.089),
-#: tosca_r 0.0370 → 0.0374, faust_reg still 100% exact. In the first pass, on the initial
-#: map, the check flagged right vertices too and slowed faust_reg 018→019 to 92.7% exact
-#: within the pass limit; in every pass it also made good remeshed pairs worse.
+#: tosca_r 0.0370 → 0.0374, faust_reg still 100% exact. Checking in the first pass too, on
+#: the initial map, flagged right vertices: in two of three variants faust_reg 018→019 ended
+#: at 90.6-92.7% exact at the pass limit.
 GLOBAL_CHECK_PASS = 1
 #: Hop radius of the final polishing step (each vertex takes its best overlap, not one-to-one).
 POLISH_K = 3
