@@ -44,8 +44,8 @@ MIN_UNTRUSTED_DROP = 0.1
 #: The global repair of this pass (0-based) also checks long-range distances
 #: (:func:`~hope_rs.anchors.anchor_step`): LMD looks at 2-rings only, so a region mapped
 #: consistently onto its mirror image passes it. Measured on every remeshed FAUST and TOSCA
-#: pair: faust_r mean error 0.0525 → 0.0459 (007→008 0.131 → 0.066, 002→003 0.101 → 0.089),
-#: tosca_r 0.0370 → 0.0374, faust_reg still 100% exact. Checking in the first pass too, on
+#: pair: faust_r mean error 0.0525 → 0.0458 (007→008 0.131 → 0.066, 002→003 0.101 → 0.089),
+#: tosca_r 0.0370 → 0.0371, faust_reg still 100% exact. Checking in the first pass too, on
 #: the initial map, flagged right vertices: in two of three variants faust_reg 018→019 ended
 #: at 90.6-92.7% exact at the pass limit.
 GLOBAL_CHECK_PASS = 1
@@ -105,7 +105,9 @@ def refine(
     the history as a step with k = 0. The k-hop steps alone win back a wrongly matched region
     a few hops per pass; on FAUST remeshed 002→007 (initial mean error 0.36) six passes left
     0.117 without the repair and 0.054 with it, on 004→009 0.132 against 0.061, and faust_reg
-    019→020 reached 100% exact in 25 steps instead of 97.9% in 49.
+    019→020 reached 100% exact in 25 steps instead of 97.9% in 49. The second pass's repair
+    also distrusts vertices whose long-range distances disagree (see
+    :data:`GLOBAL_CHECK_PASS`), which LMD alone cannot see.
     """
     # BLAS runs only small products here (the global repair's projections); with more than
     # one thread OpenBLAS's idle workers spin and take a core from rayon: 17% of all cycles
@@ -208,7 +210,7 @@ def assign_by_overlap(
     indptr, indices, data = _overlap_with_bonus(a, b, k, f, witnesses, top_k, keep)
     # ``keep`` is a full assignment inside the pattern, which spares the solver its
     # feasibility search (a quarter of its time at 28k).
-    hint = keep if a.n_vertices <= b.n_vertices else _hint_rows(keep, b.n_vertices)
+    hint = keep if a.n_vertices <= b.n_vertices else _hint_rows(keep)
     g = _core.auction_assignment_int(
         indptr, indices, data, a.n_vertices, b.n_vertices, True, AUCTION_FLOOR_DIV, hint
     )
@@ -248,7 +250,7 @@ def best_in_rows(indptr, indices, data, rows) -> np.ndarray:
     return indices[pos[order[last]]].astype(np.int64)
 
 
-def _hint_rows(keep: np.ndarray, n_b: int) -> np.ndarray:
+def _hint_rows(keep: np.ndarray) -> np.ndarray:
     """``keep`` with every repeat of a column set to -1: a one-to-one partial assignment that
     covers all n_b columns when A has more vertices than B."""
     _, first = np.unique(keep, return_index=True)
