@@ -5,6 +5,8 @@ whose initial matches are all wrong (a limb mapped to the wrong side) is won bac
 pass. Geodesic distance to a spread of trusted correspondences ("anchors") is an intrinsic
 coordinate both shapes share, whatever their triangulations: matching untrusted vertices by
 these coordinates repairs such regions in one step, and the k-hop steps then sharpen the result.
+The same coordinates also expose what LMD cannot see: a region mapped consistently onto its
+mirror image keeps its 2-rings but not its distances to the rest of the shape (``global_check``).
 """
 
 from __future__ import annotations
