@@ -36,16 +36,24 @@ def test_distance_fields_of_disconnected_parts_are_infinite():
         distance_fields(s, [6])
 
 
-def test_anchor_step_places_untrusted_vertices_of_an_isometric_copy(faust_pair):
-    rng = np.random.default_rng(3)
-    b_mesh, truth = isometric_copy(faust_pair[0].vertices, faust_pair[0].faces, rng)
-    a, b = Shape(faust_pair[0], k_max=2), Shape(b_mesh, k_max=2)
-    trusted = rng.random(a.n_vertices) > 0.3
+def scrambled_copy(mesh, seed: int, share: float):
+    """Shapes A and B (A relabelled, moved and scaled), the true map, a random ``share`` of
+    vertices ``bad`` and the true map with those vertices sent to random partners."""
+    rng = np.random.default_rng(seed)
+    b_mesh, truth = isometric_copy(mesh.vertices, mesh.faces, rng)
+    a, b = Shape(mesh, k_max=2), Shape(b_mesh, k_max=2)
+    bad = rng.random(a.n_vertices) < share
     f = truth.copy()
-    f[~trusted] = rng.integers(0, b.n_vertices, (~trusted).sum())
+    f[bad] = rng.integers(0, b.n_vertices, bad.sum())
+    return a, b, truth, bad, f
+
+
+def test_anchor_step_places_untrusted_vertices_of_an_isometric_copy(faust_pair):
+    a, b, truth, bad, f = scrambled_copy(faust_pair[0], 3, 0.3)
+    trusted = ~bad
     g = anchor_step(a, b, f, trusted)
     np.testing.assert_array_equal(g[trusted], truth[trusted])  # trusted vertices stay
-    assert np.mean(g[~trusted] == truth[~trusted]) > 0.99
+    assert np.mean(g[bad] == truth[bad]) > 0.99
     # Nothing to anchor on, or nothing to move: the map comes back unchanged.
     everything = np.ones(a.n_vertices, bool)
     assert anchor_step(a, b, f, np.zeros(a.n_vertices, bool)) is f
@@ -56,12 +64,7 @@ def test_anchor_step_places_untrusted_vertices_of_an_isometric_copy(faust_pair):
 def test_global_check_finds_wrong_matches_that_are_marked_trusted(faust_pair):
     """The long-range check sees wrong matches however they are marked: here the scrambled
     vertices are all called trusted, and it still finds and re-places them."""
-    rng = np.random.default_rng(5)
-    b_mesh, truth = isometric_copy(faust_pair[0].vertices, faust_pair[0].faces, rng)
-    a, b = Shape(faust_pair[0], k_max=2), Shape(b_mesh, k_max=2)
-    bad = rng.random(a.n_vertices) < 0.2
-    f = truth.copy()
-    f[bad] = rng.integers(0, b.n_vertices, bad.sum())
+    a, b, truth, bad, f = scrambled_copy(faust_pair[0], 5, 0.2)
     g = anchor_step(a, b, f, np.ones(a.n_vertices, bool), global_check=True)
     np.testing.assert_array_equal(g[~bad], truth[~bad])
     assert np.mean(g[bad] == truth[bad]) > 0.9
@@ -75,10 +78,5 @@ def test_global_check_finds_wrong_matches_that_are_marked_trusted(faust_pair):
 def test_global_check_ignores_a_few_scattered_disagreements(faust_pair):
     """Below GLOBAL_MIN_FLAGGED of the trusted vertices the flags are taken for stretch, not a
     misplaced region, and nothing moves."""
-    rng = np.random.default_rng(6)
-    b_mesh, truth = isometric_copy(faust_pair[0].vertices, faust_pair[0].faces, rng)
-    a, b = Shape(faust_pair[0], k_max=2), Shape(b_mesh, k_max=2)
-    bad = rng.random(a.n_vertices) < 0.03
-    f = truth.copy()
-    f[bad] = rng.integers(0, b.n_vertices, bad.sum())
+    a, b, _, _, f = scrambled_copy(faust_pair[0], 6, 0.03)
     assert anchor_step(a, b, f, np.ones(a.n_vertices, bool), global_check=True) is f
