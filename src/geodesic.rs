@@ -133,9 +133,7 @@ impl Dijkstra {
             }
         }));
     }
-}
 
-impl Dijkstra {
     /// Every vertex within `cutoff` of `src`, in the order settled (nondecreasing distance), but
     /// at most `cap` of them. Returns the radius below which the list is complete: `cutoff` when
     /// the ball fits, else just under the distance of the first vertex left out.
@@ -213,24 +211,13 @@ pub fn distance_fields(g: &EdgeGraph, sources: &[u32]) -> Result<Vec<f64>> {
     if n == 0 {
         return Ok(out);
     }
+    // A full search is a ball without limits; its distances are the ones `run` settles.
     out.par_chunks_mut(n).zip(sources.par_iter()).for_each_init(
-        BinaryHeap::new,
-        |heap, (dist, &s)| {
-            heap.clear();
-            dist[s as usize] = 0.0;
-            heap.push(Reverse((0f64.to_bits(), s)));
-            while let Some(Reverse((bits, u))) = heap.pop() {
-                let (du, u) = (f64::from_bits(bits), u as usize);
-                if du > dist[u] {
-                    continue;
-                }
-                for &w in g.adj.row(u) {
-                    let nd = du + g.len(u, w as usize);
-                    if nd < dist[w as usize] {
-                        dist[w as usize] = nd;
-                        heap.push(Reverse((nd.to_bits(), w)));
-                    }
-                }
+        || (Dijkstra::new(n), Vec::new(), Vec::new()),
+        |(dj, ids, dists), (row, &s)| {
+            dj.ball(g, s as usize, f64::INFINITY, n, ids, dists);
+            for (&v, &d) in ids.iter().zip(dists.iter()) {
+                row[v as usize] = d;
             }
         },
     );

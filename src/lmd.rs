@@ -119,8 +119,9 @@ impl LocalDistances {
         self.complete.len()
     }
 
-    /// Distances from `q` to `targets` as `Dijkstra::run` with this `cutoff` would give them
-    /// (infinite beyond it), or `None` when q's row does not reach that far.
+    /// Writes into `out` the distances from `q` to `targets` as `Dijkstra::run` with this
+    /// `cutoff` would give them (infinite beyond it); false, writing nothing, when q's row does
+    /// not reach that far.
     fn lookup(&self, q: usize, targets: &[u32], cutoff: f64, out: &mut Vec<f64>) -> bool {
         if cutoff > self.complete[q] {
             return false;
@@ -142,7 +143,7 @@ pub fn lmd_table_cutoff(rings_a: &RingDistances, scale_a: f64, scale_b: f64) -> 
     let n = rings_a.offsets.len() - 1;
     let unit = lmd_unit(rings_a, scale_a);
     let mut reach: Vec<f64> = (0..n)
-        .map(|p| rings_a.of(p).iter().copied().fold(0.0, f64::max) / scale_a + 2.0 * unit)
+        .map(|p| lmd_reach(rings_a.of(p), scale_a, unit))
         .collect();
     if reach.is_empty() {
         return 0.0;
@@ -150,6 +151,12 @@ pub fn lmd_table_cutoff(rings_a: &RingDistances, scale_a: f64, scale_b: f64) -> 
     let at = ((reach.len() - 1) as f64 * 0.995) as usize;
     let (_, r, _) = reach.select_nth_unstable_by(at, f64::total_cmp);
     *r * scale_b
+}
+
+/// How far (scaled) LMD looks on B around f(p): p's farthest 2-ring neighbour plus two units,
+/// beyond which every distance counts the same.
+fn lmd_reach(ring_dists: &[f64], scale_a: f64, unit: f64) -> f64 {
+    ring_dists.iter().copied().fold(0.0, f64::max) / scale_a + 2.0 * unit
 }
 
 fn lmd_unit(rings_a: &RingDistances, scale_a: f64) -> f64 {
@@ -203,7 +210,7 @@ pub fn local_map_distortion(
                     return (0.0, 1.0);
                 }
                 let da = rings_a.of(p);
-                let reach = da.iter().copied().fold(0.0, f64::max) / scale_a + 2.0 * unit;
+                let reach = lmd_reach(da, scale_a, unit);
                 ftargets.clear();
                 ftargets.extend(ring.iter().map(|&r| f[r as usize]));
                 let q = f[p] as usize;

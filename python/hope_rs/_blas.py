@@ -7,9 +7,22 @@ with rayon's: inside ``match`` on 2 cores that ``eigh`` took 3 s instead of 25 m
 
 from __future__ import annotations
 
+import functools
+
 from threadpoolctl import threadpool_limits
 
 
 def single_threaded_blas():
     """Context manager limiting BLAS (and the LAPACK on top of it) to one thread."""
     return threadpool_limits(limits=1, user_api="blas")
+
+
+def with_single_threaded_blas(fn):
+    """Decorator: ``fn`` runs inside :func:`single_threaded_blas`."""
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with single_threaded_blas():
+            return fn(*args, **kwargs)
+
+    return wrapper

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
-from ._blas import single_threaded_blas
+from ._blas import with_single_threaded_blas
 from .anchors import anchor_step
 from .lmd import MIN_CONSISTENT, witnesses
 from .shape import Shape
@@ -70,6 +70,10 @@ class RefineResult:
     history: list[Iteration] = field(default_factory=list)
 
 
+# BLAS runs only small products here (the global repair's projections); with more than one
+# thread OpenBLAS's idle workers spin and take a core from rayon: 17% of all cycles of a 5k
+# match went to blas_thread_server before this.
+@with_single_threaded_blas
 def refine(
     a: Shape,
     b: Shape,
@@ -109,20 +113,6 @@ def refine(
     also distrusts vertices whose long-range distances disagree (see
     :data:`GLOBAL_CHECK_PASS`), which LMD alone cannot see.
     """
-    # BLAS runs only small products here (the global repair's projections); with more than
-    # one thread OpenBLAS's idle workers spin and take a core from rayon: 17% of all cycles
-    # of a 5k match went to blas_thread_server before this.
-    with single_threaded_blas():
-        return _refine(
-            a, b, f0, schedule, max_passes, min_consistent, top_k, min_witness_fraction,
-            polish_k, global_step, callback,
-        )  # fmt: skip
-
-
-def _refine(
-    a, b, f0, schedule, max_passes, min_consistent, top_k, min_witness_fraction, polish_k,
-    global_step, callback,
-) -> RefineResult:  # fmt: skip
     k_max = min(a.k_max, b.k_max)
     schedule = list(schedule) if schedule is not None else default_schedule(k_max)
     if not schedule or any(not 1 <= k <= k_max for k in schedule):
