@@ -706,6 +706,77 @@ fn hopcroft_karp(nr: usize, nc: usize, ptr: &[usize], idx: &[u32]) -> (usize, Ve
 /// Shifted, unscaled person values (all <= 0, >= -range) by (person, arc).
 trait Values: Sync {
     fn get(&self, i: usize, a: usize) -> i64;
+    /// The K + 1 best arcs of person `i` (arcs `lo..hi`) by reduced value
+    /// `get(i, a) * scale - price[obj[a]]`, among those above `floor` (unused slots: `NO_ARC`).
+    /// Every `obj[a]` must be below `price.len()`.
+    #[allow(clippy::too_many_arguments)]
+    fn top_reduced(
+        &self,
+        i: usize,
+        lo: usize,
+        hi: usize,
+        obj: &[u32],
+        price: &[i64],
+        scale: i64,
+        floor: i64,
+    ) -> TopK;
+}
+
+/// [`Values::top_reduced`] over one row's values `w` (arcs `lo..lo + w.len()`), each turned
+/// into a shifted value by `value`. The auction's hottest loop (a rescan reads the whole row,
+/// and on HOPE's k = 8 costs rows hold about 1000 arcs), so it reads prices unchecked and
+/// compares a block of reduced values with the threshold at once.
+#[inline(always)]
+fn top_reduced_of<W: Copy>(
+    w: &[W],
+    value: impl Fn(W) -> i64,
+    lo: usize,
+    obj: &[u32],
+    price: &[i64],
+    scale: i64,
+    floor: i64,
+) -> TopK {
+    const BLOCK: usize = 8;
+    let obj = &obj[lo..lo + w.len()];
+    debug_assert!(obj.iter().all(|&o| (o as usize) < price.len()));
+    let reduced = |v: W, o: u32| -> i64 {
+        // SAFETY: objects are < n_obj = price.len(): `PersonCsr::build` renumbers them from
+        // columns that `check_header` bounded, and the caller promises it.
+        value(v) * scale - unsafe { *price.get_unchecked(o as usize) }
+    };
+    let mut t = TopK {
+        vs: [i64::MIN; K + 1],
+        ks: [NO_ARC; K + 1],
+        len: K + 1,
+    };
+    let mut thr = floor;
+    let (wb, ob) = (w.chunks_exact(BLOCK), obj.chunks_exact(BLOCK));
+    let (wr, or) = (wb.remainder(), ob.remainder());
+    let mut at = lo;
+    for (wc, oc) in wb.zip(ob) {
+        let mut r = [0i64; BLOCK];
+        for j in 0..BLOCK {
+            r[j] = reduced(wc[j], oc[j]);
+        }
+        if r.iter().any(|&x| x > thr) {
+            for (j, &x) in r.iter().enumerate() {
+                if x > thr {
+                    t.insert(K, x, at + j);
+                    thr = thr.max(t.vs[K]);
+                }
+            }
+        }
+        at += BLOCK;
+    }
+    for (j, (&v, &o)) in wr.iter().zip(or).enumerate() {
+        let x = reduced(v, o);
+        if x > thr {
+            t.insert(K, x, at + j);
+            thr = thr.max(t.vs[K]);
+        }
+    }
+    t.len = t.ks.iter().take_while(|&&a| a != NO_ARC).count();
+    t
 }
 
 /// Integer costs read in place: no copy of the values for the common non-transposed case.
@@ -723,6 +794,26 @@ impl<const MAXIMIZE: bool> Values for Direct<'_, MAXIMIZE> {
             self.refv[i].wrapping_sub(self.data[a])
         }
     }
+    #[inline]
+    #[allow(clippy::too_many_arguments)]
+    fn top_reduced(
+        &self,
+        i: usize,
+        lo: usize,
+        hi: usize,
+        o: &[u32],
+        p: &[i64],
+        sc: i64,
+        fl: i64,
+    ) -> TopK {
+        let r = self.refv[i];
+        let w = &self.data[lo..hi];
+        if MAXIMIZE {
+            top_reduced_of(w, |d: i64| d.wrapping_sub(r), lo, o, p, sc, fl)
+        } else {
+            top_reduced_of(w, |d: i64| r.wrapping_sub(d), lo, o, p, sc, fl)
+        }
+    }
 }
 
 /// Precomputed values (transposed or quantized problems); i32 when the range allows.
@@ -733,11 +824,39 @@ impl Values for Stored<i32> {
     fn get(&self, _i: usize, a: usize) -> i64 {
         self.0[a] as i64
     }
+    #[inline]
+    #[allow(clippy::too_many_arguments)]
+    fn top_reduced(
+        &self,
+        _: usize,
+        lo: usize,
+        hi: usize,
+        o: &[u32],
+        p: &[i64],
+        sc: i64,
+        fl: i64,
+    ) -> TopK {
+        top_reduced_of(&self.0[lo..hi], |v: i32| v as i64, lo, o, p, sc, fl)
+    }
 }
 impl Values for Stored<i64> {
     #[inline(always)]
     fn get(&self, _i: usize, a: usize) -> i64 {
         self.0[a]
+    }
+    #[inline]
+    #[allow(clippy::too_many_arguments)]
+    fn top_reduced(
+        &self,
+        _: usize,
+        lo: usize,
+        hi: usize,
+        o: &[u32],
+        p: &[i64],
+        sc: i64,
+        fl: i64,
+    ) -> TopK {
+        top_reduced_of(&self.0[lo..hi], |v: i64| v, lo, o, p, sc, fl)
     }
 }
 
@@ -882,27 +1001,6 @@ fn scan_row_key(row: &[i64], lo: usize, key: impl Fn(i64) -> i64) -> (i64, i64, 
     (mn, mx, t)
 }
 
-/// Full scan of person `i`: fills its candidate slots with the K best arcs by reduced value and
-/// returns (count, bound on all other arcs, best, best arc, second best).
-#[inline]
-#[allow(clippy::too_many_arguments)]
-fn rebuild<V: Values>(
-    vals: &V,
-    i: usize,
-    lo: usize,
-    hi: usize,
-    obj: &[u32],
-    price: &[i64],
-    scale: i64,
-    slots: &mut [usize],
-) -> (u8, i64, i64, usize, i64) {
-    let t = TopK::of((lo..hi).map(|a| (vals.get(i, a) * scale - price[obj[a] as usize], a)));
-    let cnt = t.len.min(K);
-    slots[..cnt].copy_from_slice(&t.ks[..cnt]);
-    let bound = if t.len > K { t.vs[K] } else { i64::MIN };
-    (cnt as u8, bound, t.vs[0], t.ks[0], t.vs[1])
-}
-
 fn price_overflow<T>() -> Result<T> {
     invalid(
         "cost range too large for the exact auction: prices exceeded the safe integer range; \
@@ -910,6 +1008,21 @@ fn price_overflow<T>() -> Result<T> {
             .to_string(),
     )
 }
+
+/// An arc as the bidding loop needs it.
+#[derive(Clone, Copy)]
+struct Cand {
+    arc: usize,
+    obj: u32,
+    /// value * scale
+    val: i64,
+}
+
+const NO_CAND: Cand = Cand {
+    arc: NO_ARC,
+    obj: NONE,
+    val: i64::MIN,
+};
 
 struct Auction<'p, V> {
     ptr: &'p [usize],
@@ -925,8 +1038,12 @@ struct Auction<'p, V> {
     /// Lower bound on (own value) - (best other value), valid since the last bid or check: other
     /// prices only rise, so it stays a lower bound and lets a phase skip the person unscanned.
     slack: Vec<i64>,
-    cand: Vec<usize>,
+    /// Each person's K candidate arcs with their objects and scaled values, so that a bid reads
+    /// them in one place rather than through the arc in the value and object arrays.
+    cand: Vec<Cand>,
     cand_len: Vec<u8>,
+    /// Object and scaled value of the arc each person holds (valid while `arc[i] != NO_ARC`).
+    held: Vec<Cand>,
     /// Upper bound on the reduced value of every non-candidate arc.
     bound: Vec<i64>,
     stack: Vec<u32>,
@@ -952,55 +1069,69 @@ impl<V: Values> Auction<'_, V> {
         }
     }
 
-    /// Exact (best, best arc, second best) of person `i`, from the candidates when they certify
-    /// it, otherwise by a full rescan that refreshes them.
+    /// Exact (best, best candidate, second best) of person `i`, from the candidates when they
+    /// certify it, otherwise by a full rescan that refreshes them.
     #[inline]
-    fn best_two(&mut self, i: usize) -> (i64, usize, i64) {
+    fn best_two(&mut self, i: usize) -> (i64, Cand, i64) {
         let base = i * K;
         let cnt = self.cand_len[i] as usize;
-        let (mut b1, mut a1, mut b2) = (i64::MIN, NO_ARC, i64::MIN);
-        for &a in &self.cand[base..base + cnt] {
-            let v = self.vals.get(i, a) * self.scale - self.price[self.obj[a] as usize];
+        let (mut b1, mut c1, mut b2) = (i64::MIN, NO_CAND, i64::MIN);
+        let mut low = i64::MAX;
+        for c in &self.cand[base..base + cnt] {
+            let v = c.val - self.price[c.obj as usize];
+            low = low.min(v);
             if v > b2 {
                 if v > b1 {
                     b2 = b1;
                     b1 = v;
-                    a1 = a;
+                    c1 = *c;
                 } else {
                     b2 = v;
                 }
             }
         }
         if b2 >= self.bound[i] {
-            return (b1, a1, b2);
+            return (b1, c1, b2);
         }
         let (lo, hi) = (self.ptr[i], self.ptr[i + 1]);
-        let (c, bound, b1, a1, b2) = rebuild(
-            self.vals,
-            i,
-            lo,
-            hi,
-            self.obj,
-            &self.price,
-            self.scale,
-            &mut self.cand[base..base + K],
-        );
-        self.cand_len[i] = c;
-        self.bound[i] = bound;
-        (b1, a1, b2)
+        // The K current candidates are K arcs worth at least `low`, so the new K best are all
+        // among the arcs worth `low` or more: the scan skips the rest, which on HOPE's costs
+        // cut its insertions into the top list, the hot spot, to a few per row. The rest are
+        // then bounded by `low - 1` rather than by the exact (K + 1)-th value.
+        let floor = if cnt == K { low - 1 } else { i64::MIN };
+        let t = self
+            .vals
+            .top_reduced(i, lo, hi, self.obj, &self.price, self.scale, floor);
+        let cnt = t.len.min(K);
+        for (slot, (&v, &a)) in self.cand[base..base + cnt]
+            .iter_mut()
+            .zip(t.vs.iter().zip(&t.ks))
+        {
+            let o = self.obj[a];
+            *slot = Cand {
+                arc: a,
+                obj: o,
+                val: v + self.price[o as usize],
+            };
+        }
+        self.cand_len[i] = cnt as u8;
+        self.bound[i] = t.vs[K].max(floor);
+        let best = if cnt > 0 { self.cand[base] } else { NO_CAND };
+        (t.vs[0], best, t.vs[1])
     }
 
     /// Re-checks an assigned person's eps-CS (keeping it if it holds) or bids for its best object.
     fn process(&mut self, i: usize, eps: i64) -> Result<()> {
-        let (b1, best_arc, b2) = self.best_two(i);
+        let (b1, best, b2) = self.best_two(i);
+        let best_arc = best.arc;
         if best_arc == NO_ARC {
             // No arcs at all: excluded by the feasibility check.
             return Ok(());
         }
         let cur = self.arc[i];
         if cur != NO_ARC {
-            let jc = self.obj[cur] as usize;
-            let vc = self.vals.get(i, cur) * self.scale - self.price[jc];
+            let jc = self.held[i].obj as usize;
+            let vc = self.held[i].val - self.price[jc];
             let other = if best_arc == cur { b2 } else { b1 };
             if other == i64::MIN {
                 self.slack[i] = i64::MAX;
@@ -1013,7 +1144,7 @@ impl<V: Values> Auction<'_, V> {
             self.owner[jc] = NONE;
             self.arc[i] = NO_ARC;
         }
-        let j = self.obj[best_arc] as usize;
+        let j = best.obj as usize;
         let prev = self.owner[j];
         if prev == NONE {
             // An unowned object is taken at its current price: eps-CS holds with slack b1 - b2
@@ -1044,6 +1175,7 @@ impl<V: Values> Auction<'_, V> {
         }
         self.owner[j] = i as u32;
         self.arc[i] = best_arc;
+        self.held[i] = best;
         Ok(())
     }
 
@@ -1106,7 +1238,7 @@ fn solve<V: Values>(
     // Checked by the callers: range * (n+1) * (n+2) <= 2^60.
     let range_scaled = range * scale;
     let price = vec![0i64; n];
-    let mut cand = vec![NO_ARC; m * K];
+    let mut cand = vec![NO_CAND; m * K];
     let mut cand_len = vec![0u8; m];
     let mut bound = vec![i64::MIN; m];
     let (ptr, obj): (&[usize], &[u32]) = (&pc.ptr, &pc.obj);
@@ -1120,7 +1252,13 @@ fn solve<V: Values>(
     // At zero prices the reduced values are the scaled values, so key order is value order.
     for (i, t) in tops.iter().enumerate() {
         let cnt = t.len.min(K);
-        cand[i * K..i * K + cnt].copy_from_slice(&t.ks[..cnt]);
+        for (c, &a) in cand[i * K..i * K + cnt].iter_mut().zip(&t.ks) {
+            *c = Cand {
+                arc: a,
+                obj: obj[a],
+                val: vals.get(i, a) * scale,
+            };
+        }
         cand_len[i] = cnt as u8;
         if t.len > K {
             bound[i] = vals.get(i, t.ks[K]) * scale;
@@ -1138,6 +1276,7 @@ fn solve<V: Values>(
         slack: vec![i64::MIN; m],
         cand,
         cand_len,
+        held: vec![NO_CAND; m],
         bound,
         stack: Vec::with_capacity(m),
         queued: vec![false; m],

@@ -277,7 +277,7 @@ mod tests {
         let fields = distance_fields(&g, &sources).unwrap();
         for (i, &s) in sources.iter().enumerate() {
             let targets: Vec<u32> = (0..13).collect();
-            let d = pair_distances(&g, &vec![s; 13], &targets).unwrap();
+            let d = pair_distances(&g, &[s; 13], &targets).unwrap();
             assert_eq!(&fields[i * 13..(i + 1) * 13], &d[..]);
         }
         assert!(fields[13 * 2 + 12] == 0.0 && fields[13 * 2].is_infinite());
