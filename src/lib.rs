@@ -8,6 +8,7 @@ pub mod geodesic;
 pub mod graph;
 pub mod khop;
 pub mod lmd;
+pub mod memory;
 pub mod overlap;
 pub mod shot;
 

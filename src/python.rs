@@ -7,6 +7,7 @@ use crate::geodesic::{distance_fields, pair_distances, EdgeGraph};
 use crate::graph::adjacency_from_faces;
 use crate::khop::HopBalls;
 use crate::lmd::{lmd_table_cutoff, local_map_distortion, LocalDistances, RingDistances};
+use crate::memory::zeroed_vec;
 use crate::overlap::{overlap_rows, BallsAt, OverlapOptions, OverlapRows};
 use crate::shot::shot_descriptors;
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
@@ -99,35 +100,6 @@ where
             .map(|&x| x.try_into().map_err(|_| out_of_range(x)))
             .collect(),
     }
-}
-
-/// A zeroed vector whose pages are not touched yet (see [`advise_huge_pages`]).
-fn zeroed_vec<T: Copy + Default>(n: usize) -> Vec<T> {
-    // Zero-valued elements come from calloc, which maps fresh (untouched) pages at this size.
-    let mut v = vec![T::default(); n];
-    advise_huge_pages(&mut v);
-    v
-}
-
-/// Asks for transparent huge pages on a large buffer that has not been touched yet, where the
-/// kernel offers them only on request (Linux's "madvise" mode, the default of many
-/// distributions; NumPy does the same for its own large arrays). The big input copies (hundreds
-/// of MB for a k = 8 cost) then fault in 2 MiB at a time instead of 4 KiB: the cost copy went
-/// from 130 to 50-75 ms at 28k.
-fn advise_huge_pages<T>(buf: &mut [T]) {
-    #[cfg(target_os = "linux")]
-    {
-        const HUGE: usize = 2 << 20;
-        let (start, bytes) = (buf.as_mut_ptr() as usize, std::mem::size_of_val(buf));
-        let (lo, hi) = (start.next_multiple_of(HUGE), (start + bytes) & !(HUGE - 1));
-        if hi > lo {
-            // SAFETY: [lo, hi) lies inside `buf`, which we borrow mutably; MADV_HUGEPAGE is a
-            // hint that never changes the memory's contents, and its result does not matter.
-            unsafe { libc::madvise(lo as *mut libc::c_void, hi - lo, libc::MADV_HUGEPAGE) };
-        }
-    }
-    #[cfg(not(target_os = "linux"))]
-    let _ = buf;
 }
 
 /// Entries per parallel task of the input copies.
