@@ -124,6 +124,90 @@ impl HopBalls {
     }
 }
 
+/// B_k of every vertex of `adj` (a symmetric pattern) as a CSR pattern with sorted columns,
+/// straight from breadth-first searches that mark visited vertices in a bitset: the columns
+/// then come out in order by reading the marked words, with no per-row sort and no rows kept
+/// in BFS order (what [`HopBalls`] stores to serve every k at once).
+pub fn khop_csr(adj: &CsrView<()>, k: usize) -> Result<Csr<()>> {
+    if adj.n_rows != adj.n_cols {
+        return invalid("adjacency must be square");
+    }
+    let n = adj.n_rows;
+    let chunks: Vec<(Vec<u32>, Vec<usize>)> = (0..n.div_ceil(ROWS_PER_TASK))
+        .into_par_iter()
+        .map(|c| {
+            let (lo, hi) = (c * ROWS_PER_TASK, ((c + 1) * ROWS_PER_TASK).min(n));
+            let mut bits = vec![0u64; n.div_ceil(64)];
+            let mut members = Vec::new();
+            let mut cols = Vec::new();
+            let mut lens = Vec::with_capacity(hi - lo);
+            for v in lo..hi {
+                members.clear();
+                members.push(v as u32);
+                bits[v >> 6] |= 1u64 << (v & 63);
+                let (mut w_lo, mut w_hi) = (v >> 6, v >> 6);
+                let mut level_start = 0usize;
+                for _ in 0..k {
+                    let frontier_end = members.len();
+                    for i in level_start..frontier_end {
+                        for &w in adj.row(members[i] as usize) {
+                            let (word, bit) = (w as usize >> 6, 1u64 << (w & 63));
+                            if bits[word] & bit == 0 {
+                                bits[word] |= bit;
+                                members.push(w);
+                                w_lo = w_lo.min(word);
+                                w_hi = w_hi.max(word);
+                            }
+                        }
+                    }
+                    if members.len() == frontier_end {
+                        break;
+                    }
+                    level_start = frontier_end;
+                }
+                let start = cols.len();
+                // Reading the words costs their span, sorting the members m log m: take the
+                // cheaper (the span is long when vertex numbering is not spatially coherent).
+                if w_hi - w_lo < 4 * members.len() {
+                    for (word, b) in bits[w_lo..=w_hi].iter_mut().enumerate() {
+                        let mut x = std::mem::take(b);
+                        while x != 0 {
+                            cols.push((((w_lo + word) << 6) | x.trailing_zeros() as usize) as u32);
+                            x &= x - 1;
+                        }
+                    }
+                } else {
+                    for &w in &members {
+                        bits[w as usize >> 6] = 0;
+                    }
+                    cols.extend_from_slice(&members);
+                    cols[start..].sort_unstable();
+                }
+                lens.push(cols.len() - start);
+            }
+            (cols, lens)
+        })
+        .collect();
+    let mut indptr = Vec::with_capacity(n + 1);
+    indptr.push(0usize);
+    for (_, lens) in &chunks {
+        for &l in lens {
+            indptr.push(indptr.last().unwrap() + l);
+        }
+    }
+    let mut indices = Vec::with_capacity(*indptr.last().unwrap());
+    for (cols, _) in chunks {
+        indices.extend_from_slice(&cols);
+    }
+    Ok(Csr {
+        n_rows: n,
+        n_cols: n,
+        indptr,
+        indices,
+        data: Vec::new(),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -149,9 +233,50 @@ mod tests {
                 assert_eq!(got, want, "v={v} k={k}");
             }
         }
+        for k in 0..=3usize {
+            assert_eq!(khop_csr(&adj.view(), k).unwrap(), b.to_csr(k), "k={k}");
+        }
         // The two isolated vertices 20 and 21 are their own balls.
         assert_eq!(b.ball(21, 3), &[21]);
         let csr = b.to_csr(1);
         assert_eq!(&csr.indices[csr.indptr[0]..csr.indptr[1]], &[0, 1, 2]);
+    }
+
+    /// A triangulated m x m grid with its vertices numbered in a scrambled order, so that balls
+    /// span most of the index range (the sorting path of `khop_csr`).
+    fn scrambled_grid(m: u32) -> (Vec<[u32; 3]>, usize) {
+        let n = (m * m) as usize;
+        let mut label: Vec<u32> = (0..n as u32).collect();
+        let mut x = 12345u64;
+        for i in (1..n).rev() {
+            x = x
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            label.swap(i, (x >> 33) as usize % (i + 1));
+        }
+        let at = |r: u32, c: u32| label[(r * m + c) as usize];
+        let mut faces = Vec::new();
+        for r in 0..m - 1 {
+            for c in 0..m - 1 {
+                faces.push([at(r, c), at(r + 1, c), at(r, c + 1)]);
+                faces.push([at(r + 1, c), at(r + 1, c + 1), at(r, c + 1)]);
+            }
+        }
+        (faces, n)
+    }
+
+    #[test]
+    fn sorted_balls_match_bfs_order_balls() {
+        for (faces, n) in [scrambled_grid(40), (strip(300), 300)] {
+            let adj = adjacency_from_faces(&faces, n).unwrap();
+            let b = HopBalls::new(&adj.view(), 8).unwrap();
+            for k in 0..=8usize {
+                assert_eq!(
+                    khop_csr(&adj.view(), k).unwrap(),
+                    b.to_csr(k),
+                    "n={n} k={k}"
+                );
+            }
+        }
     }
 }

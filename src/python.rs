@@ -5,7 +5,7 @@ use crate::csr::{Csr, CsrView};
 use crate::error::CoreError;
 use crate::geodesic::{distance_fields, pair_distances, EdgeGraph};
 use crate::graph::adjacency_from_faces;
-use crate::khop::HopBalls;
+use crate::khop::{khop_csr, HopBalls};
 use crate::lmd::{lmd_table_cutoff, local_map_distortion, LocalDistances, RingDistances};
 use crate::memory::zeroed_vec;
 use crate::overlap::{overlap_rows, BallsAt, OverlapOptions, OverlapRows};
@@ -329,7 +329,7 @@ fn khop_neighbourhoods<'py>(
     let faces = faces_vec(&faces)?;
     let m = detached(py, || {
         let adj = adjacency_from_faces(&faces, n_vertices)?;
-        Ok(ones(HopBalls::new(&adj.view(), k)?.to_csr(k)))
+        Ok(ones(khop_csr(&adj.view(), k)?))
     })?;
     Ok(csr_out(py, m))
 }
