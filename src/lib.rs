@@ -11,6 +11,7 @@ pub mod lmd;
 pub mod memory;
 pub mod overlap;
 pub mod shot;
+pub mod step;
 
 #[cfg(feature = "python")]
 mod python;

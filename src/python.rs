@@ -10,6 +10,7 @@ use crate::lmd::{lmd_table_cutoff, local_map_distortion, LocalDistances, RingDis
 use crate::memory::zeroed_vec;
 use crate::overlap::{overlap_rows, BallsAt, OverlapOptions, OverlapRows};
 use crate::shot::shot_descriptors;
+use crate::step::overlap_assignment;
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -427,6 +428,46 @@ fn overlap_cost_graphs<'py>(
     overlap_out(py, rows)
 }
 
+/// One HOPE step between two prebuilt graphs at hop radius k: the overlap cost with the
+/// current-match bonus, solved exactly (see `step::overlap_assignment`), without the cost ever
+/// reaching Python.
+#[pyfunction]
+#[pyo3(signature = (a, b, k, f, witnesses, top_k, keep, hint, floor_div))]
+#[allow(clippy::too_many_arguments)]
+fn overlap_assignment_graphs<'py>(
+    py: Python<'py>,
+    a: &MeshGraph,
+    b: &MeshGraph,
+    k: usize,
+    f: PyReadonlyArray1<'py, i64>,
+    witnesses: PyReadonlyArray1<'py, bool>,
+    top_k: Option<usize>,
+    keep: PyReadonlyArray1<'py, i64>,
+    hint: PyReadonlyArray1<'py, i64>,
+    floor_div: i64,
+) -> PyResult<Bound<'py, PyArray1<i64>>> {
+    if k > a.balls.k_max.min(b.balls.k_max) {
+        return Err(PyValueError::new_err("k exceeds the graphs' k_max"));
+    }
+    let f = u32_vec(&f, "f")?;
+    let w: Vec<bool> = plain_vec(&witnesses);
+    let keep = u32_vec(&keep, "keep")?;
+    let hint = plain_vec(&hint);
+    let g = detached(py, || {
+        overlap_assignment(
+            &BallsAt { balls: &a.balls, k },
+            &BallsAt { balls: &b.balls, k },
+            &f,
+            &w,
+            top_k,
+            &keep,
+            &hint,
+            floor_div,
+        )
+    })?;
+    Ok(owned(py, &g))
+}
+
 type PerVertexPair<'py> = (Bound<'py, PyArray1<f32>>, Bound<'py, PyArray1<f32>>);
 
 /// Local map distortion of `f` (A → B): (mean over the 2-ring, fraction of consistent neighbours).
@@ -559,6 +600,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(overlap_cost_graphs, m)?)?;
     m.add_function(wrap_pyfunction!(local_map_distortion_graphs, m)?)?;
     m.add_function(wrap_pyfunction!(py_auction_assignment_int, m)?)?;
+    m.add_function(wrap_pyfunction!(overlap_assignment_graphs, m)?)?;
     m.add_function(wrap_pyfunction!(py_auction_assignment_float, m)?)?;
     m.add_function(wrap_pyfunction!(py_shot_descriptors, m)?)?;
     Ok(())

@@ -43,6 +43,17 @@ def overlap_cost_graphs(
     top_k: int | None = None,
     keep: npt.NDArray[np.int64] | None = None,
 ) -> _Csr: ...
+def overlap_assignment_graphs(
+    a: MeshGraph,
+    b: MeshGraph,
+    k: int,
+    f: npt.NDArray[np.int64],
+    witnesses: npt.NDArray[np.bool_],
+    top_k: int | None,
+    keep: npt.NDArray[np.int64],
+    hint: npt.NDArray[np.int64],
+    floor_div: int,
+) -> npt.NDArray[np.int64]: ...
 def local_map_distortion_graphs(
     a: MeshGraph, b: MeshGraph, f: npt.NDArray[np.int64], scale_a: float, scale_b: float
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]: ...
