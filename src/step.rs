@@ -122,12 +122,9 @@ mod tests {
                 auction_assignment_int_hinted(&cost.view(), true, 16, Some(&hint)).unwrap();
             assert_eq!(g, reference, "k={k}");
             // The bonus is exactly 1 on the current match and the counts are multiplied.
-            for r in 0..n as usize {
+            for (r, &fr) in f.iter().enumerate() {
                 for a in cost.indptr[r]..cost.indptr[r + 1] {
-                    assert_eq!(
-                        cost.data[a] % COUNT_WEIGHT,
-                        (cost.indices[a] == f[r]) as i64
-                    );
+                    assert_eq!(cost.data[a] % COUNT_WEIGHT, (cost.indices[a] == fr) as i64);
                 }
             }
             // The swap is undone: the strip is matched to itself.
