@@ -174,6 +174,12 @@ fn lmd_unit(rings_a: &RingDistances, scale_a: f64) -> f64 {
 /// on the shapes' sizes, and the result is in units of A's mean edge length. Returns, per vertex,
 /// the mean distortion over its 2-ring and the fraction of its 2-ring whose distortion is below
 /// one mean edge length (a robust score when many neighbours are mismatched).
+///
+/// `prev`: an earlier map with its result, `(f_prev, mean_prev, frac_prev)`. Only vertices whose
+/// 2-ring (themselves included) maps differently are then recomputed; the others keep their
+/// values, which are exactly what a full computation gives. Late refinement steps move a few
+/// percent of the vertices, so most of the work is skipped.
+#[allow(clippy::too_many_arguments)]
 pub fn local_map_distortion(
     balls_a: &HopBalls,
     rings_a: &RingDistances,
@@ -182,6 +188,7 @@ pub fn local_map_distortion(
     scale_a: f64,
     scale_b: f64,
     table: Option<&LocalDistances>,
+    prev: Option<(&[u32], &[f32], &[f32])>,
 ) -> Result<(Vec<f32>, Vec<f32>)> {
     let n_a = balls_a.n;
     let n_b = b.adj.n_rows;
@@ -200,35 +207,99 @@ pub fn local_map_distortion(
         return invalid("the distance table was built for another shape");
     }
     let unit = lmd_unit(rings_a, scale_a);
-    let results: Vec<(f32, f32)> = (0..n_a)
-        .into_par_iter()
-        .map_init(
+    let job = Job {
+        balls_a,
+        rings_a,
+        b,
+        f,
+        scale_a,
+        scale_b,
+        table,
+        unit,
+    };
+    let Some((prev_f, prev_mean, prev_frac)) = prev else {
+        return Ok(job
+            .rows((0..n_a as u32).into_par_iter())
+            .into_iter()
+            .unzip());
+    };
+    if prev_f.len() != n_a || prev_mean.len() != n_a || prev_frac.len() != n_a {
+        return invalid(format!(
+            "the previous map and its LMD must have one entry per vertex of A ({n_a})"
+        ));
+    }
+    // LMD of p depends on f over p's 2-ring only: recompute where that changed.
+    let mut dirty = vec![false; n_a];
+    for (c, (&x, &y)) in f.iter().zip(prev_f).enumerate() {
+        if x != y {
+            for &r in balls_a.ball(c, 2) {
+                dirty[r as usize] = true;
+            }
+        }
+    }
+    let stale: Vec<u32> = (0..n_a as u32).filter(|&p| dirty[p as usize]).collect();
+    let (mut mean, mut frac) = (prev_mean.to_vec(), prev_frac.to_vec());
+    for (&p, (m, c)) in stale.iter().zip(job.rows(stale.par_iter().copied())) {
+        mean[p as usize] = m;
+        frac[p as usize] = c;
+    }
+    Ok((mean, frac))
+}
+
+/// Everything the LMD of one vertex needs.
+struct Job<'a> {
+    balls_a: &'a HopBalls,
+    rings_a: &'a RingDistances,
+    b: &'a EdgeGraph<'a>,
+    f: &'a [u32],
+    scale_a: f64,
+    scale_b: f64,
+    table: Option<&'a LocalDistances>,
+    unit: f64,
+}
+
+impl Job<'_> {
+    /// (mean, consistent fraction) of each vertex of `rows`, in parallel.
+    fn rows(&self, rows: impl IndexedParallelIterator<Item = u32>) -> Vec<(f32, f32)> {
+        let n_b = self.b.adj.n_rows;
+        rows.map_init(
             || (Dijkstra::new(n_b), Vec::new(), Vec::new()),
-            |(djb, db, ftargets), p| {
-                let ring = &balls_a.ball(p, 2)[1..];
-                if ring.is_empty() {
-                    return (0.0, 1.0);
-                }
-                let da = rings_a.of(p);
-                let reach = lmd_reach(da, scale_a, unit);
-                ftargets.clear();
-                ftargets.extend(ring.iter().map(|&r| f[r as usize]));
-                let q = f[p] as usize;
-                if !table.is_some_and(|t| t.lookup(q, ftargets, reach * scale_b, db)) {
-                    djb.run(b, q, ftargets, reach * scale_b, db);
-                }
-                let (mut sum, mut good) = (0.0, 0usize);
-                for (&x, &y) in da.iter().zip(db.iter()) {
-                    let dist = (x / scale_a - (y / scale_b).min(reach)).abs() / unit;
-                    sum += dist;
-                    good += (dist < 1.0) as usize;
-                }
-                let m = ring.len() as f64;
-                ((sum / m) as f32, (good as f64 / m) as f32)
-            },
+            |(djb, db, ftargets), p| self.vertex(p as usize, djb, db, ftargets),
         )
-        .collect();
-    Ok(results.into_iter().unzip())
+        .collect()
+    }
+
+    fn vertex(
+        &self,
+        p: usize,
+        djb: &mut Dijkstra,
+        db: &mut Vec<f64>,
+        ftargets: &mut Vec<u32>,
+    ) -> (f32, f32) {
+        let ring = &self.balls_a.ball(p, 2)[1..];
+        if ring.is_empty() {
+            return (0.0, 1.0);
+        }
+        let da = self.rings_a.of(p);
+        let reach = lmd_reach(da, self.scale_a, self.unit);
+        ftargets.clear();
+        ftargets.extend(ring.iter().map(|&r| self.f[r as usize]));
+        let q = self.f[p] as usize;
+        if !self
+            .table
+            .is_some_and(|t| t.lookup(q, ftargets, reach * self.scale_b, db))
+        {
+            djb.run(self.b, q, ftargets, reach * self.scale_b, db);
+        }
+        let (mut sum, mut good) = (0.0, 0usize);
+        for (&x, &y) in da.iter().zip(db.iter()) {
+            let dist = (x / self.scale_a - (y / self.scale_b).min(reach)).abs() / self.unit;
+            sum += dist;
+            good += (dist < 1.0) as usize;
+        }
+        let m = ring.len() as f64;
+        ((sum / m) as f32, (good as f64 / m) as f32)
+    }
 }
 
 #[cfg(test)]
@@ -275,13 +346,15 @@ mod tests {
         let (ga, gb) = (graph(&va, &adj), graph(&vb, &adj));
         let id: Vec<u32> = (0..va.len() as u32).collect();
         let rings = RingDistances::new(&ga, &balls).unwrap();
-        let (mean, frac) = local_map_distortion(&balls, &rings, &gb, &id, 1.0, 1.7, None).unwrap();
+        let (mean, frac) =
+            local_map_distortion(&balls, &rings, &gb, &id, 1.0, 1.7, None, None).unwrap();
         assert!(mean.iter().all(|&m| m < 1e-6));
         assert!(frac.iter().all(|&x| x == 1.0));
         // Swapping two far-apart vertices distorts exactly the neighbourhoods that see them.
         let mut f = id.clone();
         f.swap(13, 100);
-        let (mean, _) = local_map_distortion(&balls, &rings, &gb, &f, 1.0, 1.7, None).unwrap();
+        let (mean, _) =
+            local_map_distortion(&balls, &rings, &gb, &f, 1.0, 1.7, None, None).unwrap();
         assert!(mean[13] > 1.0 && mean[100] > 1.0);
         let far = 60;
         assert!(mean[far] < 1e-6);
@@ -311,17 +384,36 @@ mod tests {
                 _ => i as u32,
             })
             .collect();
-        let want = local_map_distortion(&balls, &rings, &gb, &f, 1.0, 2.3, None).unwrap();
+        let want = local_map_distortion(&balls, &rings, &gb, &f, 1.0, 2.3, None, None).unwrap();
         let cutoff = lmd_table_cutoff(&rings, 1.0, 2.3);
         // Full rows, rows cut short (searches fall back), and a radius that covers too little.
         for (radius, cap) in [(cutoff, MAX_ROW), (cutoff, 12), (cutoff * 0.5, MAX_ROW)] {
             let table = LocalDistances::with_cap(&gb, radius, cap);
-            let got = local_map_distortion(&balls, &rings, &gb, &f, 1.0, 2.3, Some(&table));
+            let got = local_map_distortion(&balls, &rings, &gb, &f, 1.0, 2.3, Some(&table), None);
             assert_eq!(got.unwrap(), want, "radius {radius}, cap {cap}");
         }
         let other = LocalDistances::new(&ga, 1.0);
         let mut small = other.clone();
         small.complete.pop();
-        assert!(local_map_distortion(&balls, &rings, &gb, &f, 1.0, 2.3, Some(&small)).is_err());
+        assert!(
+            local_map_distortion(&balls, &rings, &gb, &f, 1.0, 2.3, Some(&small), None).is_err()
+        );
+
+        // Updating from another map's result gives exactly the full computation.
+        let table = LocalDistances::new(&gb, cutoff);
+        let prev =
+            local_map_distortion(&balls, &rings, &gb, &f, 1.0, 2.3, Some(&table), None).unwrap();
+        let mut g = f.clone();
+        for i in (0..n).step_by(9) {
+            g[i] = ((i * 31 + 5) % n) as u32;
+        }
+        let full =
+            local_map_distortion(&balls, &rings, &gb, &g, 1.0, 2.3, Some(&table), None).unwrap();
+        assert_ne!(full, prev);
+        let p = Some((f.as_slice(), prev.0.as_slice(), prev.1.as_slice()));
+        let got = local_map_distortion(&balls, &rings, &gb, &g, 1.0, 2.3, Some(&table), p);
+        assert_eq!(got.unwrap(), full);
+        let short = Some((&f[1..], prev.0.as_slice(), prev.1.as_slice()));
+        assert!(local_map_distortion(&balls, &rings, &gb, &g, 1.0, 2.3, None, short).is_err());
     }
 }

@@ -471,7 +471,10 @@ fn overlap_assignment_graphs<'py>(
 type PerVertexPair<'py> = (Bound<'py, PyArray1<f32>>, Bound<'py, PyArray1<f32>>);
 
 /// Local map distortion of `f` (A → B): (mean over the 2-ring, fraction of consistent neighbours).
+/// `prev`: (an earlier map, its mean, its fraction); only vertices whose 2-ring maps differently
+/// are recomputed (see `lmd::local_map_distortion`).
 #[pyfunction]
+#[pyo3(signature = (a, b, f, scale_a, scale_b, prev=None))]
 fn local_map_distortion_graphs<'py>(
     py: Python<'py>,
     a: &MeshGraph,
@@ -479,8 +482,18 @@ fn local_map_distortion_graphs<'py>(
     f: PyReadonlyArray1<'py, i64>,
     scale_a: f64,
     scale_b: f64,
+    prev: Option<PrevLmd<'py>>,
 ) -> PyResult<PerVertexPair<'py>> {
     let f = u32_vec(&f, "f")?;
+    let prev = prev
+        .map(|(pf, pm, pc)| -> PyResult<_> {
+            Ok((
+                u32_vec(&pf, "previous map")?,
+                plain_vec(&pm),
+                plain_vec(&pc),
+            ))
+        })
+        .transpose()?;
     let rings = a
         .rings
         .as_ref()
@@ -495,10 +508,18 @@ fn local_map_distortion_graphs<'py>(
             scale_a,
             scale_b,
             Some(&table),
+            prev.as_ref()
+                .map(|(pf, pm, pc)| (pf.as_slice(), pm.as_slice(), pc.as_slice())),
         )
     })?;
     Ok((owned(py, &mean), owned(py, &frac)))
 }
+
+type PrevLmd<'py> = (
+    PyReadonlyArray1<'py, i64>,
+    PyReadonlyArray1<'py, f32>,
+    PyReadonlyArray1<'py, f32>,
+);
 
 /// Owned sparse cost built from (indptr, indices, data) arrays.
 fn cost_csr<T: numpy::Element + Copy + Default + Send + Sync>(

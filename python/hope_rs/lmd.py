@@ -45,3 +45,30 @@ def witnesses(a: Shape, b: Shape, f, *, min_consistent: float = MIN_CONSISTENT) 
     ``min_consistent`` of their 2-ring keeps its geodesic distance (see :data:`MIN_CONSISTENT`)."""
     _, consistent = local_map_distortion(a, b, f)
     return consistent >= min_consistent
+
+
+class LmdTracker:
+    """LMD of a sequence of maps between the same two shapes, as in a refinement loop.
+
+    Each call remembers its map and result; the next call recomputes only the vertices whose
+    2-ring (themselves included) maps differently, which gives exactly the values of
+    :func:`local_map_distortion` at a fraction of its cost once the steps move few vertices.
+    """
+
+    def __init__(self, a: Shape, b: Shape):
+        self.a, self.b = a, b
+        self._last = None
+
+    def local_map_distortion(self, f) -> tuple[np.ndarray, np.ndarray]:
+        """Same as :func:`local_map_distortion` for ``f``."""
+        a, b = self.a, self.b
+        f = np.array(as_index_map(f, a.n_vertices, b.n_vertices, name="f"), dtype=np.int64)
+        mean, consistent = _core.local_map_distortion_graphs(
+            a.graph, b.graph, f, a.scale, b.scale, self._last
+        )
+        self._last = (f, mean, consistent)
+        return mean, consistent
+
+    def witnesses(self, f, *, min_consistent: float = MIN_CONSISTENT) -> np.ndarray:
+        """Same as :func:`witnesses` for ``f``."""
+        return self.local_map_distortion(f)[1] >= min_consistent

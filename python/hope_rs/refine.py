@@ -10,7 +10,7 @@ import numpy as np
 from . import _core
 from ._blas import with_single_threaded_blas
 from .anchors import anchor_step
-from .lmd import MIN_CONSISTENT, witnesses
+from .lmd import MIN_CONSISTENT, LmdTracker
 from .shape import Shape
 
 #: Candidates kept per row of the overlap cost (plus the current match).
@@ -118,19 +118,20 @@ def refine(
     if not schedule or any(not 1 <= k <= k_max for k in schedule):
         raise ValueError(f"every k of the schedule must be in [1, {k_max}], got {schedule}")
     f = np.ascontiguousarray(f0, dtype=np.int64)
+    lmd = LmdTracker(a, b)
     history: list[Iteration] = []
     last_fraction = -1.0
     for n_pass in range(max_passes):
         changed_in_pass = 0
         if global_step:
             t0 = time.perf_counter()
-            w = witnesses(a, b, f, min_consistent=min_consistent)
+            w = lmd.witnesses(f, min_consistent=min_consistent)
             untrusted, before = 1.0 - w.mean(), 1.0 - last_fraction
             if n_pass >= 3 and untrusted > before * (1.0 - MIN_UNTRUSTED_DROP):
                 break  # the last pass did not gain: keep its map, skip the repair
             last_fraction = float(w.mean())
             check = n_pass == GLOBAL_CHECK_PASS
-            f_new = global_repair(a, b, f, w, min_consistent, global_check=check)
+            f_new = global_repair(a, b, f, w, min_consistent, global_check=check, lmd=lmd)
             changed = int(np.count_nonzero(f_new != f))
             changed_in_pass += changed
             f = f_new
@@ -139,7 +140,7 @@ def refine(
                 callback(history[-1])
         for k in schedule:
             t0 = time.perf_counter()
-            w = voters(a, b, f, min_consistent, min_witness_fraction)
+            w = voters(lmd, f, min_consistent, min_witness_fraction)
             f_new = assign_by_overlap(a, b, k, f, w, top_k=top_k)
             changed = int(np.count_nonzero(f_new != f))
             changed_in_pass += changed
@@ -152,7 +153,7 @@ def refine(
     if polish_k is not None:
         t0 = time.perf_counter()
         k = min(polish_k, k_max)
-        w = voters(a, b, f, min_consistent, min_witness_fraction)
+        w = voters(lmd, f, min_consistent, min_witness_fraction)
         f_new = best_overlap(a, b, k, f, w)
         history.append(
             Iteration(
@@ -166,22 +167,29 @@ def refine(
 
 
 def global_repair(
-    a: Shape, b: Shape, f, w, min_consistent: float, *, global_check: bool = False
+    a: Shape,
+    b: Shape,
+    f,
+    w,
+    min_consistent: float,
+    *,
+    global_check: bool = False,
+    lmd: LmdTracker | None = None,
 ) -> np.ndarray:
     """:func:`~hope_rs.anchors.anchor_step` on ``w``, the LMD witnesses of ``f``, keeping a moved
     vertex only where it then passes LMD itself (the anchor coordinates are coarser than a k-hop
     step, so elsewhere the old match is at least as good). ``global_check``: see
-    :func:`~hope_rs.anchors.anchor_step`."""
+    :func:`~hope_rs.anchors.anchor_step`; ``lmd``: the tracker of the caller's maps, if any."""
     g = anchor_step(a, b, f, w, global_check=global_check)
     if g is f:
         return f
-    ok = witnesses(a, b, g, min_consistent=min_consistent)
+    ok = (lmd or LmdTracker(a, b)).witnesses(g, min_consistent=min_consistent)
     return np.where(ok | (g == f), g, f)
 
 
-def voters(a: Shape, b: Shape, f, min_consistent: float, min_fraction: float) -> np.ndarray:
+def voters(lmd: LmdTracker, f, min_consistent: float, min_fraction: float) -> np.ndarray:
     """The LMD witnesses of ``f``, or every vertex when fewer than ``min_fraction`` qualify."""
-    w = witnesses(a, b, f, min_consistent=min_consistent)
+    w = lmd.witnesses(f, min_consistent=min_consistent)
     return w if w.mean() >= min_fraction else np.ones_like(w)
 
 
