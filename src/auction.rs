@@ -708,18 +708,15 @@ trait Values: Sync {
     fn get(&self, i: usize, a: usize) -> i64;
     /// The K + 1 best arcs of person `i` (arcs `lo..hi`) by reduced value
     /// `get(i, a) * scale - price[obj[a]]`, among those above `floor` (unused slots: `NO_ARC`).
-    /// Every `obj[a]` must be below `price.len()`.
-    #[allow(clippy::too_many_arguments)]
-    fn top_reduced(
-        &self,
-        i: usize,
-        lo: usize,
-        hi: usize,
-        obj: &[u32],
-        price: &[i64],
-        scale: i64,
-        floor: i64,
-    ) -> TopK;
+    fn top_reduced(&self, i: usize, lo: usize, hi: usize, s: &Rescan) -> TopK;
+}
+
+/// What a rescan measures arcs against. Every `obj[a]` must be below `price.len()`.
+struct Rescan<'a> {
+    obj: &'a [u32],
+    price: &'a [i64],
+    scale: i64,
+    floor: i64,
 }
 
 /// [`Values::top_reduced`] over one row's values `w` (arcs `lo..lo + w.len()`), each turned
@@ -727,16 +724,14 @@ trait Values: Sync {
 /// and on HOPE's k = 8 costs rows hold about 1000 arcs), so it reads prices unchecked and
 /// compares a block of reduced values with the threshold at once.
 #[inline(always)]
-fn top_reduced_of<W: Copy>(
-    w: &[W],
-    value: impl Fn(W) -> i64,
-    lo: usize,
-    obj: &[u32],
-    price: &[i64],
-    scale: i64,
-    floor: i64,
-) -> TopK {
+fn top_reduced_of<W: Copy>(w: &[W], value: impl Fn(W) -> i64, lo: usize, s: &Rescan) -> TopK {
     const BLOCK: usize = 8;
+    let Rescan {
+        obj,
+        price,
+        scale,
+        floor,
+    } = *s;
     let obj = &obj[lo..lo + w.len()];
     debug_assert!(obj.iter().all(|&o| (o as usize) < price.len()));
     let reduced = |v: W, o: u32| -> i64 {
@@ -795,23 +790,13 @@ impl<const MAXIMIZE: bool> Values for Direct<'_, MAXIMIZE> {
         }
     }
     #[inline]
-    #[allow(clippy::too_many_arguments)]
-    fn top_reduced(
-        &self,
-        i: usize,
-        lo: usize,
-        hi: usize,
-        o: &[u32],
-        p: &[i64],
-        sc: i64,
-        fl: i64,
-    ) -> TopK {
+    fn top_reduced(&self, i: usize, lo: usize, hi: usize, s: &Rescan) -> TopK {
         let r = self.refv[i];
         let w = &self.data[lo..hi];
         if MAXIMIZE {
-            top_reduced_of(w, |d: i64| d.wrapping_sub(r), lo, o, p, sc, fl)
+            top_reduced_of(w, |d: i64| d.wrapping_sub(r), lo, s)
         } else {
-            top_reduced_of(w, |d: i64| r.wrapping_sub(d), lo, o, p, sc, fl)
+            top_reduced_of(w, |d: i64| r.wrapping_sub(d), lo, s)
         }
     }
 }
@@ -819,44 +804,14 @@ impl<const MAXIMIZE: bool> Values for Direct<'_, MAXIMIZE> {
 /// Precomputed values (transposed or quantized problems); i32 when the range allows.
 struct Stored<W>(Vec<W>);
 
-impl Values for Stored<i32> {
+impl<W: Copy + Into<i64> + Sync> Values for Stored<W> {
     #[inline(always)]
     fn get(&self, _i: usize, a: usize) -> i64 {
-        self.0[a] as i64
+        self.0[a].into()
     }
     #[inline]
-    #[allow(clippy::too_many_arguments)]
-    fn top_reduced(
-        &self,
-        _: usize,
-        lo: usize,
-        hi: usize,
-        o: &[u32],
-        p: &[i64],
-        sc: i64,
-        fl: i64,
-    ) -> TopK {
-        top_reduced_of(&self.0[lo..hi], |v: i32| v as i64, lo, o, p, sc, fl)
-    }
-}
-impl Values for Stored<i64> {
-    #[inline(always)]
-    fn get(&self, _i: usize, a: usize) -> i64 {
-        self.0[a]
-    }
-    #[inline]
-    #[allow(clippy::too_many_arguments)]
-    fn top_reduced(
-        &self,
-        _: usize,
-        lo: usize,
-        hi: usize,
-        o: &[u32],
-        p: &[i64],
-        sc: i64,
-        fl: i64,
-    ) -> TopK {
-        top_reduced_of(&self.0[lo..hi], |v: i64| v, lo, o, p, sc, fl)
+    fn top_reduced(&self, _: usize, lo: usize, hi: usize, s: &Rescan) -> TopK {
+        top_reduced_of(&self.0[lo..hi], |v: W| v.into(), lo, s)
     }
 }
 
@@ -1118,9 +1073,13 @@ impl<V: Values> Auction<'_, V> {
         // cut its insertions into the top list, the hot spot, to a few per row. The rest are
         // then bounded by `low - 1` rather than by the exact (K + 1)-th value.
         let floor = if cnt == K { low - 1 } else { i64::MIN };
-        let t = self
-            .vals
-            .top_reduced(i, lo, hi, self.obj, &self.price, self.scale, floor);
+        let scan = Rescan {
+            obj: self.obj,
+            price: &self.price,
+            scale: self.scale,
+            floor,
+        };
+        let t = self.vals.top_reduced(i, lo, hi, &scan);
         let cnt = t.len.min(K);
         for (slot, (&v, &a)) in self.cand[base..base + cnt]
             .iter_mut()

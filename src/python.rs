@@ -392,6 +392,20 @@ fn overlap_cost_csr<'py>(
     overlap_out(py, rows)
 }
 
+/// The map and witnesses of a step at hop radius k between two prebuilt graphs, checked.
+fn step_inputs(
+    a: &MeshGraph,
+    b: &MeshGraph,
+    k: usize,
+    f: &PyReadonlyArray1<'_, i64>,
+    witnesses: &PyReadonlyArray1<'_, bool>,
+) -> PyResult<(Vec<u32>, Vec<bool>)> {
+    if k > a.balls.k_max.min(b.balls.k_max) {
+        return Err(PyValueError::new_err("k exceeds the graphs' k_max"));
+    }
+    Ok((u32_vec(f, "f")?, plain_vec(witnesses)))
+}
+
 /// Overlap cost at hop radius k between two prebuilt graphs.
 #[pyfunction]
 #[pyo3(signature = (a, b, k, f, witnesses, top_k=None, keep=None))]
@@ -406,11 +420,7 @@ fn overlap_cost_graphs<'py>(
     top_k: Option<usize>,
     keep: Option<PyReadonlyArray1<'py, i64>>,
 ) -> PyResult<PyCsr<'py, u32>> {
-    if k > a.balls.k_max.min(b.balls.k_max) {
-        return Err(PyValueError::new_err("k exceeds the graphs' k_max"));
-    }
-    let f = u32_vec(&f, "f")?;
-    let w: Vec<bool> = plain_vec(&witnesses);
+    let (f, w) = step_inputs(a, b, k, &f, &witnesses)?;
     let keep = keep.map(|k| u32_vec(&k, "keep")).transpose()?;
     let opts = OverlapOptions {
         top_k,
@@ -446,11 +456,7 @@ fn overlap_assignment_graphs<'py>(
     hint: PyReadonlyArray1<'py, i64>,
     floor_div: i64,
 ) -> PyResult<Bound<'py, PyArray1<i64>>> {
-    if k > a.balls.k_max.min(b.balls.k_max) {
-        return Err(PyValueError::new_err("k exceeds the graphs' k_max"));
-    }
-    let f = u32_vec(&f, "f")?;
-    let w: Vec<bool> = plain_vec(&witnesses);
+    let (f, w) = step_inputs(a, b, k, &f, &witnesses)?;
     let keep = u32_vec(&keep, "keep")?;
     let hint = plain_vec(&hint);
     let g = detached(py, || {
