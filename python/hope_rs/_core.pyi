@@ -55,7 +55,13 @@ def overlap_assignment_graphs(
     floor_div: int,
 ) -> npt.NDArray[np.int64]: ...
 def local_map_distortion_graphs(
-    a: MeshGraph, b: MeshGraph, f: npt.NDArray[np.int64], scale_a: float, scale_b: float
+    a: MeshGraph,
+    b: MeshGraph,
+    f: npt.NDArray[np.int64],
+    scale_a: float,
+    scale_b: float,
+    prev: tuple[npt.NDArray[np.int64], npt.NDArray[np.float32], npt.NDArray[np.float32]]
+    | None = None,
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]: ...
 def auction_assignment_int(
     indptr: npt.NDArray[np.int64],
