@@ -10,7 +10,7 @@ use crate::lmd::{lmd_table_cutoff, local_map_distortion, LocalDistances, RingDis
 use crate::memory::zeroed_vec;
 use crate::overlap::{overlap_rows, BallsAt, OverlapOptions, OverlapRows};
 use crate::shot::shot_descriptors;
-use crate::step::overlap_assignment;
+use crate::step::{best_overlap, overlap_assignment};
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -406,11 +406,10 @@ fn step_inputs(
     Ok((u32_vec(f, "f")?, plain_vec(witnesses)))
 }
 
-/// Overlap cost at hop radius k between two prebuilt graphs.
+/// Each vertex's best-overlapping vertex of B at hop radius k between two prebuilt graphs,
+/// without the one-to-one constraint (see `step::best_overlap`).
 #[pyfunction]
-#[pyo3(signature = (a, b, k, f, witnesses, top_k=None, keep=None))]
-#[allow(clippy::too_many_arguments)]
-fn overlap_cost_graphs<'py>(
+fn best_overlap_graphs<'py>(
     py: Python<'py>,
     a: &MeshGraph,
     b: &MeshGraph,
@@ -418,24 +417,18 @@ fn overlap_cost_graphs<'py>(
     f: PyReadonlyArray1<'py, i64>,
     witnesses: PyReadonlyArray1<'py, bool>,
     top_k: Option<usize>,
-    keep: Option<PyReadonlyArray1<'py, i64>>,
-) -> PyResult<PyCsr<'py, u32>> {
+) -> PyResult<Bound<'py, PyArray1<i64>>> {
     let (f, w) = step_inputs(a, b, k, &f, &witnesses)?;
-    let keep = keep.map(|k| u32_vec(&k, "keep")).transpose()?;
-    let opts = OverlapOptions {
-        top_k,
-        keep: keep.as_deref(),
-    };
-    let rows = detached(py, || {
-        overlap_rows(
+    let g = detached(py, || {
+        best_overlap(
             &BallsAt { balls: &a.balls, k },
             &BallsAt { balls: &b.balls, k },
             &f,
             &w,
-            opts,
+            top_k,
         )
     })?;
-    overlap_out(py, rows)
+    Ok(owned(py, &g))
 }
 
 /// One HOPE step between two prebuilt graphs at hop radius k: the overlap cost with the
@@ -624,7 +617,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<MeshGraph>()?;
     m.add_function(wrap_pyfunction!(khop_neighbourhoods, m)?)?;
     m.add_function(wrap_pyfunction!(overlap_cost_csr, m)?)?;
-    m.add_function(wrap_pyfunction!(overlap_cost_graphs, m)?)?;
+    m.add_function(wrap_pyfunction!(best_overlap_graphs, m)?)?;
     m.add_function(wrap_pyfunction!(local_map_distortion_graphs, m)?)?;
     m.add_function(wrap_pyfunction!(py_auction_assignment_int, m)?)?;
     m.add_function(wrap_pyfunction!(overlap_assignment_graphs, m)?)?;

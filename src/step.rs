@@ -65,14 +65,7 @@ pub fn overlap_assignment<A: Rows, B: Rows>(
     if hint.len() != nbrs_a.n_rows() {
         return invalid("hint must hold one entry per vertex of A");
     }
-    let opts = OverlapOptions {
-        top_k,
-        keep: Some(keep),
-    };
-    let cost = bonus_cost(
-        overlap_rows(nbrs_a, nbrs_b, f, witnesses, opts)?.into_csr(),
-        f,
-    );
+    let cost = step_cost(nbrs_a, nbrs_b, f, witnesses, top_k, keep)?;
     let view = cost.view();
     let mut g = auction_assignment_int_hinted(&view, true, floor_div, Some(hint))?;
     g.par_iter_mut().enumerate().for_each(|(r, q)| {
@@ -82,6 +75,41 @@ pub fn overlap_assignment<A: Rows, B: Rows>(
         }
     });
     Ok(g)
+}
+
+/// Each vertex's best column of the overlap cost (see [`bonus_cost`]), without the one-to-one
+/// constraint: ties in the overlap stay at the current match.
+pub fn best_overlap<A: Rows, B: Rows>(
+    nbrs_a: &A,
+    nbrs_b: &B,
+    f: &[u32],
+    witnesses: &[bool],
+    top_k: Option<usize>,
+) -> Result<Vec<i64>> {
+    let cost = step_cost(nbrs_a, nbrs_b, f, witnesses, top_k, f)?;
+    let view = cost.view();
+    // Every row holds its current match (`keep` = f), so it is never empty.
+    Ok((0..view.n_rows)
+        .into_par_iter()
+        .map(|r| best_in_row(&view, r).map_or(-1, |c| c as i64))
+        .collect())
+}
+
+/// The overlap cost with the match bonus, `keep[p]` stored in every row p.
+fn step_cost<A: Rows, B: Rows>(
+    nbrs_a: &A,
+    nbrs_b: &B,
+    f: &[u32],
+    witnesses: &[bool],
+    top_k: Option<usize>,
+    keep: &[u32],
+) -> Result<Csr<i64>> {
+    let opts = OverlapOptions {
+        top_k,
+        keep: Some(keep),
+    };
+    let rows = overlap_rows(nbrs_a, nbrs_b, f, witnesses, opts)?;
+    Ok(bonus_cost(rows.into_csr(), f))
 }
 
 #[cfg(test)]
@@ -133,6 +161,35 @@ mod tests {
                 "k={k}: {g:?}"
             );
         }
+    }
+
+    #[test]
+    fn best_overlap_takes_each_rows_largest_value() {
+        let n = 40u32;
+        let adj = adjacency_from_faces(&strip(n), n as usize).unwrap();
+        let balls = HopBalls::new(&adj.view(), 2).unwrap();
+        let rows = BallsAt {
+            balls: &balls,
+            k: 2,
+        };
+        let f: Vec<u32> = (0..n).map(|v| if v == 10 { 30 } else { v }).collect();
+        let w: Vec<bool> = (0..n).map(|v| v != 10).collect();
+        let got = best_overlap(&rows, &rows, &f, &w, None).unwrap();
+        let opts = OverlapOptions {
+            top_k: None,
+            keep: Some(&f),
+        };
+        let cost = bonus_cost(overlap_cost(&rows, &rows, &f, &w, opts).unwrap(), &f);
+        for (r, &q) in got.iter().enumerate() {
+            let (lo, hi) = (cost.indptr[r], cost.indptr[r + 1]);
+            let best = cost.data[lo..hi].iter().max().unwrap();
+            let at = cost.indices[lo..hi]
+                .iter()
+                .position(|&c| c as i64 == q)
+                .unwrap();
+            assert_eq!(cost.data[lo + at], *best, "row {r}");
+        }
+        assert_eq!(got[10], 10, "the moved vertex returns");
     }
 
     #[test]

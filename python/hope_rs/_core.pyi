@@ -34,15 +34,14 @@ def overlap_cost_csr(
     top_k: int | None = None,
     keep: npt.NDArray[np.int64] | None = None,
 ) -> _Csr: ...
-def overlap_cost_graphs(
+def best_overlap_graphs(
     a: MeshGraph,
     b: MeshGraph,
     k: int,
     f: npt.NDArray[np.int64],
     witnesses: npt.NDArray[np.bool_],
-    top_k: int | None = None,
-    keep: npt.NDArray[np.int64] | None = None,
-) -> _Csr: ...
+    top_k: int | None,
+) -> npt.NDArray[np.int64]: ...
 def overlap_assignment_graphs(
     a: MeshGraph,
     b: MeshGraph,

@@ -208,8 +208,8 @@ def assign_by_overlap(
     # ``keep`` is a full assignment inside the pattern, which spares the solver its
     # feasibility search (a quarter of its time at 28k).
     hint = keep if a.n_vertices <= b.n_vertices else _hint_rows(keep)
-    # The cost (as in :func:`_overlap_with_bonus`) is built and solved in one Rust call, so it
-    # never makes the round trip through NumPy; rows left out take their best column there.
+    # The cost is built and solved in one Rust call (src/step.rs), so it never makes the round
+    # trip through NumPy; rows left out take their best column there.
     return _core.overlap_assignment_graphs(
         a.graph,
         b.graph,
@@ -223,35 +223,17 @@ def assign_by_overlap(
     )
 
 
-def _overlap_with_bonus(a: Shape, b: Shape, k: int, f, witnesses, top_k, keep):
-    """Overlap cost as int64 data worth 4 per count, +1 on each row's current match (the cost
-    that ``src/step.rs`` builds in Rust for :func:`assign_by_overlap`)."""
-    indptr, indices, counts = _core.overlap_cost_graphs(
-        a.graph, b.graph, k, f, witnesses, top_k, keep
-    )
-    rows = np.repeat(np.arange(a.n_vertices), np.diff(indptr))
-    data = counts.astype(np.int64) * 4 + (indices == f[rows])
-    return indptr, indices, data
-
-
 def best_overlap(a: Shape, b: Shape, k: int, f, witnesses) -> np.ndarray:
-    """Each vertex's best-overlapping vertex of B (ties kept at the current match)."""
-    indptr, indices, data = _overlap_with_bonus(a, b, k, f, witnesses, TOP_K, f)
-    return best_in_rows(indptr, indices, data, np.arange(a.n_vertices))
-
-
-def best_in_rows(indptr, indices, data, rows) -> np.ndarray:
-    """Column of the largest value in each of ``rows`` of a CSR matrix (rows must be non-empty)."""
-    rows = np.asarray(rows, dtype=np.int64)
-    lo, hi = indptr[rows], indptr[rows + 1]
-    n = hi - lo
-    owner = np.repeat(np.arange(rows.size), n)
-    pos = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n) + np.repeat(lo, n)
-    vals = data[pos]
-    # Sort by (row, value) and take each row's last entry: its largest value.
-    order = np.lexsort((vals, owner))
-    last = np.cumsum(n) - 1
-    return indices[pos[order[last]]].astype(np.int64)
+    """Each vertex's best-overlapping vertex of B (ties kept at the current match): the cost of
+    :func:`assign_by_overlap` without the one-to-one constraint."""
+    return _core.best_overlap_graphs(
+        a.graph,
+        b.graph,
+        k,
+        np.ascontiguousarray(f, dtype=np.int64),
+        np.ascontiguousarray(witnesses, dtype=bool),
+        TOP_K,
+    )
 
 
 def _hint_rows(keep: np.ndarray) -> np.ndarray:
