@@ -6,6 +6,8 @@ use crate::csr::{Csr, CsrView};
 use crate::error::{invalid, Result};
 use crate::khop::HopBalls;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicU32, AtomicUsize, Ordering};
+use std::sync::OnceLock;
 
 /// Anything that can hand out neighbourhood rows: a CSR pattern or the k-prefix of `HopBalls`.
 pub trait Rows: Sync {
@@ -83,6 +85,18 @@ pub fn overlap_rows<A: Rows, B: Rows>(
     witnesses: &[bool],
     opts: OverlapOptions<'_>,
 ) -> Result<OverlapRows> {
+    overlap_rows_with(nbrs_a, nbrs_b, f, witnesses, opts, simd_available())
+}
+
+/// [`overlap_rows`] with the AVX-512 inner loops on or off (`simd` only where available).
+fn overlap_rows_with<A: Rows, B: Rows>(
+    nbrs_a: &A,
+    nbrs_b: &B,
+    f: &[u32],
+    witnesses: &[bool],
+    opts: OverlapOptions<'_>,
+    simd: bool,
+) -> Result<OverlapRows> {
     let n_a = nbrs_a.n_rows();
     let n_b = nbrs_b.n_rows();
     if f.len() != n_a || witnesses.len() != n_a {
@@ -112,15 +126,9 @@ pub fn overlap_rows<A: Rows, B: Rows>(
     {
         return invalid(format!("nbrs_b holds a column outside its {n_b} vertices"));
     }
-    let walk = walk_order(nbrs_a);
-    let segments: Vec<Segment> = walk
-        .par_chunks(SEGMENT)
-        .enumerate()
-        .map_init(
-            || Accumulator::new(n_a, n_b),
-            |acc, (s, rows)| acc.segment(nbrs_a, nbrs_b, f, witnesses, &opts, s * SEGMENT, rows),
-        )
-        .collect();
+    let (walk, segments) = walk_and_segments(n_a, n_b, simd, nbrs_a, |acc, first, rows| {
+        acc.segment(nbrs_a, nbrs_b, f, witnesses, &opts, first, rows)
+    });
     let mut len = vec![0usize; n_a];
     for (seg, rows) in segments.iter().zip(walk.chunks(SEGMENT)) {
         for (i, &p) in rows.iter().enumerate() {
@@ -218,24 +226,82 @@ impl OverlapRows {
     }
 }
 
+/// The walk (see [`walk_into`]) and the segments of rows along it, computed by `work` on
+/// consecutive chunks of `SEGMENT` positions. One thread walks while the others start on the
+/// segments already walked, then joins them: at 28k vertices, k = 8, the walk alone took 80 ms
+/// of a 400 ms call.
+fn walk_and_segments<A, W>(
+    n_a: usize,
+    n_b: usize,
+    simd: bool,
+    a: &A,
+    work: W,
+) -> (Vec<u32>, Vec<Segment>)
+where
+    A: Rows,
+    W: Fn(&mut Accumulator, usize, &[u32]) -> Segment + Sync,
+{
+    let sketch = (!a.nearest_first()).then(|| min_hashes(a));
+    let order: Vec<AtomicU32> = (0..n_a).map(|_| AtomicU32::new(0)).collect();
+    let walked = AtomicUsize::new(0);
+    let n_seg = n_a.div_ceil(SEGMENT);
+    let next = AtomicUsize::new(0);
+    let slots: Vec<OnceLock<Segment>> = (0..n_seg).map(|_| OnceLock::new()).collect();
+    let run = || {
+        let mut acc = Accumulator::new(n_a, n_b, simd);
+        let mut rows = Vec::with_capacity(SEGMENT);
+        loop {
+            let s = next.fetch_add(1, Ordering::Relaxed);
+            if s >= n_seg {
+                break;
+            }
+            let (lo, hi) = (s * SEGMENT, ((s + 1) * SEGMENT).min(n_a));
+            while walked.load(Ordering::Acquire) < hi {
+                std::hint::spin_loop();
+                std::thread::yield_now();
+            }
+            rows.clear();
+            rows.extend(order[lo..hi].iter().map(|p| p.load(Ordering::Relaxed)));
+            // Each index is claimed once, so the slot is empty.
+            let _ = slots[s].set(work(&mut acc, lo, &rows));
+        }
+    };
+    rayon::scope(|scope| {
+        for _ in 1..rayon::current_num_threads().min(n_seg) {
+            scope.spawn(|_| run());
+        }
+        walk_into(a, sketch.as_deref(), &order, &walked);
+        run();
+    });
+    let walk = order.into_iter().map(AtomicU32::into_inner).collect();
+    let segments = slots
+        .into_iter()
+        .map(|s| s.into_inner().expect("every segment was computed"))
+        .collect();
+    (walk, segments)
+}
+
 /// An order of A's vertices in which each vertex is, where possible, an unvisited member of the
 /// previous vertex's row that is close to it: the first one for rows in BFS order, otherwise the
 /// one whose row looks most like the previous row by MinHash (sorted rows, as scipy patterns
 /// come, would otherwise step to the smallest index, often across the neighbourhood, which
 /// doubled the kernel's work on a 28k-vertex mesh at k = 8).
-fn walk_order<A: Rows>(a: &A) -> Vec<u32> {
+///
+/// Positions are stored into `out` and published through `walked` every `SEGMENT` rows, so
+/// that segments can be computed while the walk goes on. Runs no parallel work itself: it
+/// would let this thread pick up a segment task that waits for the walk.
+fn walk_into<A: Rows>(a: &A, sketch: Option<&[u32]>, out: &[AtomicU32], walked: &AtomicUsize) {
     let n = a.n_rows();
-    let sketch = (!a.nearest_first()).then(|| min_hashes(a));
     let mut visited = vec![false; n];
-    let mut order = Vec::with_capacity(n);
+    let mut len = 0usize;
     let mut scan = 0usize;
     let mut current: Option<usize> = None;
-    while order.len() < n {
+    while len < n {
         let unvisited = |&&v: &&u32| (v as usize) < n && !visited[v as usize];
         let next = current
             .and_then(|p| {
                 let row = a.row(p);
-                match &sketch {
+                match sketch {
                     None => row.iter().find(unvisited).copied(),
                     Some(h) => {
                         let hp = &h[p * HASHES..(p + 1) * HASHES];
@@ -261,10 +327,13 @@ fn walk_order<A: Rows>(a: &A) -> Vec<u32> {
                 scan
             });
         visited[next] = true;
-        order.push(next as u32);
+        out[len].store(next as u32, Ordering::Relaxed);
+        len += 1;
+        if len.is_multiple_of(SEGMENT) || len == n {
+            walked.store(len, Ordering::Release);
+        }
         current = Some(next);
     }
-    order
 }
 
 /// MinHash signatures per row: the fraction of equal entries of two signatures estimates the
@@ -272,13 +341,27 @@ fn walk_order<A: Rows>(a: &A) -> Vec<u32> {
 const HASHES: usize = 8;
 
 fn min_hashes<A: Rows>(a: &A) -> Vec<u32> {
-    let mut out = vec![u32::MAX; a.n_rows() * HASHES];
+    let n = a.n_rows();
+    // Each vertex's hashes once, so that a row's signature is an element-wise minimum over
+    // table rows (a few vector ops per member; hashing every member 8 times took 60 ms of CPU
+    // at 28k vertices, k = 8).
+    let table: Vec<[u32; HASHES]> = (0..n as u32)
+        .into_par_iter()
+        .map(|v| std::array::from_fn(|h| mix(v, h as u32)))
+        .collect();
+    let mut out = vec![u32::MAX; n * HASHES];
     out.par_chunks_mut(HASHES).enumerate().for_each(|(r, sig)| {
+        let mut acc = [u32::MAX; HASHES];
         for &v in a.row(r) {
-            for (h, s) in sig.iter_mut().enumerate() {
-                *s = (*s).min(mix(v, h as u32));
+            let hv = table
+                .get(v as usize)
+                .copied()
+                .unwrap_or_else(|| std::array::from_fn(|h| mix(v, h as u32)));
+            for h in 0..HASHES {
+                acc[h] = acc[h].min(hv[h]);
             }
         }
+        sig.copy_from_slice(&acc);
     });
     out
 }
@@ -305,6 +388,17 @@ struct Segment {
 /// of witnesses (< 2^31), so the low bits hold the count and one load serves both questions.
 const LISTED: u32 = 1 << 31;
 
+/// Whether the inner loops may use AVX-512F: the CPU has it, and `HOPE_NO_SIMD` is not set (an
+/// escape hatch for comparing the two paths).
+fn simd_available() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::env::var_os("HOPE_NO_SIMD").is_none() && std::arch::is_x86_feature_detected!("avx512f")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
 /// Per-thread state: the counts of the current row, kept up to date as the walk moves.
 struct Accumulator {
     /// Count of each column of B in the current row, `| LISTED` when the column is in
@@ -317,10 +411,14 @@ struct Accumulator {
     leaving: Vec<u32>,
     selected: Vec<u32>,
     bits: Vec<u64>,
+    /// Entries per row of the last segment.
+    per_row: usize,
+    /// Whether the CPU has AVX-512F (gather/scatter versions of `add` and `remove`).
+    simd: bool,
 }
 
 impl Accumulator {
-    fn new(n_a: usize, n_b: usize) -> Self {
+    fn new(n_a: usize, n_b: usize, simd: bool) -> Self {
         Accumulator {
             count: vec![0; n_b],
             support: Vec::new(),
@@ -329,23 +427,39 @@ impl Accumulator {
             leaving: Vec::new(),
             selected: Vec::new(),
             bits: vec![0; n_b.div_ceil(64)],
+            per_row: 0,
+            simd,
         }
     }
 
-    /// Adds one ball of B. The innermost loop of the kernel: branch-free (whether a column is
-    /// new is data-dependent and mispredicts often, so every column is written past the end of
-    /// `support` and the length advances only for new ones) and without bounds checks.
+    /// Adds one ball of B: every column's count goes up by one, and columns seen for the first
+    /// time are appended to `support`. The innermost loop of the kernel.
     #[inline]
     fn add(&mut self, ball: &[u32]) {
-        let mut len = self.support.len();
         self.support.reserve(ball.len());
+        #[cfg(target_arch = "x86_64")]
+        if self.simd {
+            // SAFETY: `simd` is set only when the CPU has AVX-512F; see `add_scalar` for the
+            // bounds.
+            unsafe { self.add_avx512(ball) };
+            return;
+        }
+        self.add_scalar(ball);
+    }
+
+    /// Branch-free (whether a column is new is data-dependent and mispredicts often, so every
+    /// column is written past the end of `support` and the length advances only for new ones)
+    /// and without bounds checks.
+    #[inline]
+    fn add_scalar(&mut self, ball: &[u32]) {
+        let mut len = self.support.len();
         let buf = self.support.as_mut_ptr();
         let count = self.count.as_mut_ptr();
         for &q in ball {
             debug_assert!((q as usize) < self.count.len());
             // SAFETY: every column of B is < n_b = count.len() (checked once in `overlap_rows`),
-            // and at most ball.len() entries are written past the old length, which `reserve`
-            // made room for.
+            // and at most ball.len() entries are written past the old length, which `add`
+            // reserved.
             unsafe {
                 let c = count.add(q as usize);
                 let old = *c;
@@ -358,14 +472,75 @@ impl Accumulator {
         unsafe { self.support.set_len(len) };
     }
 
+    /// [`Self::add_scalar`] 16 columns at a time: gather the counts, scatter them back raised,
+    /// compress the new columns onto `support`. The columns of one ball are distinct, so the
+    /// lanes of a scatter never collide.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    unsafe fn add_avx512(&mut self, ball: &[u32]) {
+        use std::arch::x86_64::*;
+        let mut len = self.support.len();
+        let buf = self.support.as_mut_ptr();
+        let count = self.count.as_mut_ptr() as *mut i32;
+        let listed = _mm512_set1_epi32(LISTED as i32);
+        let one = _mm512_set1_epi32(1);
+        let chunks = ball.chunks_exact(16);
+        let tail = chunks.remainder();
+        for c in chunks {
+            let q = _mm512_loadu_si512(c.as_ptr() as *const _);
+            let old = _mm512_i32gather_epi32::<4>(q, count as *const _);
+            let new = _mm512_add_epi32(_mm512_or_si512(old, listed), one);
+            _mm512_i32scatter_epi32::<4>(count as *mut _, q, new);
+            // New columns: the flag bit was clear (old >= 0 as i32).
+            let fresh = _mm512_cmpge_epi32_mask(old, _mm512_setzero_si512());
+            _mm512_storeu_si512(
+                buf.add(len) as *mut _,
+                _mm512_maskz_compress_epi32(fresh, q),
+            );
+            len += fresh.count_ones() as usize;
+        }
+        for &q in tail {
+            let c = count.add(q as usize) as *mut u32;
+            let old = *c;
+            *c = (old | LISTED) + 1;
+            *buf.add(len) = q;
+            len += (old < LISTED) as usize;
+        }
+        self.support.set_len(len);
+    }
+
     #[inline]
     fn remove(&mut self, ball: &[u32]) {
+        #[cfg(target_arch = "x86_64")]
+        if self.simd {
+            // SAFETY: as in `add`.
+            unsafe { self.remove_avx512(ball) };
+            return;
+        }
         let count = self.count.as_mut_ptr();
         for &q in ball {
             debug_assert!((q as usize) < self.count.len());
-            // SAFETY: as in `add`; the ball was added before, so the count does not underflow
-            // into the flag.
+            // SAFETY: as in `add_scalar`; the ball was added before, so the count does not
+            // underflow into the flag.
             unsafe { *count.add(q as usize) -= 1 };
+        }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    unsafe fn remove_avx512(&mut self, ball: &[u32]) {
+        use std::arch::x86_64::*;
+        let count = self.count.as_mut_ptr() as *mut i32;
+        let one = _mm512_set1_epi32(1);
+        let chunks = ball.chunks_exact(16);
+        let tail = chunks.remainder();
+        for c in chunks {
+            let q = _mm512_loadu_si512(c.as_ptr() as *const _);
+            let old = _mm512_i32gather_epi32::<4>(q, count as *const _);
+            _mm512_i32scatter_epi32::<4>(count as *mut _, q, _mm512_sub_epi32(old, one));
+        }
+        for &q in tail {
+            *count.add(q as usize) -= 1;
         }
     }
 
@@ -389,10 +564,13 @@ impl Accumulator {
         rows: &[u32],
     ) -> Segment {
         let n_a = self.member.len();
+        // Sized from this thread's previous segment: growing 1 MB vectors by doubling spent
+        // a tenth of the call copying them.
+        let guess = rows.len() * self.per_row + rows.len() * self.per_row / 8;
         let mut out = Segment {
             starts: Vec::with_capacity(rows.len() + 1),
-            cols: Vec::new(),
-            vals: Vec::new(),
+            cols: Vec::with_capacity(guess),
+            vals: Vec::with_capacity(guess),
         };
         out.starts.push(0);
         self.clear();
@@ -447,6 +625,7 @@ impl Accumulator {
             self.emit(p, opts, &mut out);
             prev = Some((p, id));
         }
+        self.per_row = out.cols.len().div_ceil(rows.len().max(1));
         out
     }
 
@@ -460,61 +639,89 @@ impl Accumulator {
         out.starts.push(out.cols.len());
     }
 
-    /// Every live column, in order. One pass keeps the live columns in `support` (forgetting
-    /// the dead ones); dense rows are then ordered through a bitset, sparse ones by sorting, and
-    /// `support` ends up as exactly the live columns. At k = 8 (~1000 per row) this is most of
-    /// the output work.
-    fn emit_all(&mut self, kept: Option<u32>, out: &mut Segment) {
-        let count = &mut self.count;
-        let (mut lo, mut hi) = (u32::MAX, 0u32);
-        self.support.retain(|&q| {
-            let live = count[q as usize] > LISTED;
-            if live {
-                lo = lo.min(q);
-                hi = hi.max(q);
-            } else {
-                count[q as usize] = 0;
-            }
-            live
-        });
-        let extra = kept.filter(|&q| self.count[q as usize] <= LISTED);
-        if let Some(q) = extra {
+    /// Marks the live columns of `support` in `bits` and clears the counts of the dead ones
+    /// (the bare flag). Returns the number of live columns and the smallest and largest column
+    /// of `support`.
+    fn mark_live(&mut self) -> (usize, u32, u32) {
+        let count = self.count.as_mut_ptr();
+        let bits = &mut self.bits;
+        let (mut n, mut lo, mut hi) = (0usize, u32::MAX, 0u32);
+        for &q in &self.support {
+            // SAFETY: support holds columns of B, all < n_b = count.len().
+            let c = unsafe { *count.add(q as usize) };
+            let live = c > LISTED;
+            bits[q as usize >> 6] |= (live as u64) << (q & 63);
+            unsafe { *count.add(q as usize) = c & 0u32.wrapping_sub(live as u32) };
+            n += live as usize;
             lo = lo.min(q);
             hi = hi.max(q);
         }
-        let n = self.support.len() + extra.is_some() as usize;
+        (n, lo, hi)
+    }
+
+    /// Every live column, in order. At k = 8 (~1000 per row) this is most of the output work.
+    ///
+    /// One pass over `support` marks the live columns in a bitset and clears the counts of the
+    /// dead ones; a scan of the bitset then writes the sorted columns, which also become the new
+    /// `support`. Sparse rows, whose columns lie far apart, are sorted instead of scanned.
+    fn emit_all(&mut self, kept: Option<u32>, out: &mut Segment) {
+        let (mut n, mut lo, mut hi) = self.mark_live();
+        let count = self.count.as_mut_ptr();
+        let bits = &mut self.bits;
+        let mut extra = None;
+        if let Some(q) = kept {
+            // SAFETY: as above (keep is checked against n_b).
+            let c = unsafe { &mut *count.add(q as usize) };
+            if *c <= LISTED {
+                // Stored with count 0; flagged so that the support (rebuilt below from the
+                // output) lists it once, and the next row drops it again unless it gains votes.
+                *c = LISTED;
+                bits[q as usize >> 6] |= 1u64 << (q & 63);
+                n += 1;
+                lo = lo.min(q);
+                hi = hi.max(q);
+                extra = Some(q);
+            }
+        }
         if n == 0 {
+            self.support.clear();
             return;
         }
-        let at = out.cols.len();
-        out.cols.resize(at + n, 0);
-        out.vals.resize(at + n, 0);
-        let (cols, vals) = (&mut out.cols[at..], &mut out.vals[at..]);
         let (lo_w, hi_w) = (lo as usize >> 6, hi as usize >> 6);
+        let at = out.cols.len();
         if n * 8 < hi_w - lo_w + 1 {
-            cols[..self.support.len()].copy_from_slice(&self.support);
-            if let Some(q) = extra {
-                cols[n - 1] = q;
+            // Few columns over a long range: sort them rather than scan the range.
+            let count = &self.count;
+            self.support.retain(|&q| count[q as usize] > LISTED);
+            self.support.extend(extra);
+            for &q in &self.support {
+                bits[q as usize >> 6] = 0;
             }
-            cols.sort_unstable();
+            self.support.sort_unstable();
+            out.cols.extend_from_slice(&self.support);
         } else {
-            let bits = &mut self.bits;
-            for &q in self.support.iter().chain(extra.iter()) {
-                bits[q as usize >> 6] |= 1u64 << (q & 63);
-            }
-            let mut i = 0usize;
+            out.cols.reserve(n);
+            let cols = out.cols.as_mut_ptr();
+            let mut i = at;
             for (w, word) in bits[lo_w..=hi_w].iter_mut().enumerate() {
                 let mut word = std::mem::take(word);
                 while word != 0 {
-                    cols[i] = (((lo_w + w) << 6) | word.trailing_zeros() as usize) as u32;
+                    let q = ((lo_w + w) << 6) | word.trailing_zeros() as usize;
+                    // SAFETY: exactly n bits are set, and n entries past `at` were reserved.
+                    unsafe { *cols.add(i) = q as u32 };
                     word &= word - 1;
                     i += 1;
                 }
             }
+            debug_assert_eq!(i, at + n);
+            // SAFETY: the n entries past `at` were written above.
+            unsafe { out.cols.set_len(at + n) };
+            self.support.clear();
+            self.support.extend_from_slice(&out.cols[at..]);
         }
-        for (v, &q) in vals.iter_mut().zip(cols.iter()) {
-            *v = self.count[q as usize] & !LISTED;
-        }
+        let count = &self.count;
+        out.vals
+            .extend(out.cols[at..].iter().map(|&q| count[q as usize] & !LISTED));
     }
 
     /// The `t` largest counts (ties: smaller column first) plus the kept column, sorted.
@@ -652,6 +859,70 @@ mod tests {
                 assert!(max_dropped <= min_kept, "row {p}");
                 for (&q, &c) in cols.iter().zip(vals) {
                     assert_eq!(c, dense[p][q as usize]);
+                }
+            }
+        }
+    }
+
+    /// Several segments and both inner-loop paths: a 60 x 50 grid with scrambled labels, so that
+    /// rows come as sorted CSR (the MinHash walk) and columns lie far apart (the sorting emit),
+    /// beside the same balls in BFS order; with and without a kept column.
+    #[test]
+    fn segments_simd_and_scalar_match_dense_count() {
+        let (w, h) = (60u32, 50u32);
+        let n = (w * h) as usize;
+        let perm: Vec<u32> = (0..n as u32).map(|i| (i * 1237 + 11) % n as u32).collect();
+        let faces: Vec<[u32; 3]> = grid_faces(w, h)
+            .iter()
+            .map(|t| t.map(|v| perm[v as usize]))
+            .collect();
+        let adj = adjacency_from_faces(&faces, n).unwrap();
+        let balls = HopBalls::new(&adj.view(), 4).unwrap();
+        let f: Vec<u32> = (0..n as u32)
+            .map(|i| (i * 7 + (i % 5)) % n as u32)
+            .collect();
+        let wit: Vec<bool> = (0..n).map(|i| i % 4 != 1).collect();
+        let keep: Vec<u32> = (0..n as u32).map(|i| (i * 31 + 3) % n as u32).collect();
+        let paths = [false, simd_available()];
+        for k in [1usize, 4] {
+            let dense = dense_reference(&balls, &balls, k, &f, &wit);
+            let csr = balls.to_csr(k);
+            for kept in [None, Some(&keep[..])] {
+                let opts = OverlapOptions {
+                    top_k: None,
+                    keep: kept,
+                };
+                let want: Vec<Vec<(u32, u32)>> = (0..n)
+                    .map(|p| {
+                        (0..n as u32)
+                            .filter(|&q| dense[p][q as usize] > 0 || kept.map(|c| c[p]) == Some(q))
+                            .map(|q| (q, dense[p][q as usize]))
+                            .collect()
+                    })
+                    .collect();
+                for simd in paths {
+                    let by_balls = overlap_rows_with(
+                        &BallsAt { balls: &balls, k },
+                        &BallsAt { balls: &balls, k },
+                        &f,
+                        &wit,
+                        opts,
+                        simd,
+                    );
+                    let by_csr = overlap_rows_with(&csr.view(), &csr.view(), &f, &wit, opts, simd);
+                    for c in [by_balls, by_csr] {
+                        let c = c.unwrap().into_csr();
+                        let v = c.view();
+                        for p in 0..n {
+                            let got: Vec<(u32, u32)> = v
+                                .row(p)
+                                .iter()
+                                .copied()
+                                .zip(v.row_data(p).iter().copied())
+                                .collect();
+                            assert_eq!(got, want[p], "k {k} simd {simd} row {p}");
+                        }
+                    }
                 }
             }
         }
