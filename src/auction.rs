@@ -82,8 +82,8 @@ pub fn auction_assignment_int_with(
 /// (every entry stored, columns distinct, min(n_rows, n_cols) rows covered) proves feasibility,
 /// so the Hopcroft–Karp search is skipped: on HOPE's 28k costs that search took 90 ms of a
 /// 400 ms solve. Any other hint is ignored. The result does not depend on the hint.
-pub fn auction_assignment_int_hinted(
-    cost: &CsrView<i64>,
+pub fn auction_assignment_int_hinted<T: IntValue>(
+    cost: &CsrView<T>,
     maximize: bool,
     floor_div: i64,
     hint: Option<&[i64]>,
@@ -148,11 +148,11 @@ pub fn auction_assignment_int_hinted(
     let range = range as i64;
     let refv: Vec<i64> = scans.iter().map(|s| s.refv).collect();
     let tops: Vec<TopK> = scans.into_iter().map(|s| s.top).collect();
-    let data: &[i64] = &data;
+    let data: &[T] = &data;
     let assign = if maximize {
         solve(
             &pc,
-            &Direct::<true> { data, refv },
+            &Direct::<true, T> { data, refv },
             range,
             Some(tops),
             floor_div,
@@ -160,7 +160,7 @@ pub fn auction_assignment_int_hinted(
     } else {
         solve(
             &pc,
-            &Direct::<false> { data, refv },
+            &Direct::<false, T> { data, refv },
             range,
             Some(tops),
             floor_div,
@@ -382,10 +382,8 @@ fn duplicate_in(row: &[u32]) -> Option<u32> {
     s.windows(2).find(|w| w[0] == w[1]).map(|w| w[0])
 }
 
-fn duplicate_error<T>(r: usize, c: u32) -> Result<T> {
-    invalid(format!(
-        "cost: row {r} stores column {c} more than once; call sum_duplicates() first"
-    ))
+fn duplicate_error<T>(row: usize, col: u32) -> Result<T> {
+    Err(CoreError::Duplicate { row, col })
 }
 
 fn check_duplicates<T>(cost: &CsrView<T>) -> Result<()> {
@@ -704,6 +702,13 @@ fn hopcroft_karp(nr: usize, nc: usize, ptr: &[usize], idx: &[u32]) -> (usize, Ve
 // ---------------------------------------------------------------------------------------------
 
 /// Shifted, unscaled person values (all <= 0, >= -range) by (person, arc).
+/// Integer value types the exact solver reads in place. Costs whose values fit in 32 bits (every
+/// HOPE overlap cost) are best passed as `i32`: half the memory to fault in and to stream through
+/// the rescans.
+pub trait IntValue: Copy + Default + Send + Sync + Into<i64> {}
+impl IntValue for i32 {}
+impl IntValue for i64 {}
+
 trait Values: Sync {
     fn get(&self, i: usize, a: usize) -> i64;
     /// The K + 1 best arcs of person `i` (arcs `lo..hi`) by reduced value
@@ -775,18 +780,19 @@ fn top_reduced_of<W: Copy>(w: &[W], value: impl Fn(W) -> i64, lo: usize, s: &Res
 }
 
 /// Integer costs read in place: no copy of the values for the common non-transposed case.
-struct Direct<'a, const MAXIMIZE: bool> {
-    data: &'a [i64],
+struct Direct<'a, const MAXIMIZE: bool, T> {
+    data: &'a [T],
     refv: Vec<i64>,
 }
 
-impl<const MAXIMIZE: bool> Values for Direct<'_, MAXIMIZE> {
+impl<const MAXIMIZE: bool, T: IntValue> Values for Direct<'_, MAXIMIZE, T> {
     #[inline(always)]
     fn get(&self, i: usize, a: usize) -> i64 {
+        let d: i64 = self.data[a].into();
         if MAXIMIZE {
-            self.data[a].wrapping_sub(self.refv[i])
+            d.wrapping_sub(self.refv[i])
         } else {
-            self.refv[i].wrapping_sub(self.data[a])
+            self.refv[i].wrapping_sub(d)
         }
     }
     #[inline]
@@ -794,9 +800,9 @@ impl<const MAXIMIZE: bool> Values for Direct<'_, MAXIMIZE> {
         let r = self.refv[i];
         let w = &self.data[lo..hi];
         if MAXIMIZE {
-            top_reduced_of(w, |d: i64| d.wrapping_sub(r), lo, s)
+            top_reduced_of(w, |d: T| d.into().wrapping_sub(r), lo, s)
         } else {
-            top_reduced_of(w, |d: i64| r.wrapping_sub(d), lo, s)
+            top_reduced_of(w, |d: T| r.wrapping_sub(d.into()), lo, s)
         }
     }
 }
@@ -941,7 +947,7 @@ impl TopK {
 
 /// One pass over an integer row: (min, max, top K + 1 arcs by value).
 #[inline]
-fn scan_row(row: &[i64], lo: usize, maximize: bool) -> (i64, i64, TopK) {
+fn scan_row<T: IntValue>(row: &[T], lo: usize, maximize: bool) -> (i64, i64, TopK) {
     if maximize {
         scan_row_key(row, lo, |c| c)
     } else {
@@ -951,19 +957,20 @@ fn scan_row(row: &[i64], lo: usize, maximize: bool) -> (i64, i64, TopK) {
 }
 
 #[inline(always)]
-fn scan_row_key(row: &[i64], lo: usize, key: impl Fn(i64) -> i64) -> (i64, i64, TopK) {
+fn scan_row_key<T: IntValue>(row: &[T], lo: usize, key: impl Fn(i64) -> i64) -> (i64, i64, TopK) {
     let head = row.len().min(K + 1);
     let mut t = TopK::of(
         row[..head]
             .iter()
             .enumerate()
-            .map(|(k, &c)| (key(c), lo + k)),
+            .map(|(k, &c)| (key(c.into()), lo + k)),
     );
-    let (mut mn, mut mx) = row[..head]
-        .iter()
-        .fold((i64::MAX, i64::MIN), |(a, b), &c| (a.min(c), b.max(c)));
+    let (mut mn, mut mx) = row[..head].iter().fold((i64::MAX, i64::MIN), |(a, b), &c| {
+        (a.min(c.into()), b.max(c.into()))
+    });
     let mut thr = t.vs[K];
     for (k, &c) in row[head..].iter().enumerate() {
+        let c: i64 = c.into();
         mn = mn.min(c);
         mx = mx.max(c);
         let v = key(c);
@@ -2006,7 +2013,13 @@ mod tests {
                 data,
             };
             let r = auction_assignment_int(&c.view(), true);
-            assert!(matches!(r, Err(CoreError::InvalidInput(_))), "{r:?}");
+            let rejected = |r: &Result<Vec<i64>>| {
+                matches!(
+                    r,
+                    Err(CoreError::InvalidInput(_) | CoreError::Duplicate { .. })
+                )
+            };
+            assert!(rejected(&r), "{r:?}");
             let cf = Csr {
                 n_rows: nr,
                 n_cols: nc,
@@ -2015,7 +2028,7 @@ mod tests {
                 data: c.data.iter().map(|&x| x as f64).collect(),
             };
             let r = auction_assignment_float(&cf.view(), true);
-            assert!(matches!(r, Err(CoreError::InvalidInput(_))), "{r:?}");
+            assert!(rejected(&r), "{r:?}");
             // The raw matching never panics either.
             let _ = max_cardinality_matching(nr, nc, &c.indptr, &c.indices);
         };
@@ -2037,7 +2050,8 @@ mod tests {
             data: vec![1i64; 3],
         };
         match auction_assignment_int(&c.view(), true) {
-            Err(CoreError::InvalidInput(m)) => {
+            Err(e @ CoreError::Duplicate { row: 0, col: 2 }) => {
+                let m = e.to_string();
                 assert!(
                     m.contains("row 0") && m.contains("column 2") && m.contains("sum_duplicates"),
                     "{m}"

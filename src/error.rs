@@ -10,6 +10,9 @@ pub enum CoreError {
         uncovered: usize,
         side: &'static str,
     },
+    /// A sparse cost stores one entry twice: becomes `DuplicateEntries`, a `ValueError` on which
+    /// the Python wrapper sums the duplicates (scipy's convention) and solves again.
+    Duplicate { row: usize, col: u32 },
 }
 
 impl fmt::Display for CoreError {
@@ -22,6 +25,10 @@ impl fmt::Display for CoreError {
                  be covered by any one-to-one assignment (add allowed pairs, e.g. each row's \
                  current match, so every {side_one} has a partner)",
                 side_one = side.trim_end_matches('s')
+            ),
+            CoreError::Duplicate { row, col } => write!(
+                f,
+                "cost: row {row} stores column {col} more than once; call sum_duplicates() first"
             ),
         }
     }

@@ -18,8 +18,18 @@ use rayon::prelude::*;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::{Arc, Mutex};
 
+pyo3::create_exception!(
+    _core,
+    DuplicateEntries,
+    PyValueError,
+    "A sparse cost stores one entry twice."
+);
+
 fn to_py_err(e: CoreError) -> PyErr {
-    PyValueError::new_err(e.to_string())
+    match e {
+        CoreError::Duplicate { .. } => DuplicateEntries::new_err(e.to_string()),
+        _ => PyValueError::new_err(e.to_string()),
+    }
 }
 
 /// Runs `work` without the GIL; a panic becomes a RuntimeError instead of reaching the user raw.
@@ -520,40 +530,31 @@ type PrevLmd<'py> = (
     PyReadonlyArray1<'py, f32>,
 );
 
-/// Owned sparse cost built from (indptr, indices, data) arrays.
-fn cost_csr<T: numpy::Element + Copy + Default + Send + Sync>(
+/// Owned sparse cost from (indptr, indices) arrays and values already copied out.
+fn cost_csr<T>(
     indptr: &PyReadonlyArray1<'_, i64>,
     indices: &PyReadonlyArray1<'_, i32>,
-    data: &PyReadonlyArray1<'_, T>,
+    data: Vec<T>,
     n_rows: usize,
     n_cols: usize,
 ) -> PyResult<Csr<T>> {
-    let m = Csr {
+    // The solvers validate the structure themselves (`check_header`).
+    Ok(Csr {
         n_rows,
         n_cols,
         indptr: usize_vec(indptr, "cost indptr")?,
         indices: u32_vec(indices, "cost indices")?,
-        data: plain_vec(data),
-    };
-    // The solvers validate the structure themselves (`check_header`).
-    Ok(m)
+        data,
+    })
 }
 
-type CostArrays<'a, 'py, T> = (
-    &'a PyReadonlyArray1<'py, i64>,
-    &'a PyReadonlyArray1<'py, i32>,
-    &'a PyReadonlyArray1<'py, T>,
-);
-
-/// Copies a sparse cost out of NumPy, then runs `solver` on it without the GIL.
-fn solve_assignment<'py, T: numpy::Element + Copy + Default + Send + Sync>(
+/// Runs `solver` on an owned cost without the GIL.
+fn solve_assignment<'py, T: Sync>(
     py: Python<'py>,
-    (indptr, indices, data): CostArrays<'_, 'py, T>,
-    (n_rows, n_cols): (usize, usize),
+    cost: Csr<T>,
     solver: impl FnOnce(&CsrView<T>) -> crate::error::Result<Vec<i64>> + Send,
 ) -> PyResult<Bound<'py, PyArray1<i64>>> {
-    let m = cost_csr(indptr, indices, data, n_rows, n_cols)?;
-    let g = detached(py, || solver(&m.view()))?;
+    let g = detached(py, || solver(&cost.view()))?;
     Ok(owned(py, &g))
 }
 
@@ -575,9 +576,21 @@ fn py_auction_assignment_int<'py>(
     hint: Option<PyReadonlyArray1<'py, i64>>,
 ) -> PyResult<Bound<'py, PyArray1<i64>>> {
     let hint = hint.map(|h| plain_vec(&h));
-    solve_assignment(py, (&indptr, &indices, &data), (n_rows, n_cols), |c| {
-        auction_assignment_int_hinted(c, maximize, floor_div, hint.as_deref())
-    })
+    let hint = hint.as_deref();
+    // Values that fit in 32 bits (every overlap cost) are copied as such: half the memory to
+    // fault in and to stream through the solver's rescans (28k, k = 8: 28M values).
+    match convert_vec::<i64, i32>(&data, "cost data") {
+        Ok(narrow) => solve_assignment(
+            py,
+            cost_csr(&indptr, &indices, narrow, n_rows, n_cols)?,
+            |c| auction_assignment_int_hinted(c, maximize, floor_div, hint),
+        ),
+        Err(_) => solve_assignment(
+            py,
+            cost_csr(&indptr, &indices, plain_vec(&data), n_rows, n_cols)?,
+            |c| auction_assignment_int_hinted(c, maximize, floor_div, hint),
+        ),
+    }
 }
 
 /// Optimal assignment on a float sparse cost; -1 marks unassigned rows.
@@ -592,9 +605,8 @@ fn py_auction_assignment_float<'py>(
     n_cols: usize,
     maximize: bool,
 ) -> PyResult<Bound<'py, PyArray1<i64>>> {
-    solve_assignment(py, (&indptr, &indices, &data), (n_rows, n_cols), |c| {
-        auction_assignment_float(c, maximize)
-    })
+    let cost = cost_csr(&indptr, &indices, plain_vec(&data), n_rows, n_cols)?;
+    solve_assignment(py, cost, |c| auction_assignment_float(c, maximize))
 }
 
 /// SHOT descriptors, flat (n * 352) float32.
@@ -615,6 +627,7 @@ fn py_shot_descriptors<'py>(
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<MeshGraph>()?;
+    m.add("DuplicateEntries", m.py().get_type::<DuplicateEntries>())?;
     m.add_function(wrap_pyfunction!(khop_neighbourhoods, m)?)?;
     m.add_function(wrap_pyfunction!(overlap_cost_csr, m)?)?;
     m.add_function(wrap_pyfunction!(best_overlap_graphs, m)?)?;

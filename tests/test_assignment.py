@@ -179,3 +179,24 @@ def test_results_are_ordinary_numpy_arrays():
     assert vals.shape == (40,) and np.all(vals > 0)
     k = hope_rs.khop_neighbourhoods(np.array([[0, 1, 2], [1, 2, 3]]), 1)
     assert k[np.array([0, 3]), np.array([1, 2])].tolist() == [[1, 1]]
+
+
+def test_duplicate_entries_add_up_and_the_input_is_left_alone():
+    # Row 0 stores column 1 twice (2 + 5 = 7 beats column 0's 6); row 1 only allows column 0
+    # once row 0 takes column 1.
+    indptr = np.array([0, 3, 5])
+    indices = np.array([1, 0, 1, 0, 1], dtype=np.int32)
+    for data in (np.array([2, 6, 5, 1, 0]), np.array([2.0, 6.0, 5.0, 1.0, 0.0])):
+        cost = sp.csr_matrix((data.copy(), indices.copy(), indptr.copy()), shape=(2, 2))
+        assert hope_rs.auction_assignment(cost).tolist() == [1, 0]
+        assert cost.indices.tolist() == indices.tolist() and cost.data.tolist() == data.tolist()
+
+
+def test_values_beyond_32_bits_are_solved_exactly():
+    # The binding stores values that fit in 32 bits as such; wider ones take the 64-bit path.
+    rng = np.random.default_rng(9)
+    base = rng.integers(0, 1000, (40, 40))
+    dense = base * 10**9 + 7  # spread 1e12: exact only if no value was narrowed
+    r, c = linear_sum_assignment(dense, maximize=True)
+    g = hope_rs.auction_assignment(sp.csr_matrix(dense))
+    assert int(dense[np.arange(40), g].sum()) == int(dense[r, c].sum())

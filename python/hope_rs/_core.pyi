@@ -6,6 +6,9 @@ from typing_extensions import TypeAlias
 
 _Csr: TypeAlias = tuple[npt.NDArray[np.int64], npt.NDArray[np.int32], np.ndarray]
 
+class DuplicateEntries(ValueError):
+    """A sparse cost stores one entry twice."""
+
 class MeshGraph:
     def __init__(
         self, vertices: npt.NDArray[np.float64], faces: npt.NDArray[np.int64], k_max: int

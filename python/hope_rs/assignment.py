@@ -45,9 +45,15 @@ def auction_assignment(cost, *, maximize: bool = True) -> np.ndarray:
         m = sp.csr_matrix(cost)
         if m.ndim != 2:
             raise ValueError(f"cost must be 2-D, got shape {m.shape}")
-        m.sum_duplicates()
-        indptr, indices, data = m.indptr, m.indices, m.data
-        n_rows, n_cols = m.shape
+        try:
+            return _solve(m.indptr, m.indices, m.data, *m.shape, maximize)
+        except _core.DuplicateEntries:
+            # scipy's convention: duplicates add up. Looked for by the solver's own parallel
+            # scan, which costs nothing extra, rather than by scipy's canonical-format check up
+            # front (27 ms of a 0.37 s solve at 28k, k = 8).
+            m = m.copy()
+            m.sum_duplicates()
+            return _solve(m.indptr, m.indices, m.data, *m.shape, maximize)
     else:
         a = np.asarray(cost)
         if a.ndim != 2:
@@ -60,6 +66,10 @@ def auction_assignment(cost, *, maximize: bool = True) -> np.ndarray:
         if n_cols == 0:
             indptr = np.zeros(n_rows + 1, dtype=np.int64)
         indices = np.tile(np.arange(n_cols, dtype=np.int32), n_rows)
+    return _solve(indptr, indices, data, n_rows, n_cols, maximize)
+
+
+def _solve(indptr, indices, data, n_rows: int, n_cols: int, maximize) -> np.ndarray:
     if data.dtype == bool:
         data = data.astype(np.int64)
     if not (np.issubdtype(data.dtype, np.integer) or np.issubdtype(data.dtype, np.floating)):
