@@ -902,6 +902,21 @@ mod tests {
         }
     }
 
+    /// Every row of `c` as (column, count) pairs equals `want`.
+    fn assert_rows(c: Result<OverlapRows>, want: &[Vec<(u32, u32)>], what: &str) {
+        let c = c.unwrap().into_csr();
+        let v = c.view();
+        for (p, w) in want.iter().enumerate() {
+            let got: Vec<(u32, u32)> = v
+                .row(p)
+                .iter()
+                .copied()
+                .zip(v.row_data(p).iter().copied())
+                .collect();
+            assert_eq!(&got, w, "{what}, row {p}");
+        }
+    }
+
     /// Several segments and both inner-loop paths: a 60 x 50 grid with scrambled labels, so that
     /// rows come as sorted CSR (the MinHash walk) and columns lie far apart (the sorting emit),
     /// beside the same balls in BFS order; with and without a kept column.
@@ -962,17 +977,7 @@ mod tests {
                 };
                 for simd in paths {
                     let c = overlap_rows_with(&csr.view(), &csr.view(), &f, &wit, top_opts, simd);
-                    let c = c.unwrap().into_csr();
-                    let v = c.view();
-                    for p in 0..n {
-                        let got: Vec<(u32, u32)> = v
-                            .row(p)
-                            .iter()
-                            .copied()
-                            .zip(v.row_data(p).iter().copied())
-                            .collect();
-                        assert_eq!(got, top[p], "top_k k {k} simd {simd} row {p}");
-                    }
+                    assert_rows(c, &top, &format!("top_k, k {k}, simd {simd}"));
                     let by_balls = overlap_rows_with(
                         &BallsAt { balls: &balls, k },
                         &BallsAt { balls: &balls, k },
@@ -983,17 +988,7 @@ mod tests {
                     );
                     let by_csr = overlap_rows_with(&csr.view(), &csr.view(), &f, &wit, opts, simd);
                     for c in [by_balls, by_csr] {
-                        let c = c.unwrap().into_csr();
-                        let v = c.view();
-                        for p in 0..n {
-                            let got: Vec<(u32, u32)> = v
-                                .row(p)
-                                .iter()
-                                .copied()
-                                .zip(v.row_data(p).iter().copied())
-                                .collect();
-                            assert_eq!(got, want[p], "k {k} simd {simd} row {p}");
-                        }
+                        assert_rows(c, &want, &format!("k {k}, simd {simd}"));
                     }
                 }
             }
