@@ -270,7 +270,12 @@ where
         for _ in 1..rayon::current_num_threads().min(n_seg) {
             scope.spawn(|_| run());
         }
-        walk_into(a, sketch.as_deref(), &order, &walked);
+        {
+            // Should the walk panic, the workers must not wait for it forever: the panic then
+            // reaches the caller at the end of the scope (as a Python RuntimeError).
+            let _release = Release(&walked, n_a);
+            walk_into(a, sketch.as_deref(), &order, &walked);
+        }
         run();
     });
     let walk = order.into_iter().map(AtomicU32::into_inner).collect();
@@ -279,6 +284,15 @@ where
         .map(|s| s.into_inner().expect("every segment was computed"))
         .collect();
     (walk, segments)
+}
+
+/// Publishes the whole walk when dropped, finished or not (see `walk_and_segments`).
+struct Release<'a>(&'a AtomicUsize, usize);
+
+impl Drop for Release<'_> {
+    fn drop(&mut self) {
+        self.0.store(self.1, Ordering::Release);
+    }
 }
 
 /// An order of A's vertices in which each vertex is, where possible, an unvisited member of the
@@ -388,6 +402,35 @@ struct Segment {
 /// of witnesses (< 2^31), so the low bits hold the count and one load serves both questions.
 const LISTED: u32 = 1 << 31;
 
+/// The scalar count update of [`Accumulator::add`], branch-free (whether a column is new is
+/// data-dependent and mispredicts often, so every column is written at `buf[len]` and the
+/// length advances only for new ones). Returns the new length.
+///
+/// # Safety
+/// Every column of `ball` indexes `count`, and `buf` has room for `len + ball.len()` entries.
+#[inline]
+unsafe fn add_raw(count: *mut u32, buf: *mut u32, mut len: usize, ball: &[u32]) -> usize {
+    for &q in ball {
+        let c = count.add(q as usize);
+        let old = *c;
+        *c = (old | LISTED) + 1;
+        *buf.add(len) = q;
+        len += (old < LISTED) as usize;
+    }
+    len
+}
+
+/// The scalar count update of [`Accumulator::remove`].
+///
+/// # Safety
+/// Every column of `ball` indexes `count`.
+#[inline]
+unsafe fn remove_raw(count: *mut u32, ball: &[u32]) {
+    for &q in ball {
+        *count.add(q as usize) -= 1;
+    }
+}
+
 /// Whether the inner loops may use AVX-512F: the CPU has it, and `HOPE_NO_SIMD` is not set (an
 /// escape hatch for comparing the two paths).
 fn simd_available() -> bool {
@@ -453,27 +496,19 @@ impl Accumulator {
         self.add_scalar(ball);
     }
 
-    /// Branch-free (whether a column is new is data-dependent and mispredicts often, so every
-    /// column is written past the end of `support` and the length advances only for new ones)
-    /// and without bounds checks.
     #[inline]
     fn add_scalar(&mut self, ball: &[u32]) {
-        let mut len = self.support.len();
-        let buf = self.support.as_mut_ptr();
-        let count = self.count.as_mut_ptr();
-        for &q in ball {
-            debug_assert!((q as usize) < self.count.len());
-            // SAFETY: every column of B is < n_b = count.len() (checked once in `overlap_rows`),
-            // and at most ball.len() entries are written past the old length, which `add`
-            // reserved.
-            unsafe {
-                let c = count.add(q as usize);
-                let old = *c;
-                *c = (old | LISTED) + 1;
-                *buf.add(len) = q;
-                len += (old < LISTED) as usize;
-            }
-        }
+        let len = self.support.len();
+        // SAFETY: every column of B is < n_b = count.len() (checked once in `overlap_rows`),
+        // and `add` reserved ball.len() entries past the support's length.
+        let len = unsafe {
+            add_raw(
+                self.count.as_mut_ptr(),
+                self.support.as_mut_ptr(),
+                len,
+                ball,
+            )
+        };
         // SAFETY: entries below `len` were all written above or before.
         unsafe { self.support.set_len(len) };
     }
@@ -505,13 +540,7 @@ impl Accumulator {
             );
             len += fresh.count_ones() as usize;
         }
-        for &q in tail {
-            let c = count.add(q as usize) as *mut u32;
-            let old = *c;
-            *c = (old | LISTED) + 1;
-            *buf.add(len) = q;
-            len += (old < LISTED) as usize;
-        }
+        let len = add_raw(count as *mut u32, buf, len, tail);
         self.support.set_len(len);
     }
 
@@ -523,13 +552,9 @@ impl Accumulator {
             unsafe { self.remove_avx512(ball) };
             return;
         }
-        let count = self.count.as_mut_ptr();
-        for &q in ball {
-            debug_assert!((q as usize) < self.count.len());
-            // SAFETY: as in `add_scalar`; the ball was added before, so the count does not
-            // underflow into the flag.
-            unsafe { *count.add(q as usize) -= 1 };
-        }
+        // SAFETY: as in `add_scalar`; the ball was added before, so no count underflows into
+        // the flag.
+        unsafe { remove_raw(self.count.as_mut_ptr(), ball) };
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -545,9 +570,7 @@ impl Accumulator {
             let old = _mm512_i32gather_epi32::<4>(q, count as *const _);
             _mm512_i32scatter_epi32::<4>(count as *mut _, q, _mm512_sub_epi32(old, one));
         }
-        for &q in tail {
-            *count.add(q as usize) -= 1;
-        }
+        remove_raw(count as *mut u32, tail);
     }
 
     fn clear(&mut self) {

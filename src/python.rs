@@ -402,18 +402,25 @@ fn overlap_cost_csr<'py>(
     overlap_out(py, rows)
 }
 
-/// The map and witnesses of a step at hop radius k between two prebuilt graphs, checked.
-fn step_inputs(
-    a: &MeshGraph,
-    b: &MeshGraph,
+/// The hop balls at radius k of both graphs, and the map and witnesses of a step, checked.
+type StepInputs<'g> = (BallsAt<'g>, BallsAt<'g>, Vec<u32>, Vec<bool>);
+
+fn step_inputs<'g>(
+    a: &'g MeshGraph,
+    b: &'g MeshGraph,
     k: usize,
     f: &PyReadonlyArray1<'_, i64>,
     witnesses: &PyReadonlyArray1<'_, bool>,
-) -> PyResult<(Vec<u32>, Vec<bool>)> {
+) -> PyResult<StepInputs<'g>> {
     if k > a.balls.k_max.min(b.balls.k_max) {
         return Err(PyValueError::new_err("k exceeds the graphs' k_max"));
     }
-    Ok((u32_vec(f, "f")?, plain_vec(witnesses)))
+    Ok((
+        BallsAt { balls: &a.balls, k },
+        BallsAt { balls: &b.balls, k },
+        u32_vec(f, "f")?,
+        plain_vec(witnesses),
+    ))
 }
 
 /// Each vertex's best-overlapping vertex of B at hop radius k between two prebuilt graphs,
@@ -428,16 +435,8 @@ fn best_overlap_graphs<'py>(
     witnesses: PyReadonlyArray1<'py, bool>,
     top_k: Option<usize>,
 ) -> PyResult<Bound<'py, PyArray1<i64>>> {
-    let (f, w) = step_inputs(a, b, k, &f, &witnesses)?;
-    let g = detached(py, || {
-        best_overlap(
-            &BallsAt { balls: &a.balls, k },
-            &BallsAt { balls: &b.balls, k },
-            &f,
-            &w,
-            top_k,
-        )
-    })?;
+    let (ra, rb, f, w) = step_inputs(a, b, k, &f, &witnesses)?;
+    let g = detached(py, || best_overlap(&ra, &rb, &f, &w, top_k))?;
     Ok(owned(py, &g))
 }
 
@@ -459,20 +458,11 @@ fn overlap_assignment_graphs<'py>(
     hint: PyReadonlyArray1<'py, i64>,
     floor_div: i64,
 ) -> PyResult<Bound<'py, PyArray1<i64>>> {
-    let (f, w) = step_inputs(a, b, k, &f, &witnesses)?;
+    let (ra, rb, f, w) = step_inputs(a, b, k, &f, &witnesses)?;
     let keep = u32_vec(&keep, "keep")?;
     let hint = plain_vec(&hint);
     let g = detached(py, || {
-        overlap_assignment(
-            &BallsAt { balls: &a.balls, k },
-            &BallsAt { balls: &b.balls, k },
-            &f,
-            &w,
-            top_k,
-            &keep,
-            &hint,
-            floor_div,
-        )
+        overlap_assignment(&ra, &rb, &f, &w, top_k, &keep, &hint, floor_div)
     })?;
     Ok(owned(py, &g))
 }

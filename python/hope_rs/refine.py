@@ -211,28 +211,24 @@ def assign_by_overlap(
     # The cost is built and solved in one Rust call (src/step.rs), so it never makes the round
     # trip through NumPy; rows left out take their best column there.
     return _core.overlap_assignment_graphs(
-        a.graph,
-        b.graph,
-        k,
-        np.ascontiguousarray(f, dtype=np.int64),
-        np.ascontiguousarray(witnesses, dtype=bool),
-        top_k,
-        keep,
-        hint,
-        AUCTION_FLOOR_DIV,
+        *_step_args(a, b, k, f, witnesses), top_k, keep, hint, AUCTION_FLOOR_DIV
     )
 
 
 def best_overlap(a: Shape, b: Shape, k: int, f, witnesses) -> np.ndarray:
     """Each vertex's best-overlapping vertex of B (ties kept at the current match): the cost of
     :func:`assign_by_overlap` without the one-to-one constraint."""
-    return _core.best_overlap_graphs(
+    return _core.best_overlap_graphs(*_step_args(a, b, k, f, witnesses), TOP_K)
+
+
+def _step_args(a: Shape, b: Shape, k: int, f, witnesses) -> tuple:
+    """The leading arguments of the Rust step functions: both graphs, k, the map, the voters."""
+    return (
         a.graph,
         b.graph,
         k,
         np.ascontiguousarray(f, dtype=np.int64),
         np.ascontiguousarray(witnesses, dtype=bool),
-        TOP_K,
     )
 
 
