@@ -785,7 +785,11 @@ impl Accumulator {
             }
             above += h;
         }
-        hist[..=top].fill(0);
+        // A support longer than t may hold no live column at all (a row that lost every
+        // witness after one with t live columns and a kept one): then nothing was counted.
+        if let Some(h) = hist.get_mut(..=top) {
+            h.fill(0);
+        }
         let count = &self.count;
         let (sel, ties) = (&mut self.selected, &mut self.ties);
         sel.clear();
@@ -943,6 +947,29 @@ mod tests {
     /// Several segments and both inner-loop paths: a 60 x 50 grid with scrambled labels, so that
     /// rows come as sorted CSR (the MinHash walk) and columns lie far apart (the sorting emit),
     /// beside the same balls in BFS order; with and without a kept column.
+    #[test]
+    fn top_row_without_live_columns_keeps_only_the_kept_column() {
+        // A fresh accumulator (empty histogram) whose support is longer than t but all dead,
+        // as after a row of t live columns plus a kept one followed by a row without witnesses.
+        for kept in [None, Some(7u32)] {
+            let mut acc = Accumulator::new(1, 100, false);
+            acc.support = (10..59).collect();
+            for &q in &acc.support {
+                acc.count[q as usize] = LISTED;
+            }
+            let mut out = Segment {
+                starts: vec![0],
+                cols: Vec::new(),
+                vals: Vec::new(),
+            };
+            acc.emit_top(48, kept, &mut out);
+            assert_eq!(out.cols, kept.into_iter().collect::<Vec<_>>());
+            assert!(out.vals.iter().all(|&v| v == 0));
+            assert!(acc.support.is_empty());
+            assert!(acc.count.iter().all(|&c| c == 0));
+        }
+    }
+
     #[test]
     fn segments_simd_and_scalar_match_dense_count() {
         let (w, h) = (60u32, 50u32);
