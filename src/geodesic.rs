@@ -18,6 +18,15 @@ impl EdgeGraph<'_> {
         ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()
     }
 
+    /// Mean length of the edges at vertex `v` (0 for an isolated vertex).
+    pub fn local_edge_length(&self, v: usize) -> f64 {
+        let row = self.adj.row(v);
+        if row.is_empty() {
+            return 0.0;
+        }
+        row.iter().map(|&b| self.len(v, b as usize)).sum::<f64>() / row.len() as f64
+    }
+
     /// Mean length of the graph's edges (0 for a graph without edges).
     pub fn mean_edge_length(&self) -> f64 {
         let (mut sum, mut count) = (0.0, 0usize);
