@@ -444,7 +444,7 @@ fn best_overlap_graphs<'py>(
 /// current-match bonus, solved exactly (see `step::overlap_assignment`), without the cost ever
 /// reaching Python.
 #[pyfunction]
-#[pyo3(signature = (a, b, k, f, witnesses, top_k, keep, hint, floor_div))]
+#[pyo3(signature = (a, b, k, f, witnesses, top_k, keep, hint, floor_div, stay))]
 #[allow(clippy::too_many_arguments)]
 fn overlap_assignment_graphs<'py>(
     py: Python<'py>,
@@ -457,12 +457,14 @@ fn overlap_assignment_graphs<'py>(
     keep: PyReadonlyArray1<'py, i64>,
     hint: PyReadonlyArray1<'py, i64>,
     floor_div: i64,
+    stay: PyReadonlyArray1<'py, i64>,
 ) -> PyResult<Bound<'py, PyArray1<i64>>> {
     let (ra, rb, f, w) = step_inputs(a, b, k, &f, &witnesses)?;
     let keep = u32_vec(&keep, "keep")?;
     let hint = plain_vec(&hint);
+    let stay = u32_vec(&stay, "stay")?;
     let g = detached(py, || {
-        overlap_assignment(&ra, &rb, &f, &w, top_k, &keep, &hint, floor_div)
+        overlap_assignment(&ra, &rb, &f, &w, top_k, &keep, &hint, floor_div, &stay)
     })?;
     Ok(owned(py, &g))
 }

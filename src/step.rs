@@ -14,8 +14,9 @@ use rayon::prelude::*;
 /// when the overlap gains.
 pub const COUNT_WEIGHT: i64 = 4;
 
-/// The assignment cost `COUNT_WEIGHT * K[p, q] + (q == f[p])` of the overlap `K`.
-pub fn bonus_cost(k: Csr<u32>, f: &[u32]) -> Csr<i64> {
+/// The assignment cost `COUNT_WEIGHT * K[p, q] + (q == f[p]) * (1 + COUNT_WEIGHT * stay[p])` of
+/// the overlap `K`; `stay` (extra counts the current match is worth in each row) may be empty.
+pub fn bonus_cost(k: Csr<u32>, f: &[u32], stay: &[u32]) -> Csr<i64> {
     let mut data = vec![0i64; k.nnz()];
     let mut rows: Vec<&mut [i64]> = Vec::with_capacity(k.n_rows);
     let mut rest = data.as_mut_slice();
@@ -26,8 +27,9 @@ pub fn bonus_cost(k: Csr<u32>, f: &[u32]) -> Csr<i64> {
     }
     rows.into_par_iter().enumerate().for_each(|(r, out)| {
         let lo = k.indptr[r];
+        let bonus = 1 + COUNT_WEIGHT * stay.get(r).map_or(0, |&s| s as i64);
         for (j, d) in out.iter_mut().enumerate() {
-            *d = COUNT_WEIGHT * k.data[lo + j] as i64 + (k.indices[lo + j] == f[r]) as i64;
+            *d = COUNT_WEIGHT * k.data[lo + j] as i64 + (k.indices[lo + j] == f[r]) as i64 * bonus;
         }
     });
     Csr {
@@ -50,7 +52,7 @@ pub fn best_in_row(c: &CsrView<i64>, r: usize) -> Option<u32> {
 /// The map maximising the overlap cost one-to-one (see [`bonus_cost`]); rows the assignment
 /// leaves out (A larger than B) take their best column. `keep` (one column per row, e.g. an
 /// injective completion of `f`) is stored in every row, so a full assignment exists; `hint` is
-/// passed to the solver (see `auction_assignment_int_hinted`).
+/// passed to the solver (see `auction_assignment_int_hinted`); `stay`: see [`bonus_cost`].
 #[allow(clippy::too_many_arguments)]
 pub fn overlap_assignment<A: Rows, B: Rows>(
     nbrs_a: &A,
@@ -61,11 +63,15 @@ pub fn overlap_assignment<A: Rows, B: Rows>(
     keep: &[u32],
     hint: &[i64],
     floor_div: i64,
+    stay: &[u32],
 ) -> Result<Vec<i64>> {
     if hint.len() != nbrs_a.n_rows() {
         return invalid("hint must hold one entry per vertex of A");
     }
-    let cost = step_cost(nbrs_a, nbrs_b, f, witnesses, top_k, keep)?;
+    if !stay.is_empty() && stay.len() != nbrs_a.n_rows() {
+        return invalid("stay must be empty or hold one entry per vertex of A");
+    }
+    let cost = step_cost(nbrs_a, nbrs_b, f, witnesses, top_k, keep, stay)?;
     let view = cost.view();
     let mut g = auction_assignment_int_hinted(&view, true, floor_div, Some(hint))?;
     g.par_iter_mut().enumerate().for_each(|(r, q)| {
@@ -86,7 +92,7 @@ pub fn best_overlap<A: Rows, B: Rows>(
     witnesses: &[bool],
     top_k: Option<usize>,
 ) -> Result<Vec<i64>> {
-    let cost = step_cost(nbrs_a, nbrs_b, f, witnesses, top_k, f)?;
+    let cost = step_cost(nbrs_a, nbrs_b, f, witnesses, top_k, f, &[])?;
     let view = cost.view();
     // Every row holds its current match (`keep` = f), so it is never empty.
     Ok((0..view.n_rows)
@@ -103,13 +109,14 @@ fn step_cost<A: Rows, B: Rows>(
     witnesses: &[bool],
     top_k: Option<usize>,
     keep: &[u32],
+    stay: &[u32],
 ) -> Result<Csr<i64>> {
     let opts = OverlapOptions {
         top_k,
         keep: Some(keep),
     };
     let rows = overlap_rows(nbrs_a, nbrs_b, f, witnesses, opts)?;
-    Ok(bonus_cost(rows.into_csr(), f))
+    Ok(bonus_cost(rows.into_csr(), f, stay))
 }
 
 #[cfg(test)]
@@ -140,12 +147,12 @@ mod tests {
         let hint: Vec<i64> = keep.iter().map(|&q| q as i64).collect();
         for k in 1..=3 {
             let rows = BallsAt { balls: &balls, k };
-            let g = overlap_assignment(&rows, &rows, &f, &w, None, &keep, &hint, 16).unwrap();
+            let g = overlap_assignment(&rows, &rows, &f, &w, None, &keep, &hint, 16, &[]).unwrap();
             let opts = OverlapOptions {
                 top_k: None,
                 keep: Some(&keep),
             };
-            let cost = bonus_cost(overlap_cost(&rows, &rows, &f, &w, opts).unwrap(), &f);
+            let cost = bonus_cost(overlap_cost(&rows, &rows, &f, &w, opts).unwrap(), &f, &[]);
             let reference =
                 auction_assignment_int_hinted(&cost.view(), true, 16, Some(&hint)).unwrap();
             assert_eq!(g, reference, "k={k}");
@@ -179,7 +186,7 @@ mod tests {
             top_k: None,
             keep: Some(&f),
         };
-        let cost = bonus_cost(overlap_cost(&rows, &rows, &f, &w, opts).unwrap(), &f);
+        let cost = bonus_cost(overlap_cost(&rows, &rows, &f, &w, opts).unwrap(), &f, &[]);
         for (r, &q) in got.iter().enumerate() {
             let (lo, hi) = (cost.indptr[r], cost.indptr[r + 1]);
             let best = cost.data[lo..hi].iter().max().unwrap();
@@ -190,6 +197,37 @@ mod tests {
             assert_eq!(cost.data[lo + at], *best, "row {r}");
         }
         assert_eq!(got[10], 10, "the moved vertex returns");
+    }
+
+    #[test]
+    fn stay_keeps_a_match_that_loses_by_one_count() {
+        // Row 0 matches column 0 with 3 counts; column 1 (free) has 4. Row 1 holds column 2.
+        let k = Csr {
+            n_rows: 2,
+            n_cols: 3,
+            indptr: vec![0, 2, 3],
+            indices: vec![0, 1, 2],
+            data: vec![3u32, 4, 5],
+        };
+        let f = [0u32, 2];
+        let hint = [0i64, 2];
+        let solve = |stay: &[u32]| {
+            let c = bonus_cost(k.clone(), &f, stay);
+            auction_assignment_int_hinted(&c.view(), true, 16, Some(&hint)).unwrap()
+        };
+        assert_eq!(
+            solve(&[]),
+            vec![1, 2],
+            "without stay the larger overlap wins"
+        );
+        assert_eq!(solve(&[0, 0]), vec![1, 2]);
+        assert_eq!(
+            solve(&[1, 0]),
+            vec![0, 2],
+            "one extra count keeps the match"
+        );
+        let c = bonus_cost(k.clone(), &f, &[1, 0]);
+        assert_eq!(c.data, vec![4 * 3 + 1 + 4, 4 * 4, 4 * 5 + 1]);
     }
 
     #[test]

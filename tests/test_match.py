@@ -130,3 +130,23 @@ def test_bad_init_map(faust_pair, init, err):
 def test_bad_init_name(faust_pair):
     with pytest.raises(ValueError, match="unknown descriptor"):
         hope_rs.match(*faust_pair, init="sift")
+
+
+def test_stay_keeps_witnesses_unless_the_overlap_clearly_gains():
+    from hope_rs.refine import assign_by_overlap
+
+    # Two triangulations of one surface: no vertex bijection, so one-to-one steps trade
+    # witnesses between near-equal overlaps; a large enough stay forbids every such trade.
+    a = hope_rs.Shape(hope_rs.Mesh(*bumpy_sphere(800, 3)))
+    b = hope_rs.Shape(hope_rs.Mesh(*bumpy_sphere(800, 4)))
+    rng = np.random.default_rng(0)
+    f = rng.permutation(b.n_vertices)[: a.n_vertices]
+    w = rng.random(a.n_vertices) < 0.7
+    free = assign_by_overlap(a, b, 2, f, w)
+    assert np.any(free[w] != f[w]), "without stay some witnesses move"
+    held = assign_by_overlap(a, b, 2, f, w, stay=1000)
+    assert np.array_equal(held[w], f[w])
+    assert np.any(held[~w] != f[~w]), "the others still move"
+    assert np.unique(held).size == a.n_vertices
+    with pytest.raises(ValueError, match="stay"):
+        assign_by_overlap(a, b, 2, f, w, stay=-1)
