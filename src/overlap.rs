@@ -944,9 +944,6 @@ mod tests {
         }
     }
 
-    /// Several segments and both inner-loop paths: a 60 x 50 grid with scrambled labels, so that
-    /// rows come as sorted CSR (the MinHash walk) and columns lie far apart (the sorting emit),
-    /// beside the same balls in BFS order; with and without a kept column.
     #[test]
     fn top_row_without_live_columns_keeps_only_the_kept_column() {
         // A fresh accumulator (empty histogram) whose support is longer than t but all dead,
@@ -970,6 +967,9 @@ mod tests {
         }
     }
 
+    /// Several segments and both inner-loop paths: a 60 x 50 grid with scrambled labels, so that
+    /// rows come as sorted CSR (the MinHash walk) and columns lie far apart (the sorting emit),
+    /// beside the same balls in BFS order; with and without a kept column.
     #[test]
     fn segments_simd_and_scalar_match_dense_count() {
         let (w, h) = (60u32, 50u32);

@@ -457,14 +457,13 @@ fn overlap_assignment_graphs<'py>(
     keep: PyReadonlyArray1<'py, i64>,
     hint: PyReadonlyArray1<'py, i64>,
     floor_div: i64,
-    stay: PyReadonlyArray1<'py, i64>,
+    stay: u32,
 ) -> PyResult<Bound<'py, PyArray1<i64>>> {
     let (ra, rb, f, w) = step_inputs(a, b, k, &f, &witnesses)?;
     let keep = u32_vec(&keep, "keep")?;
     let hint = plain_vec(&hint);
-    let stay = u32_vec(&stay, "stay")?;
     let g = detached(py, || {
-        overlap_assignment(&ra, &rb, &f, &w, top_k, &keep, &hint, floor_div, &stay)
+        overlap_assignment(&ra, &rb, &f, &w, top_k, &keep, &hint, floor_div, stay)
     })?;
     Ok(owned(py, &g))
 }

@@ -14,9 +14,10 @@ use rayon::prelude::*;
 /// when the overlap gains.
 pub const COUNT_WEIGHT: i64 = 4;
 
-/// The assignment cost `COUNT_WEIGHT * K[p, q] + (q == f[p]) * (1 + COUNT_WEIGHT * stay[p])` of
-/// the overlap `K`; `stay` (extra counts the current match is worth in each row) may be empty.
-pub fn bonus_cost(k: Csr<u32>, f: &[u32], stay: &[u32]) -> Csr<i64> {
+/// The assignment cost `COUNT_WEIGHT * K[p, q] + (q == f[p]) * (1 + COUNT_WEIGHT * s[p])` of
+/// the overlap `K`, where `s[p]` is `stay` for a witness p and 0 otherwise: the extra counts a
+/// witness's current match is worth.
+pub fn bonus_cost(k: Csr<u32>, f: &[u32], witnesses: &[bool], stay: u32) -> Csr<i64> {
     let mut data = vec![0i64; k.nnz()];
     let mut rows: Vec<&mut [i64]> = Vec::with_capacity(k.n_rows);
     let mut rest = data.as_mut_slice();
@@ -27,7 +28,7 @@ pub fn bonus_cost(k: Csr<u32>, f: &[u32], stay: &[u32]) -> Csr<i64> {
     }
     rows.into_par_iter().enumerate().for_each(|(r, out)| {
         let lo = k.indptr[r];
-        let bonus = 1 + COUNT_WEIGHT * stay.get(r).map_or(0, |&s| s as i64);
+        let bonus = 1 + COUNT_WEIGHT * (stay as i64) * (witnesses[r] as i64);
         for (j, d) in out.iter_mut().enumerate() {
             *d = COUNT_WEIGHT * k.data[lo + j] as i64 + (k.indices[lo + j] == f[r]) as i64 * bonus;
         }
@@ -63,13 +64,10 @@ pub fn overlap_assignment<A: Rows, B: Rows>(
     keep: &[u32],
     hint: &[i64],
     floor_div: i64,
-    stay: &[u32],
+    stay: u32,
 ) -> Result<Vec<i64>> {
     if hint.len() != nbrs_a.n_rows() {
         return invalid("hint must hold one entry per vertex of A");
-    }
-    if !stay.is_empty() && stay.len() != nbrs_a.n_rows() {
-        return invalid("stay must be empty or hold one entry per vertex of A");
     }
     let cost = step_cost(nbrs_a, nbrs_b, f, witnesses, top_k, keep, stay)?;
     let view = cost.view();
@@ -92,7 +90,7 @@ pub fn best_overlap<A: Rows, B: Rows>(
     witnesses: &[bool],
     top_k: Option<usize>,
 ) -> Result<Vec<i64>> {
-    let cost = step_cost(nbrs_a, nbrs_b, f, witnesses, top_k, f, &[])?;
+    let cost = step_cost(nbrs_a, nbrs_b, f, witnesses, top_k, f, 0)?;
     let view = cost.view();
     // Every row holds its current match (`keep` = f), so it is never empty.
     Ok((0..view.n_rows)
@@ -109,14 +107,14 @@ fn step_cost<A: Rows, B: Rows>(
     witnesses: &[bool],
     top_k: Option<usize>,
     keep: &[u32],
-    stay: &[u32],
+    stay: u32,
 ) -> Result<Csr<i64>> {
     let opts = OverlapOptions {
         top_k,
         keep: Some(keep),
     };
     let rows = overlap_rows(nbrs_a, nbrs_b, f, witnesses, opts)?;
-    Ok(bonus_cost(rows.into_csr(), f, stay))
+    Ok(bonus_cost(rows.into_csr(), f, witnesses, stay))
 }
 
 #[cfg(test)]
@@ -147,12 +145,12 @@ mod tests {
         let hint: Vec<i64> = keep.iter().map(|&q| q as i64).collect();
         for k in 1..=3 {
             let rows = BallsAt { balls: &balls, k };
-            let g = overlap_assignment(&rows, &rows, &f, &w, None, &keep, &hint, 16, &[]).unwrap();
+            let g = overlap_assignment(&rows, &rows, &f, &w, None, &keep, &hint, 16, 0).unwrap();
             let opts = OverlapOptions {
                 top_k: None,
                 keep: Some(&keep),
             };
-            let cost = bonus_cost(overlap_cost(&rows, &rows, &f, &w, opts).unwrap(), &f, &[]);
+            let cost = bonus_cost(overlap_cost(&rows, &rows, &f, &w, opts).unwrap(), &f, &w, 0);
             let reference =
                 auction_assignment_int_hinted(&cost.view(), true, 16, Some(&hint)).unwrap();
             assert_eq!(g, reference, "k={k}");
@@ -186,7 +184,7 @@ mod tests {
             top_k: None,
             keep: Some(&f),
         };
-        let cost = bonus_cost(overlap_cost(&rows, &rows, &f, &w, opts).unwrap(), &f, &[]);
+        let cost = bonus_cost(overlap_cost(&rows, &rows, &f, &w, opts).unwrap(), &f, &w, 0);
         for (r, &q) in got.iter().enumerate() {
             let (lo, hi) = (cost.indptr[r], cost.indptr[r + 1]);
             let best = cost.data[lo..hi].iter().max().unwrap();
@@ -211,22 +209,22 @@ mod tests {
         };
         let f = [0u32, 2];
         let hint = [0i64, 2];
-        let solve = |stay: &[u32]| {
-            let c = bonus_cost(k.clone(), &f, stay);
+        let solve = |w: &[bool], stay: u32| {
+            let c = bonus_cost(k.clone(), &f, w, stay);
             auction_assignment_int_hinted(&c.view(), true, 16, Some(&hint)).unwrap()
         };
         assert_eq!(
-            solve(&[]),
+            solve(&[false, false], 1),
             vec![1, 2],
             "without stay the larger overlap wins"
         );
-        assert_eq!(solve(&[0, 0]), vec![1, 2]);
+        assert_eq!(solve(&[true, false], 0), vec![1, 2]);
         assert_eq!(
-            solve(&[1, 0]),
+            solve(&[true, false], 1),
             vec![0, 2],
             "one extra count keeps the match"
         );
-        let c = bonus_cost(k.clone(), &f, &[1, 0]);
+        let c = bonus_cost(k.clone(), &f, &[true, false], 1);
         assert_eq!(c.data, vec![4 * 3 + 1 + 4, 4 * 4, 4 * 5 + 1]);
     }
 

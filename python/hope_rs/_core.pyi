@@ -55,7 +55,7 @@ def overlap_assignment_graphs(
     keep: npt.NDArray[np.int64],
     hint: npt.NDArray[np.int64],
     floor_div: int,
-    stay: npt.NDArray[np.int64],
+    stay: int,
 ) -> npt.NDArray[np.int64]: ...
 def local_map_distortion_graphs(
     a: MeshGraph,

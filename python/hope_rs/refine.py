@@ -223,11 +223,10 @@ def assign_by_overlap(
     # ``keep`` is a full assignment inside the pattern, which spares the solver its
     # feasibility search (a quarter of its time at 28k).
     hint = keep if a.n_vertices <= b.n_vertices else _hint_rows(keep)
-    stays = np.asarray(witnesses, dtype=np.int64) * stay if stay else np.empty(0, np.int64)
     # The cost is built and solved in one Rust call (src/step.rs), so it never makes the round
     # trip through NumPy; rows left out take their best column there.
     return _core.overlap_assignment_graphs(
-        *_step_args(a, b, k, f, witnesses), top_k, keep, hint, AUCTION_FLOOR_DIV, stays
+        *_step_args(a, b, k, f, witnesses), top_k, keep, hint, AUCTION_FLOOR_DIV, stay
     )
 
 
