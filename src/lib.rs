@@ -10,6 +10,7 @@ pub mod khop;
 pub mod lmd;
 pub mod memory;
 pub mod overlap;
+pub mod pairing;
 pub mod shot;
 pub mod step;
 

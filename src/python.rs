@@ -615,6 +615,29 @@ fn py_shot_descriptors<'py>(
     Ok(owned(py, &d))
 }
 
+/// Paired row and column indices.
+type PairsOut<'py> = (Bound<'py, PyArray1<i64>>, Bound<'py, PyArray1<i64>>);
+
+/// Greedy pairing from candidate pairs ranked best first, rows with capacities (see
+/// `pairing.rs`).
+#[pyfunction]
+fn greedy_pairs<'py>(
+    py: Python<'py>,
+    rows: PyReadonlyArray1<'py, i64>,
+    cols: PyReadonlyArray1<'py, i64>,
+    capacity: PyReadonlyArray1<'py, i64>,
+    n_cols: usize,
+) -> PyResult<PairsOut<'py>> {
+    let rows = u32_vec(&rows, "rows")?;
+    let cols = u32_vec(&cols, "cols")?;
+    let capacity = u32_vec(&capacity, "capacity")?;
+    let (r, c) = detached(py, || {
+        crate::pairing::greedy_pairs(&rows, &cols, &capacity, n_cols)
+    })?;
+    let widen = |v: Vec<u32>| v.into_iter().map(i64::from).collect::<Vec<i64>>();
+    Ok((owned(py, &widen(r)), owned(py, &widen(c))))
+}
+
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<MeshGraph>()?;
@@ -627,5 +650,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(overlap_assignment_graphs, m)?)?;
     m.add_function(wrap_pyfunction!(py_auction_assignment_float, m)?)?;
     m.add_function(wrap_pyfunction!(py_shot_descriptors, m)?)?;
+    m.add_function(wrap_pyfunction!(greedy_pairs, m)?)?;
     Ok(())
 }

@@ -87,3 +87,9 @@ def auction_assignment_float(
 def shot_descriptors(
     vertices: npt.NDArray[np.float64], faces: npt.NDArray[np.int64], radius: float
 ) -> npt.NDArray[np.float32]: ...
+def greedy_pairs(
+    rows: npt.NDArray[np.int64],
+    cols: npt.NDArray[np.int64],
+    capacity: npt.NDArray[np.int64],
+    n_cols: int,
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]: ...
