@@ -48,7 +48,7 @@ def run_pair(pair: Pair, renumber: int | None = None) -> dict:
     res = hope_rs.match(a_in, b_in)
     seconds = time.perf_counter() - t0
     maps = res.init_map, res.map
-    if renumber is not None:  # back to the files' numbering: old vertex order_a[i] -> ...
+    if renumber is not None:  # back to the files' numbering (vertex order_a[i] of A, etc.)
         maps = tuple(np.empty_like(m) for m in maps)
         for out, m in zip(maps, (res.init_map, res.map)):
             out[order_a] = order_b[m]

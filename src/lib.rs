@@ -16,3 +16,9 @@ pub mod step;
 
 #[cfg(feature = "python")]
 mod python;
+
+/// `HOPE_NO_SIMD` in the environment: run the portable loops instead of the AVX2/AVX-512 ones
+/// (an escape hatch for comparing the two paths; the results are the same).
+pub(crate) fn simd_disabled() -> bool {
+    std::env::var_os("HOPE_NO_SIMD").is_some()
+}

@@ -436,7 +436,7 @@ unsafe fn remove_raw(count: *mut u32, ball: &[u32]) {
 fn simd_available() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
-        std::env::var_os("HOPE_NO_SIMD").is_none() && std::arch::is_x86_feature_detected!("avx512f")
+        !crate::simd_disabled() && std::arch::is_x86_feature_detected!("avx512f")
     }
     #[cfg(not(target_arch = "x86_64"))]
     false

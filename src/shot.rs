@@ -518,10 +518,19 @@ enum Isa {
 }
 
 impl Isa {
-    /// The widest one this CPU has, or the baseline when `HOPE_NO_SIMD` is set.
+    /// The one to use: the widest this CPU has, or the baseline when `HOPE_NO_SIMD` is set.
     fn detect() -> Isa {
+        if crate::simd_disabled() {
+            Isa::Baseline
+        } else {
+            Isa::widest()
+        }
+    }
+
+    /// The widest one this CPU has.
+    fn widest() -> Isa {
         #[cfg(target_arch = "x86_64")]
-        if std::env::var_os("HOPE_NO_SIMD").is_none() {
+        {
             use std::arch::is_x86_feature_detected as has;
             if has!("avx512f") && has!("avx512vl") && has!("avx512dq") && has!("avx2") {
                 return Isa::Avx512;
@@ -533,20 +542,19 @@ impl Isa {
         Isa::Baseline
     }
 
-    /// Every instruction set this CPU can run (for tests).
+    /// Every instruction set this CPU can run, narrowest first (for tests).
     #[cfg(test)]
     fn available() -> Vec<Isa> {
-        let mut out = vec![Isa::Baseline];
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx2") {
-                out.push(Isa::Avx2);
-            }
-            if Isa::detect() == Isa::Avx512 {
-                out.push(Isa::Avx512);
-            }
-        }
-        out
+        let all = [
+            Isa::Baseline,
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx2,
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx512,
+        ];
+        let widest = Isa::widest();
+        let n = all.iter().position(|&i| i == widest).map_or(1, |p| p + 1);
+        all[..n].to_vec()
     }
 
     fn describe(
@@ -560,7 +568,8 @@ impl Isa {
     ) {
         match self {
             Isa::Baseline => describe(p, normal, grid, radius, nb, row),
-            // SAFETY: `detect` and `available` return these only when the CPU has the features.
+            // SAFETY: `widest` (behind `detect` and `available`) returns these only when the
+            // CPU has the features.
             #[cfg(target_arch = "x86_64")]
             Isa::Avx2 => unsafe { describe_avx2(p, normal, grid, radius, nb, row) },
             #[cfg(target_arch = "x86_64")]

@@ -308,11 +308,10 @@ def nearest_unused(
     image, group, places = np.unique(images, return_inverse=True, return_counts=True)
     members = np.argsort(group, kind="stable")  # positions in `images`, grouped by image
     first = np.concatenate([[0], np.cumsum(places)[:-1]])
-    placed = np.zeros(image.size, dtype=np.int64)
-    left = places.copy()
+    left = places.copy()  # places still to fill per group
     unused = free
-    out_rows, out_cols = [], []
-    while sum(map(len, out_rows)) < n_pairs:
+    out_rows, out_cols, paired = [], [], 0
+    while paired < n_pairs:
         tree = cKDTree(points[unused])
         live = np.flatnonzero(left > 0)
         # Query sizes rounded up to powers of two, so that one query serves many groups.
@@ -334,10 +333,10 @@ def nearest_unused(
         r, c = r[by_group], c[by_group]
         start = np.searchsorted(r, r)  # first kept pair of each pair's group
         rank = np.arange(r.size) - start
-        out_rows.append(members[first[r] + placed[r] + rank])
+        out_rows.append(members[first[r] + (places[r] - left[r]) + rank])
         out_cols.append(unused[c])
-        np.add.at(placed, r, 1)
-        np.subtract.at(left, r, 1)
+        left -= np.bincount(r, minlength=left.size)
+        paired += r.size
         still = np.ones(unused.size, dtype=bool)
         still[c] = False
         unused = unused[still]
