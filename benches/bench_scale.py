@@ -119,12 +119,13 @@ def run_case(name: str, data: Path) -> dict:
     t["descriptors"] = time.perf_counter() - t1
     sampler.mark("descriptors")
     t1 = time.perf_counter()
-    f0 = initial_map(da, db)
+    f0 = initial_map(da[sa.order], db[sb.order])  # the shapes' internal numbering
     t["init"] = time.perf_counter() - t1
     sampler.mark("init")
     t1 = time.perf_counter()
     res = refine(sa, sb, f0)
     t["refine"] = time.perf_counter() - t1
+    f0, res.map = sa.map_out(sb, f0), sa.map_out(sb, res.map)
     sampler.mark("refine")
     t["total"] = time.perf_counter() - t0
     init = hope_rs.score(hope_rs.geodesic_errors(sb, f0, a_idx=ai, b_idx=bi))

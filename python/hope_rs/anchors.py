@@ -41,7 +41,7 @@ def farthest_witnesses(a: Shape, candidates: np.ndarray, n: int) -> tuple[np.nda
     """``n`` farthest-point samples of ``candidates`` on A and their distance fields (n, n_a)."""
     # Start at the candidate nearest the centroid: a choice that does not depend on vertex
     # numbering, so relabelling the meshes relabels the result.
-    v = a.mesh.vertices[candidates]
+    v = a.points[candidates]
     chosen = [int(candidates[np.argmin(((v - v.mean(axis=0)) ** 2).sum(axis=1))])]
     fields = [distance_fields(a, chosen[0])[0]]
     nearest = fields[0].copy()

@@ -77,10 +77,11 @@ def code_fingerprint() -> str:
 def descriptor_params(kind: str) -> dict:
     from .descriptors import SHOT_RADIUS
 
+    # "numbering": computed in the position-fixed numbering (hope_rs.numbering) since this tag.
     if kind == "shot":
-        return {"radius": SHOT_RADIUS}
+        return {"radius": SHOT_RADIUS, "numbering": "morton"}
     if kind in ("wks", "hks", "eigen"):
-        return {"n_eigen": N_EIGEN}
+        return {"n_eigen": N_EIGEN, "numbering": "morton"}
     raise ValueError(f"unknown descriptor {kind!r}; choose 'shot', 'wks' or 'hks'")
 
 
@@ -155,7 +156,7 @@ class ShapeCache:
 
     def descriptors(self, mesh: Mesh, kind: str, digest: str | None = None) -> np.ndarray:
         """Descriptors of ``kind`` for ``mesh``; WKS and HKS share cached eigenpairs."""
-        from .descriptors import descriptors, hks, laplacian_eigenpairs, wks
+        from .descriptors import descriptors, laplacian_eigenpairs, spectral_descriptors
 
         digest = digest or mesh_digest(mesh)
         params = descriptor_params(kind)
@@ -173,7 +174,7 @@ class ShapeCache:
                 )
             else:
                 evals, evecs = eig["vals"], eig["vecs"]
-            d = (wks if kind == "wks" else hks)(evals, evecs)
+            d = spectral_descriptors(kind, evals, evecs, mesh)
         self.put(digest, kind, params, {"d": d})
         return d
 

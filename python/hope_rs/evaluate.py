@@ -56,6 +56,14 @@ def _mesh_and_shape(b) -> tuple[Mesh, Shape | None]:
     return mesh_b, shape_b
 
 
+def _graph_distances(mesh: Mesh, shape: Shape | None, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Edge-graph distances between vertices ``u[i]`` and ``v[i]`` of ``mesh`` (unscaled), on
+    the graph ``shape`` already holds (in its internal numbering) when there is one."""
+    if shape is None:
+        return _core.MeshGraph(mesh.vertices, mesh.faces, 0).pair_distances(u, v)
+    return shape.graph.pair_distances(shape.rank[u], shape.rank[v])
+
+
 def surface_distances(mesh: Mesh, sources, targets) -> np.ndarray:
     """Surface geodesic length from ``sources[i]`` to ``targets[i]`` on ``mesh`` (unscaled).
 
@@ -124,12 +132,7 @@ def geodesic_errors(b, mapping, *, a_idx=None, b_idx=None, method: str = "graph"
     if method == "surface":
         err[wrong] = surface_distances(mesh_b, src[wrong], b_idx[wrong]) / mesh_b.scale
     else:
-        graph = (
-            shape_b.graph
-            if shape_b is not None
-            else _core.MeshGraph(mesh_b.vertices, mesh_b.faces, 0)
-        )
-        err[wrong] = graph.pair_distances(src[wrong], b_idx[wrong]) / mesh_b.scale
+        err[wrong] = _graph_distances(mesh_b, shape_b, src[wrong], b_idx[wrong]) / mesh_b.scale
     return err
 
 
@@ -223,10 +226,7 @@ def smoothness(a, b, mapping) -> Smoothness:
     length = np.linalg.norm(mesh_a.vertices[edges[:, 0]] - mesh_a.vertices[edges[:, 1]], axis=1)
     keep = length > 0
     edges, length = edges[keep], length[keep] / mesh_a.scale
-    graph = (
-        shape_b.graph if shape_b is not None else _core.MeshGraph(mesh_b.vertices, mesh_b.faces, 0)
-    )
-    mapped = graph.pair_distances(f[edges[:, 0]], f[edges[:, 1]]) / mesh_b.scale
+    mapped = _graph_distances(mesh_b, shape_b, f[edges[:, 0]], f[edges[:, 1]]) / mesh_b.scale
     ratio = np.where(np.isfinite(mapped), mapped, 1.0) / length
     coverage = np.unique(f).size / mesh_b.n_vertices
     return Smoothness(float(ratio.mean()), float(coverage))

@@ -105,10 +105,11 @@ def match(
         da, db = sa.descriptors(init), sb.descriptors(init)
         timings["descriptors"] = time.perf_counter() - t
         t = time.perf_counter()
-        f0 = initial_map(da, db)
+        # In the shapes' internal numbering, like everything up to the result.
+        f0 = initial_map(da[sa.order], db[sb.order])
         timings["init"] = time.perf_counter() - t
     else:
-        f0 = as_index_map(init, sa.n_vertices, sb.n_vertices, name="init")
+        f0 = sa.map_in(sb, as_index_map(init, sa.n_vertices, sb.n_vertices, name="init"))
     t = time.perf_counter()
     res = refine(
         sa, sb, f0, schedule=schedule, max_passes=max_passes, min_consistent=min_consistent,
@@ -116,4 +117,5 @@ def match(
     )  # fmt: skip
     timings["refine"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
-    return MatchResult(res.map, np.asarray(f0, dtype=np.int64), res.history, timings)
+    f_out, f0_out = sa.map_out(sb, res.map), sa.map_out(sb, f0)
+    return MatchResult(f_out.astype(np.int64), f0_out.astype(np.int64), res.history, timings)

@@ -41,13 +41,17 @@ CONVERGED_FRACTION = 0.01
 #: fraction while they fix the map (002→007: 0.45, 0.36, 0.62, ...), as false witnesses of the
 #: initial map lose their support.
 MIN_UNTRUSTED_DROP = 0.1
-#: The global repair of this pass (0-based) also checks long-range distances
+#: From this pass (0-based) on, the global repair also checks long-range distances
 #: (:func:`~hope_rs.anchors.anchor_step`): LMD looks at 2-rings only, so a region mapped
-#: consistently onto its mirror image passes it. Measured on every remeshed FAUST and TOSCA
-#: pair: faust_r mean error 0.0525 → 0.0458 (007→008 0.131 → 0.066, 002→003 0.101 → 0.089),
-#: tosca_r 0.0370 → 0.0371, faust_reg still 100% exact. Checking in the first pass too, on
-#: the initial map, flagged right vertices: in two of three variants faust_reg 018→019 ended
-#: at 90.6-92.7% exact at the pass limit.
+#: consistently onto its mirror image passes it. Checking in the second pass only, measured on
+#: every remeshed FAUST and TOSCA pair: faust_r mean error 0.0525 → 0.0458 (007→008 0.131 →
+#: 0.066, 002→003 0.101 → 0.089), tosca_r 0.0370 → 0.0371, faust_reg still 100% exact. A
+#: mirrored region that one check halves survives to the end, though (faust_r 002→003: 29% of
+#: the vertices over 0.2 off after the first pass, 17% after the second repair, still 12% at
+#: the end), so every later pass checks again: 63 remeshed pairs 0.0473 → 0.0423 (paired
+#: difference -0.0050 ± 0.0020). Checking from the first pass, on the initial map, gave 0.0418
+#: but flagged right vertices in earlier measurements (faust_reg 018→019 ended at 90.6-92.7%
+#: exact instead of 100% in two of three variants).
 GLOBAL_CHECK_PASS = 1
 #: From this pass (0-based) on, a witness's current match is worth :data:`STAY_COUNTS` more
 #: overlap counts, so it moves only for a clear gain. Differently triangulated shapes have no
@@ -104,6 +108,9 @@ def refine(
 ) -> RefineResult:
     """Refine the map ``f0`` (A → B) with HOPE.
 
+    ``f0`` and the result are in the shapes' internal numbering (see :class:`~hope_rs.Shape`;
+    :func:`hope_rs.match` translates), as are the maps of every function of this module.
+
     The schedule (k_max → 1 by default) is repeated until a pass changes fewer than
     :data:`CONVERGED_FRACTION` of the vertices, or ``max_passes`` passes. Each step selects
     witnesses by LMD, builds the overlap cost at hop radius k and solves the one-to-one
@@ -123,8 +130,8 @@ def refine(
     the history as a step with k = 0. The k-hop steps alone win back a wrongly matched region
     a few hops per pass; on FAUST remeshed 002→007 (initial mean error 0.36) six passes left
     0.117 without the repair and 0.054 with it, on 004→009 0.132 against 0.061, and faust_reg
-    019→020 reached 100% exact in 25 steps instead of 97.9% in 49. The second pass's repair
-    also distrusts vertices whose long-range distances disagree (see
+    019→020 reached 100% exact in 25 steps instead of 97.9% in 49. From the second pass on, the
+    repair also distrusts vertices whose long-range distances disagree (see
     :data:`GLOBAL_CHECK_PASS`), which LMD alone cannot see.
     """
     k_max = min(a.k_max, b.k_max)
@@ -144,7 +151,7 @@ def refine(
             if n_pass >= 3 and untrusted > before * (1.0 - MIN_UNTRUSTED_DROP):
                 break  # the last pass did not gain: keep its map, skip the repair
             last_fraction = float(w.mean())
-            check = n_pass == GLOBAL_CHECK_PASS
+            check = n_pass >= GLOBAL_CHECK_PASS
             f_new = global_repair(a, b, f, w, min_consistent, global_check=check, lmd=lmd)
             changed = int(np.count_nonzero(f_new != f))
             changed_in_pass += changed
@@ -222,7 +229,7 @@ def assign_by_overlap(
     """
     if not 0 <= stay <= 1000:
         raise ValueError(f"stay must be in [0, 1000] overlap counts, got {stay}")
-    keep = injective_completion(f, b.n_vertices, b.mesh.vertices)
+    keep = injective_completion(f, b.n_vertices, b.points)
     # ``keep`` is a full assignment inside the pattern, which spares the solver its
     # feasibility search (a quarter of its time at 28k).
     hint = keep if a.n_vertices <= b.n_vertices else _hint_rows(keep)

@@ -7,6 +7,7 @@ import numpy as np
 from . import _core
 from .descriptors import descriptors as _descriptors
 from .mesh import Mesh
+from .numbering import canonical_mesh
 
 K_MAX = 8
 
@@ -16,6 +17,12 @@ class Shape:
 
     Build one per mesh and pass it to :func:`hope_rs.match` as often as you like: the
     neighbourhoods and descriptors are computed once.
+
+    Internally the shape numbers its vertices by position (see :mod:`hope_rs.numbering`), so
+    that no result depends on how the input happens to be numbered. ``mesh`` and
+    :meth:`descriptors` keep the input's numbering; ``graph`` and ``points``, which the
+    refinement works on, use the internal one: internal vertex ``i`` is input vertex
+    ``order[i]``, and input vertex ``v`` is internal vertex ``rank[v]``.
 
     Parameters
     ----------
@@ -38,8 +45,12 @@ class Shape:
             raise ValueError(f"k_max must be an integer in [2, 64], got {k_max!r}")
         self.mesh = mesh
         self.k_max = int(k_max)
-        self.scale = mesh.scale
-        self.graph = _core.MeshGraph(mesh.vertices, mesh.faces, self.k_max)
+        internal, self.order, self.rank = canonical_mesh(mesh)
+        self.points = internal.vertices
+        # From the internal mesh, so that its float sums run in an order that does not depend
+        # on the input's numbering either.
+        self.scale = internal.scale
+        self.graph = _core.MeshGraph(internal.vertices, internal.faces, self.k_max)
         self._descriptors: dict[str, np.ndarray] = {}
 
     @property
@@ -47,10 +58,19 @@ class Shape:
         return self.mesh.n_vertices
 
     def descriptors(self, kind: str = "shot") -> np.ndarray:
-        """Descriptors of ``kind`` ("shot", "wks", "hks"), computed once and cached."""
+        """Descriptors of ``kind`` ("shot", "wks", "hks") in the input's numbering, computed
+        once and cached."""
         if kind not in self._descriptors:
             self._descriptors[kind] = _descriptors(self.mesh, kind)
         return self._descriptors[kind]
+
+    def map_in(self, other: Shape, f: np.ndarray) -> np.ndarray:
+        """A map from this shape to ``other`` in input numbering, in internal numbering."""
+        return other.rank[np.asarray(f)[self.order]]
+
+    def map_out(self, other: Shape, g: np.ndarray) -> np.ndarray:
+        """A map from this shape to ``other`` in internal numbering, in input numbering."""
+        return other.order[np.asarray(g)][self.rank]
 
     def __repr__(self) -> str:
         return f"Shape(n_vertices={self.n_vertices}, k_max={self.k_max})"
