@@ -49,8 +49,14 @@ def laplacian_eigenpairs(mesh: Mesh, k: int = 100) -> tuple[np.ndarray, np.ndarr
     Returns eigenvalues ``(k,)`` (ascending) and mass-orthonormal eigenvectors ``(n, k)`` of the
     mesh scaled to unit area, so values are comparable across shapes.
     """
-    import robust_laplacian
     import scipy.sparse.linalg as sla
+
+    try:
+        import robust_laplacian
+    except ImportError:
+        raise ImportError(
+            "WKS/HKS descriptors need the robust-laplacian package: pip install robust-laplacian"
+        ) from None
 
     k = int(min(k, mesh.n_vertices - 2))
     if k < 1:
