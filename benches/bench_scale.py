@@ -115,11 +115,11 @@ def run_case(name: str, data: Path) -> dict:
     t["shapes"] = time.perf_counter() - t0
     sampler.mark("shapes")
     t1 = time.perf_counter()
-    da, db = sa.descriptors("shot"), sb.descriptors("shot")
+    da, db = sa.internal_descriptors("shot"), sb.internal_descriptors("shot")
     t["descriptors"] = time.perf_counter() - t1
     sampler.mark("descriptors")
     t1 = time.perf_counter()
-    f0 = initial_map(da[sa.order], db[sb.order])  # the shapes' internal numbering
+    f0 = initial_map(da, db)  # the shapes' internal numbering
     t["init"] = time.perf_counter() - t1
     sampler.mark("init")
     t1 = time.perf_counter()

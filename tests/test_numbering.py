@@ -134,3 +134,19 @@ def test_descriptors_follow_a_relabelling_bit_for_bit(faust_pair, kind):
     mesh = faust_pair[0]
     other, perm = renumbered(mesh, np.random.default_rng(1))
     np.testing.assert_array_equal(descriptors(other, kind), descriptors(mesh, kind)[perm])
+
+
+def test_a_shape_keeps_its_descriptors_internally_and_hands_them_out_as_numbered(faust_pair):
+    from hope_rs.descriptors import descriptors
+
+    mesh = faust_pair[0]
+    shape = hope_rs.Shape(mesh)
+    want = descriptors(mesh, "shot")
+    np.testing.assert_array_equal(shape.descriptors("shot"), want)
+    np.testing.assert_array_equal(shape.internal_descriptors("shot"), want[shape.order])
+    # Descriptors from elsewhere (a cache) come in the input's numbering.
+    other = hope_rs.Shape(mesh)
+    other.set_descriptors("shot", want)
+    np.testing.assert_array_equal(other.internal_descriptors("shot"), want[shape.order])
+    with pytest.raises(ValueError, match="descriptors must be"):
+        other.set_descriptors("wks", want[:10])

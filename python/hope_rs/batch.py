@@ -132,7 +132,12 @@ def _spec(s) -> tuple:
     if isinstance(s, (str, os.PathLike)):
         return ("path", os.fspath(s))
     if isinstance(s, Shape):
-        return ("mesh", s.mesh.vertices, s.mesh.faces, dict(s._descriptors))
+        return (
+            "mesh",
+            s.mesh.vertices,
+            s.mesh.faces,
+            {k: s.descriptors(k) for k in s._descriptors},
+        )
     if isinstance(s, Mesh):
         return ("mesh", s.vertices, s.faces, {})
     if isinstance(s, (tuple, list)) and len(s) == 2:
@@ -228,7 +233,8 @@ def _shape(token, cache_root: str | None, kinds: tuple, k_max: int) -> Shape:
         return _SHAPES[key]
     if isinstance(token, dict):
         shape = Shape(Mesh(token["vertices"], token["faces"]), k_max=k_max)
-        shape._descriptors.update(token["descriptors"])
+        for kind, d in token["descriptors"].items():
+            shape.set_descriptors(kind, d)
     else:
         cache = ShapeCache(cache_root)
         got = cache.get(token, "mesh", {})

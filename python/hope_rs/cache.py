@@ -201,7 +201,7 @@ def cached_shape(
     shape = Shape(mesh, k_max=k_max)
     for kind in kinds:
         if cache is not None:
-            shape._descriptors[kind] = cache.descriptors(mesh, kind, digest)
+            shape.set_descriptors(kind, cache.descriptors(mesh, kind, digest))
         else:
             shape.descriptors(kind)
     return shape

@@ -102,11 +102,11 @@ def match(
     timings["shapes"] = time.perf_counter() - t0
     if isinstance(init, str):
         t = time.perf_counter()
-        da, db = sa.descriptors(init), sb.descriptors(init)
+        # In the shapes' internal numbering, like everything up to the result.
+        da, db = sa.internal_descriptors(init), sb.internal_descriptors(init)
         timings["descriptors"] = time.perf_counter() - t
         t = time.perf_counter()
-        # In the shapes' internal numbering, like everything up to the result.
-        f0 = initial_map(da[sa.order], db[sb.order])
+        f0 = initial_map(da, db)
         timings["init"] = time.perf_counter() - t
     else:
         f0 = sa.map_in(sb, as_index_map(init, sa.n_vertices, sb.n_vertices, name="init"))
