@@ -36,7 +36,7 @@ def _shot_as_numbered(mesh: Mesh, radius: float = SHOT_RADIUS) -> np.ndarray:
     # is nearly degenerate the last bits decide an axis (0.14% of the TOSCA cat's vertices
     # changed, by up to 0.23, under a random renumbering). The public functions pass the
     # position-fixed numbering (hope_rs.numbering), so relabelling a mesh relabels its
-    # descriptors bit for bit.
+    # descriptors bit for bit. The same holds for every `_as_numbered` function below.
     from . import _core
 
     out = _core.shot_descriptors(mesh.vertices, mesh.faces, float(radius) * mesh.scale)
@@ -49,6 +49,12 @@ def laplacian_eigenpairs(mesh: Mesh, k: int = 100) -> tuple[np.ndarray, np.ndarr
     Returns eigenvalues ``(k,)`` (ascending) and mass-orthonormal eigenvectors ``(n, k)`` of the
     mesh scaled to unit area, so values are comparable across shapes.
     """
+    canon, _, rank = canonical_mesh(mesh)
+    evals, evecs = _eigenpairs_as_numbered(canon, k)
+    return evals, evecs[rank]
+
+
+def _eigenpairs_as_numbered(mesh: Mesh, k: int) -> tuple[np.ndarray, np.ndarray]:
     import scipy.sparse.linalg as sla
 
     try:
@@ -61,15 +67,13 @@ def laplacian_eigenpairs(mesh: Mesh, k: int = 100) -> tuple[np.ndarray, np.ndarr
     k = int(min(k, mesh.n_vertices - 2))
     if k < 1:
         raise ValueError("the mesh is too small for a Laplacian spectrum")
-    # Solved in the position-fixed numbering with a fixed start vector, so relabelling the
-    # mesh relabels the eigenvectors and changes nothing else (see hope_rs.numbering).
-    canon, _, rank = canonical_mesh(mesh)
-    L, M = robust_laplacian.mesh_laplacian(canon.vertices / canon.scale, canon.faces)
+    L, M = robust_laplacian.mesh_laplacian(mesh.vertices / mesh.scale, mesh.faces)
+    # A fixed start vector: ARPACK's own is random.
     v0 = np.random.default_rng(0).random(mesh.n_vertices)
     # Shift-invert about a small negative value: L is singular (constants), L + eps*M is not.
     evals, evecs = sla.eigsh(L, k=k, M=M, sigma=-1e-8, which="LM", v0=v0)
     by_value = np.argsort(evals)
-    return np.maximum(evals[by_value], 0.0), evecs[rank][:, by_value]
+    return np.maximum(evals[by_value], 0.0), evecs[:, by_value]
 
 
 def hks(evals: np.ndarray, evecs: np.ndarray, n_scales: int = 100) -> np.ndarray:
@@ -97,13 +101,26 @@ def wks(evals: np.ndarray, evecs: np.ndarray, n_energies: int = 100) -> np.ndarr
 
 
 def descriptors(mesh: Mesh, kind: str = "shot", *, n_eigen: int = 100) -> np.ndarray:
-    """Descriptors of ``kind`` in {"shot", "wks", "hks"} for every vertex of ``mesh``."""
+    """Descriptors of ``kind`` in {"shot", "wks", "hks"} for every vertex of ``mesh``, computed
+    in the position-fixed numbering (:mod:`hope_rs.numbering`) and returned in ``mesh``'s."""
+    _check_kind(kind)
+    canon, _, rank = canonical_mesh(mesh)
+    return descriptors_as_numbered(canon, kind, n_eigen=n_eigen)[rank]
+
+
+def descriptors_as_numbered(mesh: Mesh, kind: str = "shot", *, n_eigen: int = 100) -> np.ndarray:
+    """:func:`descriptors` computed in ``mesh``'s own numbering, for a mesh already in the
+    position-fixed one (a :class:`~hope_rs.Shape`'s internal mesh)."""
+    _check_kind(kind)
     if kind == "shot":
-        return shot(mesh)
-    if kind in ("wks", "hks"):
-        evals, evecs = laplacian_eigenpairs(mesh, n_eigen)
-        return spectral_descriptors(kind, evals, evecs, mesh)
-    raise ValueError(f"unknown descriptor {kind!r}; choose 'shot', 'wks' or 'hks'")
+        return _shot_as_numbered(mesh)
+    evals, evecs = _eigenpairs_as_numbered(mesh, n_eigen)
+    return (wks if kind == "wks" else hks)(evals, evecs)
+
+
+def _check_kind(kind: str) -> None:
+    if kind not in ("shot", "wks", "hks"):
+        raise ValueError(f"unknown descriptor {kind!r}; choose 'shot', 'wks' or 'hks'")
 
 
 def spectral_descriptors(kind: str, evals: np.ndarray, evecs: np.ndarray, mesh: Mesh) -> np.ndarray:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _core
-from .descriptors import descriptors as _descriptors
+from .descriptors import descriptors_as_numbered
 from .mesh import Mesh
 from .numbering import canonical_mesh
 
@@ -46,14 +46,18 @@ class Shape:
         self.mesh = mesh
         self.k_max = int(k_max)
         self.internal, self.order, self.rank = canonical_mesh(mesh)
-        self.points = self.internal.vertices
         # From the internal mesh, so that its float sums run in an order that does not depend
         # on the input's numbering either.
         self.scale = self.internal.scale
-        self.graph = _core.MeshGraph(self.points, self.internal.faces, self.k_max)
+        self.graph = _core.MeshGraph(self.internal.vertices, self.internal.faces, self.k_max)
         # In the internal numbering: the initial map reads them there, and a copy in the
         # input's numbering would add 0.7 GB at 250k vertices.
         self._descriptors: dict[str, np.ndarray] = {}
+
+    @property
+    def points(self) -> np.ndarray:
+        """Vertex positions in the internal numbering."""
+        return self.internal.vertices
 
     @property
     def n_vertices(self) -> int:
@@ -67,9 +71,9 @@ class Shape:
     def internal_descriptors(self, kind: str = "shot") -> np.ndarray:
         """:meth:`descriptors` in the internal numbering (the cached array itself)."""
         if kind not in self._descriptors:
-            # The internal mesh is already in the position-fixed numbering, so this equals
-            # descriptors(self.mesh, kind)[self.order] bit for bit, without the extra copy.
-            self._descriptors[kind] = _descriptors(self.internal, kind)
+            # The internal mesh is in the position-fixed numbering already: this equals
+            # descriptors(self.mesh, kind)[self.order] bit for bit, without renumbering again.
+            self._descriptors[kind] = descriptors_as_numbered(self.internal, kind)
         return self._descriptors[kind]
 
     def set_descriptors(self, kind: str, d: np.ndarray) -> None:
