@@ -11,6 +11,7 @@ memory (sampled every 20 ms) during that stage, and the process's overall peak (
 
     python benches/bench_scale.py                          # 5k (faust_r), 28k (TOSCA), 100k, 250k
     python benches/bench_scale.py --cases faust100k --timeout 600
+    python benches/bench_scale.py --cases faust100k,faust250k --multiscale
 """
 
 from __future__ import annotations
@@ -88,10 +89,12 @@ class PeakSampler(threading.Thread):
         self.peak = self.rss()
 
 
-def run_case(name: str, data: Path) -> dict:
-    """One case, in this process: build, match stage by stage, score on original vertices."""
+def run_case(name: str, data: Path, multiscale: bool = False) -> dict:
+    """One case, in this process: build, match stage by stage, score on original vertices.
+    With ``multiscale``, the "descriptors" stage is the whole coarse match and its lift (as in
+    ``match(..., multiscale=True)``), and "init" is empty."""
     import hope_rs
-    from hope_rs.initial import initial_map
+    from hope_rs.initial import shapes_initial_map
     from hope_rs.refine import refine
 
     folder, a, b, target = CASES[name]
@@ -115,15 +118,26 @@ def run_case(name: str, data: Path) -> dict:
     t["shapes"] = time.perf_counter() - t0
     sampler.mark("shapes")
     t1 = time.perf_counter()
-    da, db = sa.internal_descriptors("shot"), sb.internal_descriptors("shot")
-    t["descriptors"] = time.perf_counter() - t1
-    sampler.mark("descriptors")
-    t1 = time.perf_counter()
-    f0 = initial_map(da, db)  # the shapes' internal numbering
-    t["init"] = time.perf_counter() - t1
-    sampler.mark("init")
-    t1 = time.perf_counter()
-    res = refine(sa, sb, f0)
+    if multiscale:
+        from hope_rs.multiscale import FINE_PASSES, coarse_start
+
+        f0 = coarse_start(sa, sb, "shot")[1]  # the shapes' internal numbering
+        t["descriptors"] = time.perf_counter() - t1
+        sampler.mark("descriptors")
+        t["init"] = 0.0
+        sampler.mark("init")
+        t1 = time.perf_counter()
+        res = refine(sa, sb, f0, max_passes=FINE_PASSES)
+    else:
+        da, db = sa.internal_descriptors("shot"), sb.internal_descriptors("shot")
+        t["descriptors"] = time.perf_counter() - t1
+        sampler.mark("descriptors")
+        t1 = time.perf_counter()
+        f0 = shapes_initial_map(sa, sb, da, db, "shot")  # the shapes' internal numbering
+        t["init"] = time.perf_counter() - t1
+        sampler.mark("init")
+        t1 = time.perf_counter()
+        res = refine(sa, sb, f0)
     t["refine"] = time.perf_counter() - t1
     f0, res.map = sa.map_out(sb, f0), sa.map_out(sb, res.map)
     sampler.mark("refine")
@@ -131,7 +145,7 @@ def run_case(name: str, data: Path) -> dict:
     init = hope_rs.score(hope_rs.geodesic_errors(sb, f0, a_idx=ai, b_idx=bi))
     final = hope_rs.score(hope_rs.geodesic_errors(sb, res.map, a_idx=ai, b_idx=bi))
     return {
-        "case": name,
+        "case": name + (" (multiscale)" if multiscale else ""),
         "n": f"{ma.n_vertices}/{mb.n_vertices}",
         "steps": len(res.history),
         "seconds": t,
@@ -170,15 +184,21 @@ def main() -> None:
     p.add_argument("--cases", default="faust_r5k,tosca28k,faust100k,faust250k")
     p.add_argument("--timeout", type=float, default=1200, help="seconds per case")
     p.add_argument("--out", type=Path, help="also write the Markdown table here")
+    p.add_argument(
+        "--multiscale",
+        action="store_true",
+        help="match(..., multiscale=True): the descr column is then the coarse match and lift",
+    )
     p.add_argument("--child", help=argparse.SUPPRESS)
     args = p.parse_args()
     if args.child:
-        print(json.dumps(run_case(args.child, args.data)))
+        print(json.dumps(run_case(args.child, args.data, args.multiscale)))
         return
     print(f"load average: {os.getloadavg()}", flush=True)
     rows = []
     for name in args.cases.split(","):
         cmd = [sys.executable, __file__, "--child", name, "--data", str(args.data)]
+        cmd += ["--multiscale"] if args.multiscale else []
         try:
             # stdout carries the result; the child's stderr (stage progress, errors) passes through
             out = subprocess.run(

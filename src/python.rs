@@ -9,7 +9,7 @@ use crate::khop::{khop_csr, HopBalls};
 use crate::lmd::{lmd_table_cutoff, local_map_distortion, LocalDistances, RingDistances};
 use crate::memory::zeroed_vec;
 use crate::overlap::{overlap_rows, BallsAt, OverlapOptions, OverlapRows};
-use crate::shot::shot_descriptors;
+use crate::shot::{shot_descriptors, shot_descriptors_at};
 use crate::step::{best_overlap, overlap_assignment};
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
@@ -600,18 +600,23 @@ fn py_auction_assignment_float<'py>(
     solve_assignment(py, cost, |c| auction_assignment_float(c, maximize))
 }
 
-/// SHOT descriptors, flat (n * 352) float32.
+/// SHOT descriptors, flat (n * 352) float32; of the vertices `centres` only when given.
 #[pyfunction]
-#[pyo3(name = "shot_descriptors")]
+#[pyo3(name = "shot_descriptors", signature = (vertices, faces, radius, centres=None))]
 fn py_shot_descriptors<'py>(
     py: Python<'py>,
     vertices: PyReadonlyArray2<'py, f64>,
     faces: PyReadonlyArray2<'py, i64>,
     radius: f64,
+    centres: Option<PyReadonlyArray1<'py, i64>>,
 ) -> PyResult<Bound<'py, PyArray1<f32>>> {
     let v = points_vec(&vertices)?;
     let f = faces_vec(&faces)?;
-    let d = detached(py, || shot_descriptors(&v, &f, radius))?;
+    let centres = centres.map(|c| u32_vec(&c, "centres")).transpose()?;
+    let d = detached(py, || match &centres {
+        Some(c) => shot_descriptors_at(&v, &f, radius, c),
+        None => shot_descriptors(&v, &f, radius),
+    })?;
     Ok(owned(py, &d))
 }
 

@@ -85,7 +85,10 @@ def auction_assignment_float(
     maximize: bool,
 ) -> npt.NDArray[np.int64]: ...
 def shot_descriptors(
-    vertices: npt.NDArray[np.float64], faces: npt.NDArray[np.int64], radius: float
+    vertices: npt.NDArray[np.float64],
+    faces: npt.NDArray[np.int64],
+    radius: float,
+    centres: npt.NDArray[np.int64] | None = None,
 ) -> npt.NDArray[np.float32]: ...
 def greedy_pairs(
     rows: npt.NDArray[np.int64],

@@ -28,6 +28,9 @@ def add_batch_parser(sub) -> None:
     p.add_argument("--no-cache", action="store_true", help="keep the cache for this run only")
     p.add_argument("--init", default="shot", choices=["shot", "wks", "hks"], help="descriptors")
     p.add_argument("--k-max", type=int, default=8, help="largest hop radius (default 8)")
+    p.add_argument(
+        "--multiscale", action="store_true", help="match(..., multiscale=True) for every pair"
+    )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress output")
     p.set_defaults(func=cmd_batch)
 
@@ -54,6 +57,7 @@ def cmd_batch(args) -> int:
         cache=False if args.no_cache else (args.cache or True),
         init=args.init,
         k_max=args.k_max,
+        multiscale=args.multiscale,
         progress=not args.quiet,
         ray_options={"address": args.ray_address} if args.backend == "ray" else None,
     ):

@@ -76,10 +76,13 @@ def code_fingerprint() -> str:
 
 def descriptor_params(kind: str) -> dict:
     from .descriptors import SHOT_RADIUS
+    from .sites import MIN_VERTICES_PER_SITE, SITE_SPACING
 
-    # "numbering": computed in the position-fixed numbering (hope_rs.numbering) since this tag.
+    # "numbering": computed in the position-fixed numbering (hope_rs.numbering) since this tag;
+    # "sites": shared by grid cells on dense meshes (hope_rs.sites).
     if kind == "shot":
-        return {"radius": SHOT_RADIUS, "numbering": "morton"}
+        sites = [SITE_SPACING, MIN_VERTICES_PER_SITE]
+        return {"radius": SHOT_RADIUS, "numbering": "morton", "sites": sites}
     if kind in ("wks", "hks", "eigen"):
         return {"n_eigen": N_EIGEN, "numbering": "morton"}
     raise ValueError(f"unknown descriptor {kind!r}; choose 'shot', 'wks' or 'hks'")

@@ -86,7 +86,10 @@ def cmd_match(args) -> int:
         len(default_schedule(args.k_max)) + 1, enabled=not args.quiet and sys.stderr.isatty()
     )
     try:
-        res = match(a, b, init=args.init, k_max=args.k_max, callback=progress.step)
+        res = match(
+            a, b, init=args.init, k_max=args.k_max, multiscale=args.multiscale,
+            callback=progress.step,
+        )  # fmt: skip
     finally:
         progress.close()
     if args.output:
@@ -116,6 +119,11 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("-o", "--output", help="map file (default: standard output)")
     m.add_argument("--init", default="shot", choices=["shot", "wks", "hks"], help="descriptors")
     m.add_argument("--k-max", type=int, default=8, help="largest hop radius (default 8)")
+    m.add_argument(
+        "--multiscale",
+        action="store_true",
+        help="for large meshes: match coarse copies first, then one fine pass (faster, less exact)",
+    )
     m.add_argument("--json", action="store_true", help="print timings and a summary as JSON")
     m.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     m.set_defaults(func=cmd_match)

@@ -24,6 +24,10 @@ def shot(mesh: Mesh, *, radius: float = SHOT_RADIUS) -> np.ndarray:
     -----
     SHOT's local frame is right-handed, so a mirror image gets different descriptors: this is
     what lets the initial map tell left from right, which the intrinsic HKS/WKS cannot.
+
+    On meshes much denser than the support radius needs, the vertices of each small grid cell
+    share the descriptor of one of them (:mod:`hope_rs.sites`), which keeps the cost linear
+    in the vertex count instead of quadratic.
     """
     if not (np.isfinite(radius) and radius > 0):
         raise ValueError(f"radius must be a positive number, got {radius}")
@@ -38,9 +42,16 @@ def _shot_as_numbered(mesh: Mesh, radius: float = SHOT_RADIUS) -> np.ndarray:
     # position-fixed numbering (hope_rs.numbering), so relabelling a mesh relabels its
     # descriptors bit for bit. The same holds for every `_as_numbered` function below.
     from . import _core
+    from .sites import shot_sites
 
-    out = _core.shot_descriptors(mesh.vertices, mesh.faces, float(radius) * mesh.scale)
-    return out.reshape(mesh.n_vertices, -1)
+    r = float(radius) * mesh.scale
+    sites = shot_sites(mesh, radius)
+    if sites is None:
+        return _core.shot_descriptors(mesh.vertices, mesh.faces, r).reshape(mesh.n_vertices, -1)
+    # A dense mesh: one descriptor per grid cell, shared by its vertices (see hope_rs.sites).
+    at, owner = sites
+    out = _core.shot_descriptors(mesh.vertices, mesh.faces, r, at.astype(np.int64))
+    return out.reshape(at.size, -1)[owner]
 
 
 def laplacian_eigenpairs(mesh: Mesh, k: int = 100) -> tuple[np.ndarray, np.ndarray]:
@@ -103,7 +114,7 @@ def wks(evals: np.ndarray, evecs: np.ndarray, n_energies: int = 100) -> np.ndarr
 def descriptors(mesh: Mesh, kind: str = "shot", *, n_eigen: int = 100) -> np.ndarray:
     """Descriptors of ``kind`` in {"shot", "wks", "hks"} for every vertex of ``mesh``, computed
     in the position-fixed numbering (:mod:`hope_rs.numbering`) and returned in ``mesh``'s."""
-    _check_kind(kind)
+    check_kind(kind)
     canon, _, rank = canonical_mesh(mesh)
     return descriptors_as_numbered(canon, kind, n_eigen=n_eigen)[rank]
 
@@ -111,14 +122,14 @@ def descriptors(mesh: Mesh, kind: str = "shot", *, n_eigen: int = 100) -> np.nda
 def descriptors_as_numbered(mesh: Mesh, kind: str = "shot", *, n_eigen: int = 100) -> np.ndarray:
     """:func:`descriptors` computed in ``mesh``'s own numbering, for a mesh already in the
     position-fixed one (a :class:`~hope_rs.Shape`'s internal mesh)."""
-    _check_kind(kind)
+    check_kind(kind)
     if kind == "shot":
         return _shot_as_numbered(mesh)
     evals, evecs = _eigenpairs_as_numbered(mesh, n_eigen)
     return (wks if kind == "wks" else hks)(evals, evecs)
 
 
-def _check_kind(kind: str) -> None:
+def check_kind(kind: str) -> None:
     if kind not in ("shot", "wks", "hks"):
         raise ValueError(f"unknown descriptor {kind!r}; choose 'shot', 'wks' or 'hks'")
 

@@ -181,3 +181,18 @@ def initial_map(
     missing = g < 0
     g[missing] = idx[missing, 0]
     return g
+
+
+def shapes_initial_map(sa, sb, da: np.ndarray, db: np.ndarray, kind: str) -> np.ndarray:
+    """:func:`initial_map` between two :class:`~hope_rs.Shape` objects, from their descriptors
+    ``da``, ``db`` of ``kind`` in the internal numbering (the map is in it too). Where the
+    vertices of a grid cell share one descriptor (SHOT on dense meshes, see
+    :mod:`hope_rs.sites`), only the cells' sites are searched and each vertex of A follows
+    its site."""
+    site_a, site_b = sa.descriptor_sites(kind), sb.descriptor_sites(kind)
+    rows_a = site_a[0] if site_a is not None else slice(None)
+    rows_b = site_b[0] if site_b is not None else slice(None)
+    g = initial_map(da[rows_a], db[rows_b])
+    if site_b is not None:
+        g = site_b[0][g]
+    return g[site_a[1]] if site_a is not None else g

@@ -8,7 +8,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ._validate import as_index_map
-from .initial import initial_map
+from .descriptors import check_kind
+from .initial import shapes_initial_map
 from .lmd import MIN_CONSISTENT
 from .mesh import Mesh
 from .refine import MAX_PASSES, POLISH_K, TOP_K, Iteration, refine
@@ -29,13 +30,19 @@ class MatchResult:
     history : list of Iteration
         Per refinement step: k, witness fraction, vertices changed, seconds.
     timings : dict
-        Seconds per stage ("shapes", "descriptors", "init", "refine", "total").
+        Seconds per stage ("shapes", "descriptors", "init" or, with ``multiscale``,
+        "coarse"; "refine", "total").
+    coarse : MatchResult or None
+        With ``multiscale``, the match of the coarse copies.
     """
 
     map: np.ndarray
     init_map: np.ndarray
     history: list[Iteration] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
+    #: With ``multiscale``, the match of the coarse copies (each coarse vertex ``j`` is the
+    #: vertex ``coarse_level()[0].sites[j]`` of the shape's internal mesh); else ``None``.
+    coarse: MatchResult | None = None
 
 
 def _as_shape(x, k_max: int, name: str) -> Shape:
@@ -62,6 +69,7 @@ def match(
     top_k: int = TOP_K,
     polish_k: int | None = POLISH_K,
     global_step: bool = True,
+    multiscale: bool = False,
     callback=None,
 ) -> MatchResult:
     """Dense correspondence from shape A to shape B with HOPE.
@@ -89,8 +97,16 @@ def match(
     global_step : bool
         Start each pass by re-placing untrusted vertices by their geodesic distances to trusted
         ones (see :func:`hope_rs.refine.global_repair`); ``False`` is the paper's loop.
+    multiscale : bool
+        For large meshes: match coarse copies of the shapes first (with the options above),
+        lift that map to the fine vertices and refine it for
+        :data:`~hope_rs.multiscale.FINE_PASSES` pass (see :mod:`hope_rs.multiscale`). About
+        four times faster on 100k-vertex meshes, with a larger error (FAUST subdivided to
+        110k: mean geodesic error 0.0134 instead of 0.0088). Shapes too coarse to gain are
+        matched as they are; when neither gains this is the default path.
     callback : callable, optional
-        Called with each :class:`~hope_rs.refine.Iteration` as it finishes.
+        Called with each :class:`~hope_rs.refine.Iteration` as it finishes (of the coarse
+        match too, with ``multiscale``).
 
     Returns
     -------
@@ -101,21 +117,36 @@ def match(
     sa, sb = _as_shape(a, k_max, "a"), _as_shape(b, k_max, "b")
     timings["shapes"] = time.perf_counter() - t0
     if isinstance(init, str):
+        check_kind(init)
+    else:
+        init = sa.map_in(sb, as_index_map(init, sa.n_vertices, sb.n_vertices, name="init"))
+    options = {
+        "schedule": schedule, "max_passes": max_passes, "min_consistent": min_consistent,
+        "top_k": top_k, "polish_k": polish_k, "global_step": global_step, "callback": callback,
+    }  # fmt: skip
+    coarse = None
+    t = time.perf_counter()
+    if multiscale and (sa.coarse_level() is not None or sb.coarse_level() is not None):
+        from .multiscale import FINE_PASSES, coarse_start
+
+        coarse, f0 = coarse_start(sa, sb, init, k_max=k_max, **options)
+        timings["coarse"] = time.perf_counter() - t
+        options["max_passes"] = min(max_passes, FINE_PASSES)
+    elif isinstance(init, str):
         t = time.perf_counter()
         # In the shapes' internal numbering, like everything up to the result.
         da, db = sa.internal_descriptors(init), sb.internal_descriptors(init)
         timings["descriptors"] = time.perf_counter() - t
         t = time.perf_counter()
-        f0 = initial_map(da, db)
+        f0 = shapes_initial_map(sa, sb, da, db, init)
         timings["init"] = time.perf_counter() - t
     else:
-        f0 = sa.map_in(sb, as_index_map(init, sa.n_vertices, sb.n_vertices, name="init"))
+        f0 = init
     t = time.perf_counter()
-    res = refine(
-        sa, sb, f0, schedule=schedule, max_passes=max_passes, min_consistent=min_consistent,
-        top_k=top_k, polish_k=polish_k, global_step=global_step, callback=callback,
-    )  # fmt: skip
+    res = refine(sa, sb, f0, **options)
     timings["refine"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     f_out, f0_out = sa.map_out(sb, res.map), sa.map_out(sb, f0)
-    return MatchResult(f_out.astype(np.int64), f0_out.astype(np.int64), res.history, timings)
+    return MatchResult(
+        f_out.astype(np.int64), f0_out.astype(np.int64), res.history, timings, coarse
+    )

@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 
 from . import _core
-from .descriptors import descriptors_as_numbered
+from .descriptors import SHOT_RADIUS, descriptors_as_numbered
 from .mesh import Mesh
 from .numbering import canonical_mesh
+from .sites import shot_sites
 
 K_MAX = 8
 
@@ -53,6 +54,8 @@ class Shape:
         # In the internal numbering: the initial map reads them there, and a copy in the
         # input's numbering would add 0.7 GB at 250k vertices.
         self._descriptors: dict[str, np.ndarray] = {}
+        self._sites: tuple[np.ndarray, np.ndarray] | None | bool = False  # False: not yet known
+        self._coarse: tuple | None | bool = False
 
     @property
     def points(self) -> np.ndarray:
@@ -75,6 +78,32 @@ class Shape:
             # descriptors(self.mesh, kind)[self.order] bit for bit, without renumbering again.
             self._descriptors[kind] = descriptors_as_numbered(self.internal, kind)
         return self._descriptors[kind]
+
+    def descriptor_sites(self, kind: str = "shot") -> tuple[np.ndarray, np.ndarray] | None:
+        """(``sites``, ``owner``) in the internal numbering when the descriptors of ``kind``
+        are shared by the vertices of grid cells (SHOT on dense meshes, see
+        :mod:`hope_rs.sites`): internal vertex ``i`` has the descriptor of ``sites[owner[i]]``.
+        ``None`` when every vertex has its own."""
+        if kind != "shot":
+            return None
+        if self._sites is False:
+            self._sites = shot_sites(self.internal, SHOT_RADIUS)
+        return self._sites
+
+    def has_descriptors(self, kind: str) -> bool:
+        """Whether descriptors of ``kind`` are computed or set already."""
+        return kind in self._descriptors
+
+    def coarse_level(self):
+        """(:class:`~hope_rs.multiscale.Coarse`, its :class:`Shape`) of this shape's internal
+        mesh for multiscale matching, built once; ``None`` when the mesh is not dense enough
+        to coarsen (see :func:`hope_rs.multiscale.coarse_mesh`)."""
+        if self._coarse is False:
+            from .multiscale import coarse_mesh
+
+            c = coarse_mesh(self.internal)
+            self._coarse = None if c is None else (c, Shape(c.mesh, k_max=self.k_max))
+        return self._coarse
 
     def set_descriptors(self, kind: str, d: np.ndarray) -> None:
         """Store descriptors of ``kind`` computed elsewhere (e.g. read from a cache), given in
