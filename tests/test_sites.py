@@ -109,3 +109,23 @@ def test_sites_follow_the_density_not_the_scale(faust_pair):
         assert np.bincount(owner).min() >= 1
         counts.append(sites.size)
     assert counts[0] == counts[1]
+
+
+def test_initial_map_between_a_dense_and_a_sparse_shape(faust_pair, monkeypatch):
+    from hope_rs.initial import initial_map, shapes_initial_map
+
+    a, b = faust_pair
+    monkeypatch.setattr(S, "SITE_SPACING", 0.25)
+    sa = hope_rs.Shape(a)  # sites and descriptors are computed on first use: use them now
+    sites, owner = sa.descriptor_sites()
+    da = sa.internal_descriptors("shot")
+    monkeypatch.setattr(S, "SITE_SPACING", 1 / 16)
+    sb = hope_rs.Shape(b)
+    assert sb.descriptor_sites() is None
+    db = sb.internal_descriptors("shot")
+    g = shapes_initial_map(sa, sb, da, db, "shot")
+    assert g.shape == (a.n_vertices,) and (g == g[sites][owner]).all()
+    # The sites are matched against every vertex of B.
+    np.testing.assert_array_equal(g[sites], initial_map(da[sites], db))
+    # B's descriptors are per vertex: the map reaches beyond any one set of sites.
+    assert np.unique(g).size > sites.size / 2
