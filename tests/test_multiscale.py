@@ -106,14 +106,18 @@ def test_multiscale_takes_an_initial_map(faust_pair, coarser):
         hope_rs.match(a, b, multiscale=True, init="sift")
 
 
-def test_shapes_too_coarse_to_gain_take_the_default_path():
-    a = hope_rs.Mesh(*bumpy_sphere(1500, seed=1))
-    b = hope_rs.Mesh(*bumpy_sphere(1500, seed=2))
-    assert hope_rs.Shape(a).coarse_level() is None
-    plain = hope_rs.match(a, b)
-    multi = hope_rs.match(a, b, multiscale=True)
-    assert multi.coarse is None
-    np.testing.assert_array_equal(multi.map, plain.map)
+def test_unless_both_shapes_coarsen_match_takes_the_default_path(faust_pair, coarser):
+    a, b = faust_pair
+    sparse = hope_rs.Mesh(*bumpy_sphere(1500, seed=1))
+    assert hope_rs.Shape(sparse).coarse_level() is None
+    assert hope_rs.Shape(a).coarse_level() is not None
+    for x, y in ((sparse, hope_rs.Mesh(*bumpy_sphere(1500, seed=2))), (a, sparse), (sparse, b)):
+        plain = hope_rs.match(x, y)
+        multi = hope_rs.match(x, y, multiscale=True)
+        assert multi.coarse is None and "coarse" not in multi.timings
+        np.testing.assert_array_equal(multi.map, plain.map)
+    with pytest.raises(ValueError, match="not dense enough"):
+        M.coarse_start(hope_rs.Shape(sparse), hope_rs.Shape(a), "shot")
 
 
 def test_cli_multiscale_flag(tmp_path, capsys, faust_pair, coarser):
