@@ -120,7 +120,9 @@ def test_unless_both_shapes_coarsen_match_takes_the_default_path(faust_pair, coa
         M.coarse_start(hope_rs.Shape(sparse), hope_rs.Shape(a), "shot")
 
 
-def test_cli_multiscale_flag(tmp_path, capsys, faust_pair, coarser):
+def test_cli_multiscale_flag(tmp_path, capsys, faust_pair, coarser, monkeypatch):
+    import hope_rs.cli
+
     a, b = data_path("faust_reg", "tr_reg_012.off"), data_path("faust_reg", "tr_reg_018.off")
     out = tmp_path / "map.txt"
     assert main(["match", str(a), str(b), "-o", str(out), "--multiscale", "--json", "-q"]) == 0
@@ -128,6 +130,12 @@ def test_cli_multiscale_flag(tmp_path, capsys, faust_pair, coarser):
     assert "coarse" in summary["timings"]
     want = hope_rs.match(*faust_pair, multiscale=True).map
     np.testing.assert_array_equal(np.loadtxt(out, dtype=np.int64), want)
+    # Without the flag, large meshes get a hint on stderr (unless --quiet).
+    monkeypatch.setattr(hope_rs.cli, "HINT_VERTICES", 6890)
+    assert main(["match", str(a), str(b), "-o", str(tmp_path / "plain.txt")]) == 0
+    assert "--multiscale is about 4x faster" in capsys.readouterr().err
+    assert main(["match", str(a), str(b), "-o", str(tmp_path / "plain.txt"), "-q"]) == 0
+    assert "hint" not in capsys.readouterr().err
 
 
 def test_batch_multiscale_flag_gives_the_maps_of_match(tmp_path, capsys, faust_pair, coarser):

@@ -73,6 +73,10 @@ def _summary(res) -> dict:
     }
 
 
+#: ``hope-rs match`` suggests ``--multiscale`` when both meshes have at least this many vertices.
+HINT_VERTICES = 100_000
+
+
 def cmd_match(args) -> int:
     from .matching import match
     from .mesh import load_mesh
@@ -81,6 +85,12 @@ def cmd_match(args) -> int:
     if args.output and os.path.isdir(args.output):
         raise ValueError(f"output {args.output!r} is a folder; give a file name")
     a, b = load_mesh(args.a), load_mesh(args.b)
+    if not args.multiscale and not args.quiet and min(a.n_vertices, b.n_vertices) >= HINT_VERTICES:
+        print(
+            "hope-rs: hint: on meshes this large, --multiscale is about 4x faster, with a larger "
+            "error (see the README)",
+            file=sys.stderr,
+        )
     # One global repair step (k = 0) starts every pass.
     progress = Progress(
         len(default_schedule(args.k_max)) + 1, enabled=not args.quiet and sys.stderr.isatty()
