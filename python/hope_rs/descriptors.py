@@ -35,23 +35,35 @@ def shot(mesh: Mesh, *, radius: float = SHOT_RADIUS) -> np.ndarray:
     return _shot_as_numbered(canon, radius)[rank]
 
 
-def _shot_as_numbered(mesh: Mesh, radius: float = SHOT_RADIUS) -> np.ndarray:
+def _shot_as_numbered(mesh: Mesh, radius: float = SHOT_RADIUS, sites=False) -> np.ndarray:
     # Computed in the numbering given: its sums run in neighbour order, and where a local frame
     # is nearly degenerate the last bits decide an axis (0.14% of the TOSCA cat's vertices
     # changed, by up to 0.23, under a random renumbering). The public functions pass the
     # position-fixed numbering (hope_rs.numbering), so relabelling a mesh relabels its
     # descriptors bit for bit. The same holds for every `_as_numbered` function below.
+    # ``sites``: those of hope_rs.sites.shot_sites for this mesh and radius if the caller has
+    # them (None: every vertex is described); False: find them here.
     from . import _core
     from .sites import shot_sites
 
-    r = float(radius) * mesh.scale
-    sites = shot_sites(mesh, radius)
+    if sites is False:
+        sites = shot_sites(mesh, radius)
     if sites is None:
+        r = float(radius) * mesh.scale
         return _core.shot_descriptors(mesh.vertices, mesh.faces, r).reshape(mesh.n_vertices, -1)
     # A dense mesh: one descriptor per grid cell, shared by its vertices (see hope_rs.sites).
     at, owner = sites
-    out = _core.shot_descriptors(mesh.vertices, mesh.faces, r, at.astype(np.int64))
-    return out.reshape(at.size, -1)[owner]
+    return shot_at(mesh, at, radius)[owner]
+
+
+def shot_at(mesh: Mesh, at: np.ndarray, radius: float = SHOT_RADIUS) -> np.ndarray:
+    """SHOT of the vertices ``at`` of ``mesh`` only, ``(len(at), 352)``, every vertex of the
+    mesh voting in their supports (rows equal those of :func:`shot` on the same numbering)."""
+    from . import _core
+
+    r = float(radius) * mesh.scale
+    out = _core.shot_descriptors(mesh.vertices, mesh.faces, r, np.asarray(at, dtype=np.int64))
+    return out.reshape(len(at), -1)
 
 
 def laplacian_eigenpairs(mesh: Mesh, k: int = 100) -> tuple[np.ndarray, np.ndarray]:

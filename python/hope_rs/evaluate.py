@@ -24,7 +24,7 @@ import numpy as np
 
 from . import _core
 from ._validate import as_index_map
-from .mesh import Mesh
+from .mesh import Mesh, unique_edges
 from .shape import Shape
 
 #: Thresholds of the standard "% correspondences within geodesic error" curve.
@@ -219,10 +219,7 @@ def smoothness(a, b, mapping) -> Smoothness:
     mesh_a, _ = _mesh_and_shape(a)
     mesh_b, shape_b = _mesh_and_shape(b)
     f = as_index_map(mapping, mesh_a.n_vertices, mesh_b.n_vertices, name="map")
-    fa = mesh_a.faces
-    edges = np.unique(
-        np.sort(np.concatenate([fa[:, [0, 1]], fa[:, [1, 2]], fa[:, [2, 0]]]), 1), axis=0
-    )
+    edges = unique_edges(mesh_a.faces)
     length = np.linalg.norm(mesh_a.vertices[edges[:, 0]] - mesh_a.vertices[edges[:, 1]], axis=1)
     keep = length > 0
     edges, length = edges[keep], length[keep] / mesh_a.scale

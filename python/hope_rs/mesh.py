@@ -74,6 +74,12 @@ class Mesh:
         return out
 
 
+def unique_edges(faces: np.ndarray) -> np.ndarray:
+    """The undirected edges of ``faces``, each once as ``(low, high)``, sorted."""
+    f = np.asarray(faces)
+    return np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), 1), axis=0)
+
+
 def load_mesh(path: str | os.PathLike) -> Mesh:
     """Load a triangle mesh from OFF, OBJ, PLY or STL, keeping the file's vertex order.
 

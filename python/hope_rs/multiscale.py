@@ -56,7 +56,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .mesh import Mesh
+from .mesh import Mesh, unique_edges
 from .sites import cell_sites, grid_cells
 
 #: Side of a coarse cell as a fraction of sqrt(area).
@@ -101,8 +101,7 @@ def coarse_mesh(mesh: Mesh, spacing: float | None = None) -> Coarse | None:
 
 def _edges(faces: np.ndarray) -> np.ndarray:
     """Every edge of ``faces`` in both directions, once each."""
-    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    e = np.unique(np.sort(e, axis=1), axis=0)
+    e = unique_edges(faces)
     return np.concatenate([e, e[:, ::-1]])
 
 
@@ -152,17 +151,14 @@ def lift_map(
 def _level(shape, kind: str | None):
     """(Coarse, coarse Shape) of ``shape`` (which must be dense enough to coarsen), with SHOT
     descriptors when ``kind`` is "shot"; the coarse Shape computes other kinds itself."""
-    from . import _core
-    from .descriptors import SHOT_RADIUS
+    from .descriptors import shot_at
 
     level = shape.coarse_level()
     if level is None:
         raise ValueError("the shape is not dense enough to coarsen (see coarse_mesh)")
     if kind == "shot" and not level[1].has_descriptors("shot"):
         # On the fine mesh, at the coarse vertices: the coarse surface would describe coarser.
-        m = shape.internal
-        d = _core.shot_descriptors(m.vertices, m.faces, SHOT_RADIUS * m.scale, level[0].sites)
-        level[1].set_descriptors("shot", d.reshape(level[0].sites.size, -1))
+        level[1].set_descriptors("shot", shot_at(shape.internal, level[0].sites))
     return level
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _core
-from .descriptors import SHOT_RADIUS, descriptors_as_numbered
+from .descriptors import SHOT_RADIUS, _shot_as_numbered, descriptors_as_numbered
 from .mesh import Mesh
 from .numbering import canonical_mesh
 from .sites import shot_sites
@@ -76,7 +76,11 @@ class Shape:
         if kind not in self._descriptors:
             # The internal mesh is in the position-fixed numbering already: this equals
             # descriptors(self.mesh, kind)[self.order] bit for bit, without renumbering again.
-            self._descriptors[kind] = descriptors_as_numbered(self.internal, kind)
+            self._descriptors[kind] = (
+                _shot_as_numbered(self.internal, SHOT_RADIUS, self.descriptor_sites("shot"))
+                if kind == "shot"
+                else descriptors_as_numbered(self.internal, kind)
+            )
         return self._descriptors[kind]
 
     def descriptor_sites(self, kind: str = "shot") -> tuple[np.ndarray, np.ndarray] | None:

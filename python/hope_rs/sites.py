@@ -52,18 +52,21 @@ def cell_sites(vertices: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.
     """One site per cell, the member nearest the cell's centroid (ties: the lowest index):
     (``sites``, ``owner``) with ``sites[owner[i]]`` the site of vertex ``i``; sites are in
     the order of their cells' ids."""
-    v = np.asarray(vertices, dtype=np.float64)
     ids, owner = np.unique(cells, return_inverse=True)
-    owner = owner.reshape(-1)
-    count = np.bincount(owner, minlength=ids.size).astype(np.float64)
+    return _sites_of(np.asarray(vertices, dtype=np.float64), owner.reshape(-1), ids.size), owner
+
+
+def _sites_of(v: np.ndarray, owner: np.ndarray, n_cells: int) -> np.ndarray:
+    """The site of each of ``n_cells`` cells, vertex ``i`` being in cell ``owner[i]``."""
+    count = np.bincount(owner, minlength=n_cells).astype(np.float64)
     centroid = np.stack(
-        [np.bincount(owner, weights=v[:, d], minlength=ids.size) for d in range(3)], axis=1
+        [np.bincount(owner, weights=v[:, d], minlength=n_cells) for d in range(3)], axis=1
     )
     centroid /= count[:, None]
     d2 = ((v - centroid[owner]) ** 2).sum(axis=1)
     by_cell = np.lexsort((np.arange(v.shape[0]), d2, owner))
     first = np.r_[True, owner[by_cell][1:] != owner[by_cell][:-1]]
-    return by_cell[first], owner
+    return by_cell[first]
 
 
 def shot_sites(mesh: Mesh, radius: float) -> tuple[np.ndarray, np.ndarray] | None:
@@ -73,7 +76,8 @@ def shot_sites(mesh: Mesh, radius: float) -> tuple[np.ndarray, np.ndarray] | Non
     if n == 0:
         return None
     cells = grid_cells(mesh.vertices, SITE_SPACING * radius * mesh.scale)
-    n_cells = np.unique(cells).size
-    if n < MIN_VERTICES_PER_SITE * n_cells:
+    ids, owner = np.unique(cells, return_inverse=True)
+    if n < MIN_VERTICES_PER_SITE * ids.size:
         return None
-    return cell_sites(mesh.vertices, cells)
+    owner = owner.reshape(-1)
+    return _sites_of(mesh.vertices, owner, ids.size), owner
