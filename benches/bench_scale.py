@@ -89,13 +89,14 @@ class PeakSampler(threading.Thread):
         self.peak = self.rss()
 
 
-def run_case(name: str, data: Path, multiscale: bool = False) -> dict:
+def run_case(name: str, data: Path, multiscale: bool = False, spectral: bool = True) -> dict:
     """One case, in this process: build, match stage by stage, score on original vertices.
     With ``multiscale``, the "descriptors" stage is the whole coarse match and its lift (as in
-    ``match(..., multiscale=True)``), and "init" is empty."""
+    ``match(..., multiscale=True)``), and "init" is empty. ``spectral``: as in ``match``."""
     import hope_rs
     from hope_rs.initial import shapes_initial_map
     from hope_rs.refine import refine
+    from hope_rs.spectral import applies, spectral_refine
 
     folder, a, b, target = CASES[name]
     ma = hope_rs.load_mesh(data / folder / f"{a}.off")
@@ -118,10 +119,12 @@ def run_case(name: str, data: Path, multiscale: bool = False) -> dict:
     t["shapes"] = time.perf_counter() - t0
     sampler.mark("shapes")
     t1 = time.perf_counter()
-    if multiscale:
+    # As in match: shapes too coarse to halve take the default path.
+    if multiscale and sa.coarse_level() is not None and sb.coarse_level() is not None:
         from hope_rs.multiscale import FINE_PASSES, coarse_start
 
-        f0 = coarse_start(sa, sb, "shot")[1]  # the shapes' internal numbering
+        coarse_spectral = spectral and not applies(sa, sb)  # as in match
+        f0 = coarse_start(sa, sb, "shot", spectral=coarse_spectral)[1]  # internal numbering
         t["descriptors"] = time.perf_counter() - t1
         sampler.mark("descriptors")
         t["init"] = 0.0
@@ -139,41 +142,52 @@ def run_case(name: str, data: Path, multiscale: bool = False) -> dict:
         t1 = time.perf_counter()
         res = refine(sa, sb, f0)
     t["refine"] = time.perf_counter() - t1
-    f0, res.map = sa.map_out(sb, f0), sa.map_out(sb, res.map)
     sampler.mark("refine")
+    t1 = time.perf_counter()
+    f = spectral_refine(sa, sb, res.map)[0] if spectral else res.map
+    t["spectral"] = time.perf_counter() - t1
+    sampler.mark("spectral")
+    f0, f, res.map = sa.map_out(sb, f0), sa.map_out(sb, f), sa.map_out(sb, res.map)
     t["total"] = time.perf_counter() - t0
     init = hope_rs.score(hope_rs.geodesic_errors(sb, f0, a_idx=ai, b_idx=bi))
-    final = hope_rs.score(hope_rs.geodesic_errors(sb, res.map, a_idx=ai, b_idx=bi))
+    hope = hope_rs.score(hope_rs.geodesic_errors(sb, res.map, a_idx=ai, b_idx=bi))
+    final = hope_rs.score(hope_rs.geodesic_errors(sb, f, a_idx=ai, b_idx=bi))
     return {
-        "case": name + (" (multiscale)" if multiscale else ""),
+        "case": name
+        + (" (multiscale)" if multiscale else "")
+        + ("" if spectral else " (no spectral)"),
         "n": f"{ma.n_vertices}/{mb.n_vertices}",
         "steps": len(res.history),
         "seconds": t,
         "peak_gib": {k: v / 2**30 for k, v in sampler.stages.items()},
         "maxrss_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20,
         "init": [init.exact, init.mean],
-        "hope": [final.exact, final.mean, final.auc],
+        "hope": [hope.exact, hope.mean, hope.auc],
+        "final": [final.exact, final.mean, final.auc],
     }
 
 
 def table(rows: list[dict]) -> str:
     head = (
-        "| case | n | shapes (s) | descr (s) | init (s) | refine (s) | steps | total (s) "
-        "| peak descr / init / refine (GiB) | max RSS (GiB) | init exact / mean | HOPE exact / mean |\n"
-        "|---|---|---|---|---|---|---|---|---|---|---|---|\n"
+        "| case | n | shapes (s) | descr (s) | init (s) | refine (s) | steps | spectral (s) "
+        "| total (s) | peak descr / init / refine / spectral (GiB) | max RSS (GiB) "
+        "| init exact / mean | HOPE exact / mean | final exact / mean |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
     )
     lines = []
     for r in rows:
         if "error" in r:
-            lines.append(f"| {r['case']} | | | | | | | | | | | {r['error']} |")
+            lines.append(f"| {r['case']} |" + " |" * 12 + f" {r['error']} |")
             continue
         s, p = r["seconds"], r["peak_gib"]
         lines.append(
             f"| {r['case']} | {r['n']} | {s['shapes']:.2f} | {s['descriptors']:.2f} "
-            f"| {s['init']:.2f} | {s['refine']:.2f} | {r['steps']} | {s['total']:.1f} "
-            f"| {p['descriptors']:.2f} / {p['init']:.2f} / {p['refine']:.2f} "
+            f"| {s['init']:.2f} | {s['refine']:.2f} | {r['steps']} | {s['spectral']:.2f} "
+            f"| {s['total']:.1f} "
+            f"| {p['descriptors']:.2f} / {p['init']:.2f} / {p['refine']:.2f} / {p['spectral']:.2f} "
             f"| {r['maxrss_gib']:.2f} | {100 * r['init'][0]:.1f}% / {r['init'][1]:.4f} "
-            f"| {100 * r['hope'][0]:.1f}% / {r['hope'][1]:.4f} |"
+            f"| {100 * r['hope'][0]:.1f}% / {r['hope'][1]:.4f} "
+            f"| {100 * r['final'][0]:.1f}% / {r['final'][1]:.4f} |"
         )
     return head + "\n".join(lines) + "\n"
 
@@ -189,16 +203,20 @@ def main() -> None:
         action="store_true",
         help="match(..., multiscale=True): the descr column is then the coarse match and lift",
     )
+    p.add_argument(
+        "--no-spectral", action="store_true", help="match(..., spectral=False): HOPE's map only"
+    )
     p.add_argument("--child", help=argparse.SUPPRESS)
     args = p.parse_args()
     if args.child:
-        print(json.dumps(run_case(args.child, args.data, args.multiscale)))
+        print(json.dumps(run_case(args.child, args.data, args.multiscale, not args.no_spectral)))
         return
     print(f"load average: {os.getloadavg()}", flush=True)
     rows = []
     for name in args.cases.split(","):
         cmd = [sys.executable, __file__, "--child", name, "--data", str(args.data)]
         cmd += ["--multiscale"] if args.multiscale else []
+        cmd += ["--no-spectral"] if args.no_spectral else []
         try:
             # stdout carries the result; the child's stderr (stage progress, errors) passes through
             out = subprocess.run(

@@ -31,6 +31,9 @@ def add_batch_parser(sub) -> None:
     p.add_argument(
         "--multiscale", action="store_true", help="match(..., multiscale=True) for every pair"
     )
+    p.add_argument(
+        "--no-spectral", action="store_true", help="match(..., spectral=False) for every pair"
+    )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress output")
     p.set_defaults(func=cmd_batch)
 
@@ -58,6 +61,7 @@ def cmd_batch(args) -> int:
         init=args.init,
         k_max=args.k_max,
         multiscale=args.multiscale,
+        spectral=not args.no_spectral,
         progress=not args.quiet,
         ray_options={"address": args.ray_address} if args.backend == "ray" else None,
     ):

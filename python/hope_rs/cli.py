@@ -98,7 +98,7 @@ def cmd_match(args) -> int:
     try:
         res = match(
             a, b, init=args.init, k_max=args.k_max, multiscale=args.multiscale,
-            callback=progress.step,
+            spectral=not args.no_spectral, callback=progress.step,
         )  # fmt: skip
     finally:
         progress.close()
@@ -133,6 +133,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--multiscale",
         action="store_true",
         help="for large meshes: match coarse copies first, then one fine pass (faster, less exact)",
+    )
+    m.add_argument(
+        "--no-spectral",
+        action="store_true",
+        help="return HOPE's own map, without the spectral (ZoomOut) pass after it",
     )
     m.add_argument("--json", action="store_true", help="print timings and a summary as JSON")
     m.add_argument("-q", "--quiet", action="store_true", help="no progress bar")

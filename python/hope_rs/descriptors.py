@@ -78,6 +78,14 @@ def laplacian_eigenpairs(mesh: Mesh, k: int = 100) -> tuple[np.ndarray, np.ndarr
 
 
 def _eigenpairs_as_numbered(mesh: Mesh, k: int) -> tuple[np.ndarray, np.ndarray]:
+    evals, evecs, _ = laplacian_basis_as_numbered(mesh, k)
+    return evals, evecs
+
+
+def laplacian_basis_as_numbered(mesh: Mesh, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`laplacian_eigenpairs` in ``mesh``'s own numbering, plus the lumped mass of each
+    vertex ``(n,)`` (of the mesh scaled to unit area), the weights of the inner product in
+    which the eigenvectors are orthonormal."""
     import scipy.sparse.linalg as sla
 
     try:
@@ -96,7 +104,7 @@ def _eigenpairs_as_numbered(mesh: Mesh, k: int) -> tuple[np.ndarray, np.ndarray]
     # Shift-invert about a small negative value: L is singular (constants), L + eps*M is not.
     evals, evecs = sla.eigsh(L, k=k, M=M, sigma=-1e-8, which="LM", v0=v0)
     by_value = np.argsort(evals)
-    return np.maximum(evals[by_value], 0.0), evecs[:, by_value]
+    return np.maximum(evals[by_value], 0.0), evecs[:, by_value], np.asarray(M.diagonal())
 
 
 def hks(evals: np.ndarray, evecs: np.ndarray, n_scales: int = 100) -> np.ndarray:

@@ -149,6 +149,7 @@ METHODS: dict[str, tuple[str, Callable[[PairContext], MethodResult]]] = {
     "hope": ("HOPE, default parameters, SHOT start", _hope()),
     "zoomout": ("ZoomOut (pyFM) 20→100, from the SHOT initial map", _zoomout("shot")),
     "zoomout-wks": ("ZoomOut (pyFM) 20→100, from the WKS initial map", _zoomout("wks")),
+    "hope-nospectral": ("HOPE's own map, without the spectral pass", _hope(spectral=False)),
     "hope-nolmd": ("HOPE without LMD: every vertex a witness", _hope(min_consistent=0.0)),
     "hope-fixedk": ("HOPE with a single fixed k = 8", _hope(schedule=[8])),
     "hope-k4": ("HOPE with k_max = 4", _hope(k_max=4)),

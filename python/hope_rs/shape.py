@@ -5,7 +5,12 @@ from __future__ import annotations
 import numpy as np
 
 from . import _core
-from .descriptors import SHOT_RADIUS, _shot_as_numbered, descriptors_as_numbered
+from .descriptors import (
+    SHOT_RADIUS,
+    _shot_as_numbered,
+    descriptors_as_numbered,
+    laplacian_basis_as_numbered,
+)
 from .mesh import Mesh
 from .numbering import canonical_mesh
 from .sites import shot_sites
@@ -56,6 +61,7 @@ class Shape:
         self._descriptors: dict[str, np.ndarray] = {}
         self._sites: tuple[np.ndarray, np.ndarray] | None | bool = False  # False: not yet known
         self._coarse: tuple | None | bool = False
+        self._basis: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
     def points(self) -> np.ndarray:
@@ -108,6 +114,19 @@ class Shape:
             c = coarse_mesh(self.internal)
             self._coarse = None if c is None else (c, Shape(c.mesh, k_max=self.k_max))
         return self._coarse
+
+    def spectral_basis(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """The first ``k`` Laplace–Beltrami eigenvectors ``(n, k)`` of the mesh scaled to unit
+        area and its lumped vertex masses ``(n,)``, in the internal numbering; computed once
+        (again only when a larger ``k`` is asked for). Fewer columns when the mesh has fewer
+        than ``k + 2`` vertices."""
+        have = 0 if self._basis is None else self._basis[0].shape[1]
+        if have < min(k, self.n_vertices - 2):
+            _, evecs, mass = laplacian_basis_as_numbered(self.internal, k)
+            self._basis = (evecs, mass)
+        assert self._basis is not None
+        evecs, mass = self._basis
+        return evecs[:, :k], mass
 
     def set_descriptors(self, kind: str, d: np.ndarray) -> None:
         """Store descriptors of ``kind`` computed elsewhere (e.g. read from a cache), given in
