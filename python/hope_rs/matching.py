@@ -115,8 +115,8 @@ def match(
     spectral : bool
         After HOPE, run ZoomOut from its map and keep, region by region, whichever of the two
         maps distorts A's 2-rings less (see :mod:`hope_rs.spectral`). On differently
-        triangulated shapes this halves HOPE's error (63 remeshed FAUST/TOSCA pairs: mean
-        geodesic error 0.042 → 0.022), on identically triangulated ones HOPE's exact map stays.
+        triangulated shapes this lowers HOPE's error (63 remeshed FAUST/TOSCA pairs: mean
+        geodesic error 0.042 → 0.025), on identically triangulated ones HOPE's exact map stays.
         It costs two Laplace–Beltrami eigenbases (about 0.6 s each at 5k vertices, 3 s at 28k)
         and is skipped when a shape has more than
         :data:`~hope_rs.spectral.MAX_VERTICES` vertices.
