@@ -87,7 +87,7 @@ def cmd_match(args) -> int:
     a, b = load_mesh(args.a), load_mesh(args.b)
     if not args.multiscale and not args.quiet and min(a.n_vertices, b.n_vertices) >= HINT_VERTICES:
         print(
-            "hope-rs: hint: on meshes this large, --multiscale is about 4x faster, with a larger "
+            "hope-rs: hint: on meshes this large, --multiscale is about 3x faster, with a larger "
             "error (see the README)",
             file=sys.stderr,
         )

@@ -108,16 +108,16 @@ def match(
         For large meshes: match coarse copies of the shapes first (with the options above),
         lift that map to the fine vertices and refine it for
         :data:`~hope_rs.multiscale.FINE_PASSES` pass (see :mod:`hope_rs.multiscale`). About
-        four times faster on 100k-vertex meshes, with a larger error (FAUST subdivided to
-        110k: 31 s instead of 123 s, mean geodesic error 0.0131 instead of 0.0088). Unless
+        three times faster on 100k-vertex meshes, with a larger error (FAUST subdivided to
+        110k: 43 s instead of 123 s, mean geodesic error 0.0112 instead of 0.0088). Unless
         both shapes are dense enough to halve (see
         :func:`~hope_rs.multiscale.coarse_mesh`), this is the default path.
     spectral : bool
         After HOPE, run ZoomOut from its map and keep, region by region, whichever of the two
         maps distorts A's 2-rings less (see :mod:`hope_rs.spectral`). On differently
         triangulated shapes this lowers HOPE's error (63 remeshed FAUST/TOSCA pairs: mean
-        geodesic error 0.042 → 0.025), on identically triangulated ones HOPE's exact map stays.
-        It costs two Laplace–Beltrami eigenbases (about 0.6 s each at 5k vertices, 3 s at 28k)
+        geodesic error 0.042 → 0.024), on identically triangulated ones HOPE's exact map stays.
+        It costs two Laplace–Beltrami eigenbases (about 0.7 s each at 5k vertices, 4 s at 28k)
         and is skipped when a shape has more than
         :data:`~hope_rs.spectral.MAX_VERTICES` vertices.
     callback : callable, optional
@@ -151,7 +151,7 @@ def match(
         # The spectral pass runs once, at the finest level it affords: on the TOSCA cat
         # (28k) a pass on the coarse copies as well left 9.3% exact / 0.0214 in 27.4 s, against
         # 27.2% / 0.0182 in 22.8 s with the fine pass only; on FAUST subdivided to 110k, where
-        # the fine shapes are too large for it, the coarse pass took 0.0131 to 0.0116.
+        # the fine shapes are too large for it, the coarse pass took 0.0131 to 0.0116 (with a 20 → 100 basis).
         options["spectral"] = spectral and not applies(sa, sb)
         coarse, f0 = coarse_start(sa, sb, init, k_max=k_max, **options)
         timings["coarse"] = time.perf_counter() - t
