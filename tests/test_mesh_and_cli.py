@@ -126,3 +126,4 @@ def test_demo_reports_accuracy():
     report = run_demo(verbose=False)
     assert report["hope"]["exact"] >= 0.95
     assert report["hope"]["mean"] <= report["initial_map"]["mean"]
+    assert report["final"]["exact"] >= 0.95
