@@ -26,6 +26,7 @@ import scipy.linalg
 import scipy.sparse as sp
 
 from .anchors import N_ANCHORS, distance_fields, farthest_witnesses
+from .initial import _nearest_one
 from .lmd import MIN_CONSISTENT, local_map_distortion
 from .mesh import unique_edges
 from .shape import Shape
@@ -87,7 +88,6 @@ def zoomout(
     pa, wa = phi_a[sa], mass_a[sa]
     gram = pa.T @ (wa[:, None] * pa)  # the identity when every vertex is a sample
     t = np.asarray(f, dtype=np.int64)[sa]  # vertices of B
-    eb = phi_b
     for k in basis_sizes(k_start, k_end, step):
         c = functional_map(pa[:, :k], wa, phi_b[t, :k], gram[:k, :k])
         eb = phi_b[:, :k] @ c.T
@@ -102,7 +102,7 @@ def zoomout(
     from scipy.spatial import cKDTree
 
     _, own = cKDTree(a.points[sa]).query(a.points, workers=2)
-    return near_b.best(phi_a[:, : eb.shape[1]], eb, t[own])
+    return near_b.best(phi_a[:, :k], eb, t[own])
 
 
 def functional_map(
@@ -119,19 +119,11 @@ def functional_map(
 
 
 def nearest_rows(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Index of the nearest row of ``y`` for each row of ``x`` (Euclidean, exhaustive). In
-    float32 blocks through BLAS: in 20-100 dimensions a k-d tree searches nearly everything
-    anyway, and was 4x slower here."""
+    """Index of the nearest row of ``y`` for each row of ``x`` (Euclidean, exhaustive): the
+    initial map's float32 BLAS search. In 20-120 dimensions a k-d tree searches nearly
+    everything anyway, and was 4x slower here."""
     x32, y32 = x.astype(np.float32), y.astype(np.float32)
-    yy = np.einsum("ij,ij->i", y32, y32)
-    out = np.empty(x.shape[0], dtype=np.int64)
-    rows = max(1, (1 << 23) // max(y.shape[0], 1))  # 32 MB of distances per block
-    for s in range(0, x.shape[0], rows):
-        d = x32[s : s + rows] @ y32.T
-        d *= -2.0
-        d += yy
-        out[s : s + rows] = d.argmin(axis=1)
-    return out
+    return _nearest_one(x32, y32, np.einsum("ij,ij->i", y32, y32))[0][:, 0]
 
 
 def _samples(n: int, m: int) -> np.ndarray:
@@ -180,7 +172,11 @@ def choose_by_region(
     over 1-rings ``smoothing`` times first, so that regions choose, not single vertices."""
     mh, _ = local_map_distortion(a, b, h)
     mz, _ = local_map_distortion(a, b, z)
-    d = mh.astype(np.float64) - mz
+    return _choose(a, h, z, mh.astype(np.float64) - mz, smoothing, margin)
+
+
+def _choose(a: Shape, h, z, d: np.ndarray, smoothing: int, margin: float) -> np.ndarray:
+    """:func:`choose_by_region` given ``d``, the per-vertex mean LMD of ``h`` minus ``z``'s."""
     if smoothing:
         p = _ring_average(a)
         for _ in range(smoothing):
@@ -219,21 +215,26 @@ def spectral_refine(a: Shape, b: Shape, h: np.ndarray) -> tuple[np.ndarray, np.n
     except RuntimeError as e:  # ARPACK did not converge, or a singular factorisation
         warnings.warn(f"spectral pass skipped, HOPE's map kept: {e}", RuntimeWarning, stacklevel=3)
         return h, None
-    f = choose_by_region(a, b, h, z, smoothing=SMOOTHING_STEPS, margin=MARGIN)
+    # LMD of both maps once: the region choice reads the means, the guard's anchors the
+    # consistent fractions.
+    mh, ch = local_map_distortion(a, b, h)
+    mz, cz = local_map_distortion(a, b, z)
+    f = _choose(a, h, z, mh.astype(np.float64) - mz, SMOOTHING_STEPS, MARGIN)
     if not np.array_equal(f, h):
-        d_h, d_f = long_range_discrepancy(a, b, h, z, [h, f])
+        trusted = (ch >= MIN_CONSISTENT) & (cz >= MIN_CONSISTENT)
+        d_h, d_f = long_range_discrepancy(a, b, h, trusted, [h, f])
         if d_f > MAX_DISCREPANCY_RATIO * d_h:
             return h, z
     return f, z
 
 
 def long_range_discrepancy(
-    a: Shape, b: Shape, h: np.ndarray, z: np.ndarray, maps: list[np.ndarray]
+    a: Shape, b: Shape, h: np.ndarray, trusted: np.ndarray, maps: list[np.ndarray]
 ) -> list[float]:
     """For each map of ``maps`` (A → B, internal numbering), the mean |d_A(p, x) - d_B(m(p),
     h(x))| over vertices p and anchors x (sqrt(area) units, edge-graph geodesics): how far the
     map bends distances to :data:`~hope_rs.anchors.N_ANCHORS` farthest-point anchors among the
-    vertices both ``h`` and ``z`` map consistently (LMD).
+    ``trusted`` vertices (a mask: those both candidate maps keep LMD-consistent).
 
     The choice by region compares 2-rings only. Where the two bases differ (a partial shape:
     FAUST without its legs against a whole body) ZoomOut can map a region smoothly to the wrong
@@ -241,12 +242,10 @@ def long_range_discrepancy(
     0.122, the chosen one 0.179, and a mean geodesic error of 0.048 against 0.103. On the
     remeshed pairs the chosen map bends these distances as little as HOPE's or less.
     """
-    _, ch = local_map_distortion(a, b, h)
-    _, cz = local_map_distortion(a, b, z)
-    trusted = np.flatnonzero((ch >= MIN_CONSISTENT) & (cz >= MIN_CONSISTENT))
-    if trusted.size < 4:
-        trusted = np.arange(a.n_vertices)
-    anchors, da = farthest_witnesses(a, trusted, N_ANCHORS)
+    cand = np.flatnonzero(trusted)
+    if cand.size < 4:
+        cand = np.arange(a.n_vertices)
+    anchors, da = farthest_witnesses(a, cand, N_ANCHORS)
     db = distance_fields(b, h[anchors])
     seen = np.isfinite(da)  # anchors in other components of A say nothing
     far = 4.0  # unreachable on B counts as far, not infinitely far
