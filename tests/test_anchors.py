@@ -7,7 +7,9 @@ from scipy.sparse.csgraph import dijkstra
 from test_match import isometric_copy
 
 import hope_rs
-from hope_rs.anchors import anchor_step, distance_fields
+from hope_rs.anchors import anchor_step, distance_fields, swapped_regions
+from hope_rs.lmd import local_map_distortion
+from hope_rs.refine import refine
 from hope_rs.shape import Shape
 
 
@@ -82,3 +84,60 @@ def test_global_check_ignores_a_few_scattered_disagreements(faust_pair):
     misplaced region, and nothing moves."""
     a, b, _, _, f = scrambled_copy(faust_pair[0], 6, 0.03)
     assert anchor_step(a, b, f, np.ones(a.n_vertices, bool), global_check=True) is f
+
+
+def tube(n_len: int = 121, n_around: int = 24, half_length: float = 1.0, radius: float = 0.15):
+    """An open tube along x, symmetric under x -> -x: ring i is the mirror of ring
+    n_len - 1 - i, vertex by vertex."""
+    x = np.linspace(-half_length, half_length, n_len)
+    t = np.linspace(0, 2 * np.pi, n_around, endpoint=False)
+    v = np.stack(
+        [
+            np.repeat(x, n_around),
+            radius * np.tile(np.cos(t), n_len),
+            radius * np.tile(np.sin(t), n_len),
+        ],
+        axis=1,
+    )
+    i, j = np.meshgrid(np.arange(n_len - 1), np.arange(n_around), indexing="ij")
+    p, q = i * n_around + j, i * n_around + (j + 1) % n_around
+    faces = np.concatenate(
+        [np.stack([p, p + n_around, q], -1), np.stack([q, p + n_around, q + n_around], -1)]
+    )
+    mirror = ((n_len - 1 - np.arange(n_len))[:, None] * n_around + np.arange(n_around)).ravel()
+    return hope_rs.Mesh(v, faces.reshape(-1, 3)), mirror
+
+
+def test_swapped_ends_move_back_and_a_right_map_stays():
+    """Both ends of a tube carried onto each other, as hands that touch in one pose get
+    swapped: each end keeps its 2-rings, so LMD trusts it, and its anchor distances expose it."""
+    mesh, mirror = tube()
+    b_mesh, truth_in = isometric_copy(mesh.vertices, mesh.faces, np.random.default_rng(1))
+    a, b = Shape(mesh, k_max=2), Shape(b_mesh, k_max=2)
+    ends = np.abs(mesh.vertices[:, 0]) > 0.9
+    f_in = truth_in.copy()
+    f_in[ends] = truth_in[mirror[ends]]
+    truth, f = a.map_in(b, truth_in), a.map_in(b, f_in)
+    ends = ends[a.order]  # internal numbering
+    _, consistent = local_map_distortion(a, b, f)
+    assert consistent[ends].mean() > 0.9  # LMD trusts the swapped ends
+    g = swapped_regions(a, b, f, consistent)
+    np.testing.assert_array_equal(g[~ends], truth[~ends])
+    # Vertices along the seams are not firmly trusted and stay for the anchor step.
+    assert np.mean(g[ends] == truth[ends]) > 0.8
+    assert np.mean(g[ends] == f[ends]) < 0.2
+    _, right = local_map_distortion(a, b, truth)
+    assert swapped_regions(a, b, truth, right) is truth
+
+
+def test_refine_undoes_swapped_ends():
+    mesh, mirror = tube()
+    a = b = Shape(mesh, k_max=4)
+    ends = np.abs(mesh.vertices[:, 0]) > 0.9
+    f = np.arange(mesh.n_vertices)
+    f[ends] = mirror[ends]
+    f = a.map_in(b, f)
+    assert np.mean(f == np.arange(a.n_vertices)) < 0.91
+    # The ends are under GLOBAL_MIN_FLAGGED of the tube: the global check alone left them.
+    g = refine(a, b, f, polish_k=None).map
+    assert np.mean(g == np.arange(a.n_vertices)) > 0.99

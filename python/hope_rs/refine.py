@@ -9,7 +9,7 @@ import numpy as np
 
 from . import _core
 from ._blas import with_single_threaded_blas
-from .anchors import anchor_step
+from .anchors import anchor_step, swapped_regions
 from .lmd import MIN_CONSISTENT, LmdTracker
 from .shape import Shape
 
@@ -63,6 +63,10 @@ GLOBAL_CHECK_PASS = 1
 #: left identically triangulated FAUST pairs short of 100% exact: a witness one vertex off
 #: must still be able to move.
 STAY_PASS = 2
+#: From this pass (0-based) on, the global repair first moves back regions that LMD trusts
+#: but whose distances to the rest of the shape say they sit in the wrong place
+#: (:func:`~hope_rs.anchors.swapped_regions`).
+REGION_CHECK_PASS = 1
 STAY_COUNTS = 1
 #: Hop radius of the final polishing step (each vertex takes its best overlap, not one-to-one).
 POLISH_K = 3
@@ -152,7 +156,10 @@ def refine(
                 break  # the last pass did not gain: keep its map, skip the repair
             last_fraction = float(w.mean())
             check = n_pass >= GLOBAL_CHECK_PASS
-            f_new = global_repair(a, b, f, w, min_consistent, global_check=check, lmd=lmd)
+            regions = n_pass >= REGION_CHECK_PASS
+            f_new = global_repair(
+                a, b, f, w, min_consistent, global_check=check, region_check=regions, lmd=lmd
+            )
             changed = int(np.count_nonzero(f_new != f))
             changed_in_pass += changed
             f = f_new
@@ -196,16 +203,23 @@ def global_repair(
     min_consistent: float,
     *,
     global_check: bool = False,
+    region_check: bool = False,
     lmd: LmdTracker | None = None,
 ) -> np.ndarray:
     """:func:`~hope_rs.anchors.anchor_step` on ``w``, the LMD witnesses of ``f``, keeping a moved
     vertex only where it then passes LMD itself (the anchor coordinates are coarser than a k-hop
     step, so elsewhere the old match is at least as good). ``global_check``: see
     :func:`~hope_rs.anchors.anchor_step`; ``lmd``: the tracker of the caller's maps, if any."""
+    lmd = lmd or LmdTracker(a, b)
+    if region_check:
+        f_in = f
+        f = swapped_regions(a, b, f, lmd.local_map_distortion(f)[1])
+        if f is not f_in:
+            w = lmd.witnesses(f, min_consistent=min_consistent)
     g = anchor_step(a, b, f, w, global_check=global_check)
     if g is f:
         return f
-    ok = (lmd or LmdTracker(a, b)).witnesses(g, min_consistent=min_consistent)
+    ok = lmd.witnesses(g, min_consistent=min_consistent)
     return np.where(ok | (g == f), g, f)
 
 

@@ -11,7 +11,7 @@ from .descriptors import (
     descriptors_as_numbered,
     laplacian_basis_as_numbered,
 )
-from .mesh import Mesh
+from .mesh import Mesh, unique_edges
 from .numbering import canonical_mesh
 from .sites import shot_sites
 
@@ -62,11 +62,19 @@ class Shape:
         self._sites: tuple[np.ndarray, np.ndarray] | None | bool = False  # False: not yet known
         self._coarse: tuple | None | bool = False
         self._basis: tuple[np.ndarray, np.ndarray] | None = None
+        self._edges: np.ndarray | None = None
 
     @property
     def points(self) -> np.ndarray:
         """Vertex positions in the internal numbering."""
         return self.internal.vertices
+
+    @property
+    def edges(self) -> np.ndarray:
+        """The undirected edges ``(low, high)`` of the internal mesh, computed once."""
+        if self._edges is None:
+            self._edges = unique_edges(self.internal.faces)
+        return self._edges
 
     @property
     def n_vertices(self) -> int:

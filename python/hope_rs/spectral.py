@@ -28,7 +28,6 @@ import scipy.sparse as sp
 from .anchors import N_ANCHORS, distance_fields, farthest_witnesses
 from .initial import _nearest_one
 from .lmd import MIN_CONSISTENT, local_map_distortion
-from .mesh import unique_edges
 from .shape import Shape
 
 #: ZoomOut's basis sizes: from K_START to K_END eigenfunctions in steps of K_STEP. On the 63
@@ -187,7 +186,7 @@ def _choose(a: Shape, h, z, d: np.ndarray, smoothing: int, margin: float) -> np.
 def _ring_average(a: Shape) -> sp.csr_matrix:
     """The operator averaging a vertex function over each closed 1-ring of A (internal)."""
     n = a.n_vertices
-    e = unique_edges(a.internal.faces)
+    e = a.edges
     rows = np.concatenate([e[:, 0], e[:, 1], np.arange(n)])
     cols = np.concatenate([e[:, 1], e[:, 0], np.arange(n)])
     m = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n, n))
