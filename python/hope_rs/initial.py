@@ -154,9 +154,7 @@ def _nearest_one(da: np.ndarray, db: np.ndarray, nb2: np.ndarray) -> tuple[np.nd
             np.subtract(nb2[None, :], d2, out=d2)
             j = np.argmin(d2, axis=1)
             idx[s : s + j.size, 0] = j
-            dist[s : s + j.size, 0] = d2[np.arange(j.size), j] + np.einsum(
-                "ij,ij->i", chunk, chunk
-            )
+            dist[s : s + j.size, 0] = d2[np.arange(j.size), j] + np.einsum("ij,ij->i", chunk, chunk)
 
     with single_threaded_blas():
         if n_threads == 1:
