@@ -37,6 +37,9 @@ def test_nearest_rows_is_the_exhaustive_nearest_neighbour():
     rng = np.random.default_rng(0)
     x, y = rng.normal(size=(300, 17)), rng.normal(size=(2000, 17))
     np.testing.assert_array_equal(S.nearest_rows(x, y), cdist(x, y).argmin(axis=1))
+    # More rows than one chunk (4M distances): the search splits them between threads.
+    x = rng.normal(size=(6001, 17))
+    np.testing.assert_array_equal(S.nearest_rows(x, y), cdist(x, y).argmin(axis=1))
 
 
 def test_functional_map_of_an_orthonormal_basis_is_its_projection():
