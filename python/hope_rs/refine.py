@@ -136,7 +136,8 @@ def refine(
     0.117 without the repair and 0.054 with it, on 004→009 0.132 against 0.061, and faust_reg
     019→020 reached 100% exact in 25 steps instead of 97.9% in 49. From the second pass on, the
     repair also distrusts vertices whose long-range distances disagree (see
-    :data:`GLOBAL_CHECK_PASS`), which LMD alone cannot see.
+    :data:`GLOBAL_CHECK_PASS`), which LMD alone cannot see, and is preceded by a step that
+    moves back whole regions mapped to the wrong place (:data:`REGION_CHECK_PASS`).
     """
     k_max = min(a.k_max, b.k_max)
     schedule = list(schedule) if schedule is not None else default_schedule(k_max)
@@ -155,11 +156,13 @@ def refine(
             if n_pass >= 3 and untrusted > before * (1.0 - MIN_UNTRUSTED_DROP):
                 break  # the last pass did not gain: keep its map, skip the repair
             last_fraction = float(w.mean())
+            f_new = f
+            if n_pass >= REGION_CHECK_PASS:
+                f_new = swapped_regions(a, b, f, lmd.local_map_distortion(f)[1])
+                if f_new is not f:
+                    w = lmd.witnesses(f_new, min_consistent=min_consistent)
             check = n_pass >= GLOBAL_CHECK_PASS
-            regions = n_pass >= REGION_CHECK_PASS
-            f_new = global_repair(
-                a, b, f, w, min_consistent, global_check=check, region_check=regions, lmd=lmd
-            )
+            f_new = global_repair(a, b, f_new, w, min_consistent, global_check=check, lmd=lmd)
             changed = int(np.count_nonzero(f_new != f))
             changed_in_pass += changed
             f = f_new
@@ -203,23 +206,16 @@ def global_repair(
     min_consistent: float,
     *,
     global_check: bool = False,
-    region_check: bool = False,
     lmd: LmdTracker | None = None,
 ) -> np.ndarray:
     """:func:`~hope_rs.anchors.anchor_step` on ``w``, the LMD witnesses of ``f``, keeping a moved
     vertex only where it then passes LMD itself (the anchor coordinates are coarser than a k-hop
     step, so elsewhere the old match is at least as good). ``global_check``: see
     :func:`~hope_rs.anchors.anchor_step`; ``lmd``: the tracker of the caller's maps, if any."""
-    lmd = lmd or LmdTracker(a, b)
-    if region_check:
-        f_in = f
-        f = swapped_regions(a, b, f, lmd.local_map_distortion(f)[1])
-        if f is not f_in:
-            w = lmd.witnesses(f, min_consistent=min_consistent)
     g = anchor_step(a, b, f, w, global_check=global_check)
     if g is f:
         return f
-    ok = lmd.witnesses(g, min_consistent=min_consistent)
+    ok = (lmd or LmdTracker(a, b)).witnesses(g, min_consistent=min_consistent)
     return np.where(ok | (g == f), g, f)
 
 
