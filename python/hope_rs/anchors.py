@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
+from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from ._blas import single_threaded_blas
@@ -55,8 +55,6 @@ def distance_fields(shape: Shape, sources) -> np.ndarray:
 
 def _nearest_region(a: Shape, firm: np.ndarray, label: np.ndarray) -> np.ndarray:
     """The label of the nearest (in hops) firm vertex of every vertex of A; -1 if none."""
-    from scipy.sparse.csgraph import dijkstra
-
     e = a.edges
     n = a.n_vertices
     graph = sp.csr_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))

@@ -63,11 +63,11 @@ GLOBAL_CHECK_PASS = 1
 #: left identically triangulated FAUST pairs short of 100% exact: a witness one vertex off
 #: must still be able to move.
 STAY_PASS = 2
-#: From this pass (0-based) on, the global repair first moves back regions that LMD trusts
+STAY_COUNTS = 1
+#: From this pass (0-based) on, each pass first moves back whole regions that LMD trusts
 #: but whose distances to the rest of the shape say they sit in the wrong place
 #: (:func:`~hope_rs.anchors.swapped_regions`).
 REGION_CHECK_PASS = 1
-STAY_COUNTS = 1
 #: Hop radius of the final polishing step (each vertex takes its best overlap, not one-to-one).
 POLISH_K = 3
 #: Unused vertices ranked per group of duplicates beyond twice its size, in each round of
