@@ -158,3 +158,34 @@ def test_ray_backend_matches_the_local_run_pair_for_pair(folder, tmp_path):
         assert (a.a, a.b, a.error) == (b.a, b.b, b.error)
         if a.ok:
             np.testing.assert_array_equal(a.map, b.map)
+
+
+def test_the_spectral_basis_is_cached_once_per_shape_and_reused(folder, tmp_path, monkeypatch):
+    import hope_rs.batch as batch_module
+    import hope_rs.descriptors
+    import hope_rs.shape
+
+    shapes = [folder / "m" / f"s{s}.off" for s in range(3)]
+    pairs = [(0, 1), (1, 2)]
+    first = hope_rs.match_many(shapes, pairs, jobs=1, cache=tmp_path / "c")
+    assert len(list((tmp_path / "c").rglob("basis-*.npz"))) == 3  # one per shape
+
+    # A new process (no shapes kept in memory) reads the bases instead of solving for them.
+    def no_eigensolve(*args, **kwargs):
+        raise AssertionError("the basis should have come from the cache")
+
+    monkeypatch.setattr(batch_module, "_SHAPES", type(batch_module._SHAPES)())
+    monkeypatch.setattr(hope_rs.shape, "laplacian_basis_as_numbered", no_eigensolve)
+    monkeypatch.setattr(hope_rs.descriptors, "laplacian_basis_as_numbered", no_eigensolve)
+    again = hope_rs.match_many(shapes, pairs, jobs=1, cache=tmp_path / "c")
+    for x, y in zip(first, again):
+        assert x.ok and y.ok, (x.error, y.error)
+        np.testing.assert_array_equal(x.map, y.map)
+    monkeypatch.undo()
+    direct = hope_rs.match(hope_rs.load_mesh(shapes[0]), hope_rs.load_mesh(shapes[1]))
+    assert direct.timings["spectral"] > 0
+    np.testing.assert_array_equal(first[0].map, direct.map)
+    # Without the spectral pass nothing is solved or stored.
+    none = hope_rs.match_many(shapes, pairs, jobs=1, cache=tmp_path / "d", spectral=False)
+    assert all(r.ok for r in none)
+    assert not list((tmp_path / "d").rglob("basis-*.npz"))

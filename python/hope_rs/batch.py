@@ -25,6 +25,7 @@ import numpy as np
 from .cache import ShapeCache, cached_shape, descriptor_params, file_digest, mesh_digest
 from .mesh import Mesh
 from .shape import K_MAX, Shape
+from .spectral import applies_to_size
 
 #: Shapes a worker keeps built between pairs, counted in vertices.
 SHAPE_BUDGET = 300_000
@@ -187,9 +188,13 @@ def _error(e: BaseException) -> str:
     return f"{type(e).__name__}: {e}"
 
 
-def prepare_task(spec: tuple, cache_root: str, kinds: tuple, want_data: bool = False) -> dict:
-    """Parse a shape and compute its descriptors into the cache; returns its digest and size
-    (and its arrays when ``want_data``, for backends whose workers do not share a disk)."""
+def prepare_task(
+    spec: tuple, cache_root: str, kinds: tuple, want_data: bool = False, basis: bool = False
+) -> dict:
+    """Parse a shape and compute its descriptors into the cache, and with ``basis`` the
+    spectral pass's eigenbasis (on a shared disk only, for shapes the pass can run on);
+    returns its digest and size (and its arrays when ``want_data``, for backends whose workers
+    do not share a disk)."""
     try:
         cache = ShapeCache(cache_root)
         if spec[0] == "path":
@@ -208,6 +213,8 @@ def prepare_task(spec: tuple, cache_root: str, kinds: tuple, want_data: bool = F
                 cache.put(digest, kind, descriptor_params(kind), {"d": given[kind]})
             else:
                 descr[kind] = cache.descriptors(mesh, kind, digest)
+        if basis and not want_data and applies_to_size(mesh.n_vertices):
+            cache.spectral_basis(mesh, digest)
         out = {"digest": digest, "n_vertices": mesh.n_vertices}
         if want_data:
             out["data"] = {
@@ -222,8 +229,9 @@ def prepare_task(spec: tuple, cache_root: str, kinds: tuple, want_data: bool = F
 _SHAPES: OrderedDict = OrderedDict()
 
 
-def _shape(token, cache_root: str | None, kinds: tuple, k_max: int) -> Shape:
-    """The Shape of a digest (read from the cache) or of shipped arrays, kept for later pairs."""
+def _shape(token, cache_root: str | None, kinds: tuple, k_max: int, basis: bool = False) -> Shape:
+    """The Shape of a digest (read from the cache) or of shipped arrays, kept for later pairs;
+    with ``basis``, the cached eigenbasis too, when there is one."""
     if isinstance(token, dict):  # arrays shipped with the task
         key = (token["digest"], k_max)
     else:
@@ -244,6 +252,9 @@ def _shape(token, cache_root: str | None, kinds: tuple, k_max: int) -> Shape:
             Mesh(got["vertices"], got["faces"]), cache=cache, kinds=kinds, k_max=k_max,
             digest=token,
         )  # fmt: skip
+        got = cache.spectral_basis(shape.mesh, token, compute=False) if basis else None
+        if got is not None:
+            shape.set_spectral_basis(*got)
     _SHAPES[key] = shape
     while sum(s.n_vertices for s in _SHAPES.values()) > SHAPE_BUDGET and len(_SHAPES) > 2:
         _SHAPES.popitem(last=False)
@@ -257,8 +268,9 @@ def pair_task(job: dict, a, b) -> dict:
     limit_threads(job.get("threads"))
     try:
         t0 = time.perf_counter()
-        sa = _shape(a, job["cache_root"], job["kinds"], job["k_max"])
-        sb = _shape(b, job["cache_root"], job["kinds"], job["k_max"])
+        basis = job.get("basis", False)
+        sa = _shape(a, job["cache_root"], job["kinds"], job["k_max"], basis)
+        sb = _shape(b, job["cache_root"], job["kinds"], job["k_max"], basis)
         load = time.perf_counter() - t0
         res = match(sa, sb, init=job["init"], k_max=job["k_max"], **job["options"])
         return {"map": res.map, "timings": {"load": load, **res.timings}}
@@ -455,14 +467,15 @@ def imatch_many(
         return
     ex = _make_backend(backend, jobs, ray_options)
     try:
+        basis = bool(match_options.get("spectral", True))
         job = {
             "cache_root": str(cache.root), "kinds": kinds, "k_max": k_max, "init": init,
-            "options": match_options, "threads": getattr(ex, "threads", None),
+            "options": match_options, "threads": getattr(ex, "threads", None), "basis": basis,
         }  # fmt: skip
         needed = sorted({s for _, i, j, _ in todo for s in (i, j)})
         handles = {}
         for s in needed:
-            h = ex.submit(prepare_task, specs[s], str(cache.root), kinds, ex.ships_data)
+            h = ex.submit(prepare_task, specs[s], str(cache.root), kinds, ex.ships_data, basis)
             handles[_key(h)] = (h, "prepare", s)
         ready: dict[int, object] = {}
         failed: dict[int, str] = {}

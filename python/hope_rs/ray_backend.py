@@ -62,7 +62,7 @@ class RayBackend:
         from .batch import prepare_task
 
         if fn is prepare_task:
-            spec, cache_root, kinds, _ = args
+            spec, cache_root, kinds = args[:3]  # the arrays travel with the tasks: no basis
             meta, data = self._prepare.remote(spec, cache_root, kinds)
             self._data[meta] = data
             return meta

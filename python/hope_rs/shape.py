@@ -136,6 +136,17 @@ class Shape:
         evecs, mass = self._basis
         return evecs[:, :k], mass
 
+    def set_spectral_basis(self, evecs: np.ndarray, mass: np.ndarray) -> None:
+        """Store the eigenbasis of :meth:`spectral_basis` computed elsewhere (e.g. read from a
+        cache), in the internal numbering."""
+        evecs, mass = np.asarray(evecs, dtype=np.float64), np.asarray(mass, dtype=np.float64)
+        if evecs.ndim != 2 or evecs.shape[0] != self.n_vertices or mass.shape != (self.n_vertices,):
+            raise ValueError(
+                f"a basis must be ({self.n_vertices}, k) eigenvectors and ({self.n_vertices},) "
+                f"masses, got {evecs.shape} and {mass.shape}"
+            )
+        self._basis = (evecs, mass)
+
     def set_descriptors(self, kind: str, d: np.ndarray) -> None:
         """Store descriptors of ``kind`` computed elsewhere (e.g. read from a cache), given in
         the input's numbering."""

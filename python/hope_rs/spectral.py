@@ -214,12 +214,14 @@ def _ring_average(a: Shape) -> sp.csr_matrix:
 
 
 def applies(a: Shape, b: Shape) -> bool:
-    """Whether :func:`spectral_refine` runs on these shapes: neither has more than
-    :data:`MAX_VERTICES` vertices, and both have enough for a basis of :data:`K_START`."""
-    return (
-        max(a.n_vertices, b.n_vertices) <= MAX_VERTICES
-        and min(a.n_vertices, b.n_vertices) >= K_START + 2
-    )
+    """Whether :func:`spectral_refine` runs on these shapes: both sizes pass
+    :func:`applies_to_size`."""
+    return applies_to_size(a.n_vertices) and applies_to_size(b.n_vertices)
+
+
+def applies_to_size(n_vertices: int) -> bool:
+    """At most :data:`MAX_VERTICES` vertices, and enough for a basis of :data:`K_START`."""
+    return K_START + 2 <= n_vertices <= MAX_VERTICES
 
 
 def spectral_refine(a: Shape, b: Shape, h: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
