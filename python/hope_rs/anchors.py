@@ -198,10 +198,8 @@ def swapped_regions(a: Shape, b: Shape, f: np.ndarray, consistent: np.ndarray) -
     if not others:
         return f
     db = np.where(np.isfinite(db), db, 4.0)
-    # A region also takes the seam vertices nearer to it than to any other region (in hops):
-    # moved without them, the wrong half of its seam pulls it back in the next k-hop step.
-    owner = _nearest_region(a, firm, label)
     placement = AnchorPlacement(da, db)
+    owner = None
     g = f.copy()
     for c in others:
         v = np.flatnonzero(label == c)
@@ -210,6 +208,11 @@ def swapped_regions(a: Shape, b: Shape, f: np.ndarray, consistent: np.ndarray) -
         there = agree(da[:, v], db[:, p]).mean()
         shift = np.median(np.abs(db[:, f[v]] - db[:, p]).max(axis=0))
         if there - now > REGION_MIN_GAIN and shift > REGION_MIN_SHIFT:
+            # The region also takes the seam vertices nearer to it than to any other region
+            # (in hops): moved without them, the wrong half of its seam pulls it back in the
+            # next k-hop step.
+            if owner is None:
+                owner = _nearest_region(a, firm, label)
             grown = np.flatnonzero(owner == c)
             g[grown] = placement.place(grown)
     return g if (g != f).any() else f
