@@ -24,6 +24,8 @@ N_ANCHORS = 32
 #: The anchor coordinates are reduced to this many principal axes before the neighbour search
 #: (geodesic distance fields are smooth, so a few axes keep nearly all their variance).
 SEARCH_DIMS = 12
+#: Stands in for the distance to a vertex of another component (sqrt(area) units).
+UNREACHABLE = 4.0
 #: Geodesic distances agree within this share of their length plus :data:`AGREE_ABS`.
 AGREE_REL = 0.1
 AGREE_ABS = 0.03
@@ -89,6 +91,22 @@ def farthest_witnesses(a: Shape, candidates: np.ndarray, n: int) -> tuple[np.nda
     return np.array(chosen), np.vstack(fields)
 
 
+def reachable(d: np.ndarray) -> np.ndarray:
+    """Distance fields with unreachable vertices (other components) at :data:`UNREACHABLE`:
+    far, not infinitely far."""
+    return np.where(np.isfinite(d), d, UNREACHABLE)
+
+
+def drop_disagreeing_anchors(f: np.ndarray, anchors: np.ndarray, da: np.ndarray, db: np.ndarray):
+    """``(anchors, da, db)`` without the anchors whose distances to at least half of the other
+    anchors disagree between A and B under ``f`` (mapped wrongly themselves), unless fewer
+    than four would remain."""
+    good = agree(da[:, anchors], db[:, f[anchors]]).mean(axis=1) >= 0.5
+    if good.sum() >= 4:
+        return anchors[good], da[good], db[good]
+    return anchors, da, db
+
+
 def agree(da: np.ndarray, db: np.ndarray) -> np.ndarray:
     """Whether geodesic distances on A and their counterparts on B agree (sqrt(area) units):
     within :data:`AGREE_REL` of the distance plus :data:`AGREE_ABS`, since poses of one body
@@ -119,14 +137,9 @@ def anchor_step(
         return f
     anchors, da = farthest_witnesses(a, cand, N_ANCHORS)
     db = distance_fields(b, f[anchors])
-    # Unreachable (other components) counts as far, not infinitely far.
-    big = 4.0
-    da = np.where(np.isfinite(da), da, big)
-    db = np.where(np.isfinite(db), db, big)
+    da, db = reachable(da), reachable(db)
     if global_check:
-        good = agree(da[:, anchors], db[:, f[anchors]]).mean(axis=1) >= 0.5
-        if good.sum() >= 4:
-            anchors, da, db = anchors[good], da[good], db[good]
+        anchors, da, db = drop_disagreeing_anchors(f, anchors, da, db)
         flagged = trusted & (agree(da, db[:, f]).mean(axis=0) < GLOBAL_MIN_AGREE)
         if flagged.sum() >= GLOBAL_MIN_FLAGGED * trusted.sum():
             trusted = trusted & ~flagged
@@ -190,14 +203,12 @@ def swapped_regions(a: Shape, b: Shape, f: np.ndarray, consistent: np.ndarray) -
         return f
     anchors, da = farthest_witnesses(a, np.flatnonzero(label == core), N_ANCHORS)
     db = distance_fields(b, f[anchors])
-    good = agree(da[:, anchors], db[:, f[anchors]]).mean(axis=1) >= 0.5
-    if good.sum() >= 4:
-        anchors, da, db = anchors[good], da[good], db[good]
+    anchors, da, db = drop_disagreeing_anchors(f, anchors, da, db)
     # Regions of other mesh components than the anchors' have no distances to compare.
     others = [c for c in others if np.isfinite(da[:, label == c]).all()]
     if not others:
         return f
-    db = np.where(np.isfinite(db), db, 4.0)
+    db = reachable(db)
     placement = AnchorPlacement(da, db)
     owner = None
     g = f.copy()

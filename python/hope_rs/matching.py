@@ -139,7 +139,6 @@ def match(
     options = {
         "schedule": schedule, "max_passes": max_passes, "min_consistent": min_consistent,
         "top_k": top_k, "polish_k": polish_k, "global_step": global_step, "callback": callback,
-        "spectral": spectral,
     }  # fmt: skip
     coarse = None
     t = time.perf_counter()
@@ -152,8 +151,8 @@ def match(
         # (28k) a pass on the coarse copies as well left 9.3% exact / 0.0214 in 27.4 s, against
         # 27.2% / 0.0182 in 22.8 s with the fine pass only; on FAUST subdivided to 110k, where
         # the fine shapes are too large for it, the coarse pass took 0.0131 to 0.0116 (with a 20 → 100 basis).
-        options["spectral"] = spectral and not applies(sa, sb)
-        coarse, f0 = coarse_start(sa, sb, init, k_max=k_max, **options)
+        coarse_spectral = spectral and not applies(sa, sb)
+        coarse, f0 = coarse_start(sa, sb, init, k_max=k_max, spectral=coarse_spectral, **options)
         timings["coarse"] = time.perf_counter() - t
         options["max_passes"] = min(max_passes, FINE_PASSES)
     elif isinstance(init, str):
@@ -167,7 +166,6 @@ def match(
     else:
         f0 = init
     t = time.perf_counter()
-    options.pop("spectral")
     res = refine(sa, sb, f0, **options)
     timings["refine"] = time.perf_counter() - t
     f, hope_map = res.map, None

@@ -26,7 +26,7 @@ import scipy.linalg
 import scipy.sparse as sp
 
 from ._blas import single_threaded_blas
-from .anchors import N_ANCHORS, distance_fields, farthest_witnesses
+from .anchors import N_ANCHORS, distance_fields, farthest_witnesses, reachable
 from .initial import _nearest_one
 from .lmd import MIN_CONSISTENT, local_map_distortion
 from .shape import Shape
@@ -269,8 +269,7 @@ def long_range_discrepancy(
     anchors, da = farthest_witnesses(a, cand, N_ANCHORS)
     db = distance_fields(b, h[anchors])
     seen = np.isfinite(da)  # anchors in other components of A say nothing
-    far = 4.0  # unreachable on B counts as far, not infinitely far
-    db = np.where(np.isfinite(db), db, far)
+    db = reachable(db)
     out = []
     for m in maps:
         err = np.abs(da - db[:, m])
