@@ -9,6 +9,7 @@ pub mod graph;
 pub mod khop;
 pub mod lmd;
 pub mod memory;
+pub mod nearest;
 pub mod overlap;
 pub mod pairing;
 pub mod shot;

@@ -620,6 +620,47 @@ fn py_shot_descriptors<'py>(
     Ok(owned(py, &d))
 }
 
+/// Rows of a 2-D float32 array, flattened and owned, with the row length.
+fn f32_rows(a: &PyReadonlyArray2<'_, f32>) -> (Vec<f32>, usize) {
+    let v = a.as_array();
+    let flat = match v.as_slice() {
+        Some(s) => s.to_vec(),
+        None => v.iter().copied().collect(),
+    };
+    (flat, v.ncols())
+}
+
+/// For each query row, its nearest candidate row of `base` (see `nearest.rs`).
+#[pyfunction]
+#[pyo3(name = "nearest_among")]
+fn py_nearest_among<'py>(
+    py: Python<'py>,
+    query: PyReadonlyArray2<'py, f32>,
+    base: PyReadonlyArray2<'py, f32>,
+    cand: PyReadonlyArray2<'py, i64>,
+) -> PyResult<Bound<'py, PyArray1<i64>>> {
+    let (q, dim) = f32_rows(&query);
+    let (b, dim_b) = f32_rows(&base);
+    let c = cand.as_array();
+    if dim != dim_b || c.nrows() != query.as_array().nrows() {
+        return Err(PyValueError::new_err(format!(
+            "query (n, d), base (m, d) and cand (n, c) must agree, got {:?}, {:?} and {:?}",
+            query.as_array().shape(),
+            base.as_array().shape(),
+            cand.as_array().shape()
+        )));
+    }
+    let m = c.ncols();
+    let c: Vec<u32> = c
+        .iter()
+        .map(|&x| u32::try_from(x))
+        .collect::<Result<_, _>>()
+        .map_err(|_| PyValueError::new_err("cand holds a negative or too large index"))?;
+    let best = detached(py, || crate::nearest::nearest_among(&q, &b, dim, &c, m))?;
+    let best: Vec<i64> = best.into_iter().map(i64::from).collect();
+    Ok(owned(py, &best))
+}
+
 /// Paired row and column indices.
 type PairsOut<'py> = (Bound<'py, PyArray1<i64>>, Bound<'py, PyArray1<i64>>);
 
@@ -656,5 +697,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(py_auction_assignment_float, m)?)?;
     m.add_function(wrap_pyfunction!(py_shot_descriptors, m)?)?;
     m.add_function(wrap_pyfunction!(greedy_pairs, m)?)?;
+    m.add_function(wrap_pyfunction!(py_nearest_among, m)?)?;
     Ok(())
 }

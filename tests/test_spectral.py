@@ -42,6 +42,29 @@ def test_nearest_rows_is_the_exhaustive_nearest_neighbour():
     np.testing.assert_array_equal(S.nearest_rows(x, y), cdist(x, y).argmin(axis=1))
 
 
+def test_nearest_among_candidates_matches_numpy_and_rejects_bad_input():
+    from hope_rs import _core
+
+    rng = np.random.default_rng(1)
+    q = rng.normal(size=(700, 23)).astype(np.float32)
+    base = rng.normal(size=(400, 23)).astype(np.float32)
+    cand = rng.integers(0, 400, size=(700, 9))
+    d = ((base[cand] - q[:, None, :]) ** 2).sum(axis=2)
+    want = cand[np.arange(700), d.argmin(axis=1)]
+    np.testing.assert_array_equal(_core.nearest_among(q, base, cand), want)
+    # A strided (non-contiguous) query gives the same answer.
+    wide = np.repeat(q, 2, axis=1)[:, ::2]
+    np.testing.assert_array_equal(_core.nearest_among(wide, base, cand), want)
+    for args in [
+        (q, base, np.where(cand == cand[0, 0], 400, cand)),  # out of range
+        (q, base, -cand - 1),  # negative
+        (q, base[:, :5], cand),  # dimensions differ
+        (q[:10], base, cand),  # one candidate row per query
+    ]:
+        with pytest.raises(ValueError):
+            _core.nearest_among(*args)
+
+
 def test_functional_map_of_an_orthonormal_basis_is_its_projection():
     rng = np.random.default_rng(1)
     mass = rng.uniform(0.5, 2.0, 400)

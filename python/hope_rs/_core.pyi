@@ -96,3 +96,8 @@ def greedy_pairs(
     capacity: npt.NDArray[np.int64],
     n_cols: int,
 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]: ...
+def nearest_among(
+    query: npt.NDArray[np.float32],
+    base: npt.NDArray[np.float32],
+    cand: npt.NDArray[np.int64],
+) -> npt.NDArray[np.int64]: ...

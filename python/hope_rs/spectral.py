@@ -25,6 +25,7 @@ import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
 
+from . import _core
 from ._blas import single_threaded_blas
 from .anchors import N_ANCHORS, distance_fields, farthest_witnesses, reachable
 from .initial import _nearest_one
@@ -167,14 +168,13 @@ class _SpectralNeighbours:
     def best(self, emb_a: np.ndarray, emb_b: np.ndarray, guess: np.ndarray) -> np.ndarray:
         _, cand = self.tree.query(self.points[guess], k=self.k, workers=2)
         cand = cand.reshape(guess.size, -1)
-        ea, eb = emb_a.astype(np.float32), emb_b.astype(np.float32)
-        out = np.empty(guess.size, dtype=np.int64)
-        rows = max(1, (1 << 22) // (cand.shape[1] * eb.shape[1]))  # 16 MB per block
-        for s in range(0, guess.size, rows):
-            c = cand[s : s + rows]
-            d = ((eb[c] - ea[s : s + rows, None, :]) ** 2).sum(axis=2)
-            out[s : s + rows] = c[np.arange(c.shape[0]), d.argmin(axis=1)]
-        return out
+        # In Rust: NumPy gathered an (n, CANDIDATES, k) array per call, 2.7 s of the TOSCA
+        # cat's pass (28k vertices, 22 calls).
+        return _core.nearest_among(
+            np.ascontiguousarray(emb_a, dtype=np.float32),
+            np.ascontiguousarray(emb_b, dtype=np.float32),
+            cand.astype(np.int64, copy=False),
+        )
 
 
 def choose_by_region(
