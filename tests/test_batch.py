@@ -175,7 +175,7 @@ def test_the_spectral_basis_is_cached_once_per_shape_and_reused(folder, tmp_path
         raise AssertionError("the basis should have come from the cache")
 
     monkeypatch.setattr(batch_module, "_SHAPES", type(batch_module._SHAPES)())
-    monkeypatch.setattr(hope_rs.shape, "laplacian_basis_as_numbered", no_eigensolve)
+    monkeypatch.setattr(hope_rs.shape, "spectral_basis_of", no_eigensolve)
     monkeypatch.setattr(hope_rs.descriptors, "laplacian_basis_as_numbered", no_eigensolve)
     again = hope_rs.match_many(shapes, pairs, jobs=1, cache=tmp_path / "c")
     for x, y in zip(first, again):

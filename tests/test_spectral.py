@@ -4,6 +4,7 @@ import warnings
 
 import numpy as np
 import pytest
+import scipy.linalg
 from conftest import data_path, relabel
 from meshes import bumpy_sphere
 from scipy.spatial.distance import cdist
@@ -186,6 +187,55 @@ def write_off(path, m: hope_rs.Mesh) -> None:
     lines += [f"{x!r} {y!r} {z!r}\n" for x, y, z in m.vertices.tolist()]
     lines += [f"3 {i} {j} {k}\n" for i, j, k in m.faces.tolist()]
     path.write_text("".join(lines))
+
+
+def test_a_dense_mesh_gets_its_basis_from_its_coarse_copy():
+    from hope_rs import descriptors as DS
+    from hope_rs.multiscale import coarse_mesh
+
+    mesh = hope_rs.Shape(hope_rs.Mesh(*bumpy_sphere(15000, 3))).internal
+    coarse = coarse_mesh(mesh)
+    assert coarse is not None and coarse.mesh.n_vertices < mesh.n_vertices / 2
+    k = 40
+    w, v, mass = DS.laplacian_basis_from_coarse(mesh, coarse.owner, coarse.mesh, k)
+    w0, v0, mass0 = DS.laplacian_basis_as_numbered(mesh, k)
+    np.testing.assert_allclose(mass, mass0)
+    # Mass-orthonormal, and spanning the exact eigenvectors' subspaces (up to a degenerate
+    # cluster at the cut-off, hence 30 of 40), with eigenvalues close to the exact ones.
+    np.testing.assert_allclose(v.T @ (mass[:, None] * v), np.eye(k), atol=1e-8)
+    for m in (10, 30):
+        captured = np.linalg.norm(v0[:, :m].T @ (mass[:, None] * v)) ** 2 / m
+        assert captured > 0.999, (m, captured)
+    np.testing.assert_allclose(w[1:30], w0[1:30], rtol=1e-3)
+    # The coarse eigenvectors merely copied to the fine vertices span nearly the same
+    # subspace, but their steps between coarse cells carry energy: their Ritz values are far
+    # off, and the fine iterations are what remove it.
+    import robust_laplacian
+
+    lap, _ = robust_laplacian.mesh_laplacian(mesh.vertices / mesh.scale, mesh.faces)
+    _, vc, _ = DS.laplacian_basis_as_numbered(coarse.mesh, k)
+    raw = vc[coarse.owner]
+    ritz = scipy.linalg.eigh(raw.T @ (lap @ raw), raw.T @ (mass[:, None] * raw), eigvals_only=True)
+    assert np.median(ritz[1:30] / w0[1:30]) > 1.1
+
+
+def test_the_basis_falls_back_to_arpack_when_the_coarse_route_fails(monkeypatch):
+    from hope_rs import descriptors as DS
+
+    mesh = hope_rs.Shape(hope_rs.Mesh(*bumpy_sphere(15000, 3))).internal
+
+    def collapse(*args):
+        raise RuntimeError("the coarse-seeded eigenbasis collapsed")
+
+    monkeypatch.setattr(DS, "laplacian_basis_from_coarse", collapse)
+    v = DS.spectral_basis_of(mesh, 12)[1]
+    v0 = DS.laplacian_basis_as_numbered(mesh, 12)[1]
+    np.testing.assert_array_equal(v, v0)
+    # A mesh without a coarse copy goes to ARPACK directly.
+    small = hope_rs.Shape(hope_rs.Mesh(*bumpy_sphere(3000, 3))).internal
+    np.testing.assert_array_equal(
+        DS.spectral_basis_of(small, 12)[1], DS.laplacian_basis_as_numbered(small, 12)[1]
+    )
 
 
 def test_cli_and_batch_no_spectral_flags(tmp_path, capsys):

@@ -93,7 +93,9 @@ def descriptor_params(kind: str) -> dict:
 def basis_params() -> dict:
     from .spectral import K_END
 
-    return {"k": K_END, "numbering": "morton"}
+    # "solver": bases of dense meshes now come from their coarse copies (see
+    # descriptors.spectral_basis_of); entries stored before were exact ARPACK bases.
+    return {"k": K_END, "numbering": "morton", "solver": "coarse-seeded"}
 
 
 def _atomic_save(path: Path, arrays: dict[str, np.ndarray]) -> None:
@@ -196,7 +198,7 @@ class ShapeCache:
         internal numbering of :class:`~hope_rs.Shape`): read, or with ``compute`` computed and
         stored. ``None`` when absent and not computed, or when the eigensolver fails (the pass
         then tries again, and warns, in the worker that needs it)."""
-        from .descriptors import laplacian_basis_as_numbered
+        from .descriptors import spectral_basis_of
         from .numbering import canonical_mesh
 
         params = basis_params()
@@ -206,7 +208,7 @@ class ShapeCache:
         if not compute:
             return None
         try:
-            _, vecs, mass = laplacian_basis_as_numbered(canonical_mesh(mesh)[0], params["k"])
+            _, vecs, mass = spectral_basis_of(canonical_mesh(mesh)[0], params["k"])
         except (RuntimeError, ValueError):  # ARPACK did not converge, a singular factorisation
             return None
         self.put(digest, "basis", params, {"vecs": vecs, "mass": mass})

@@ -107,6 +107,82 @@ def laplacian_basis_as_numbered(mesh: Mesh, k: int) -> tuple[np.ndarray, np.ndar
     return np.maximum(evals[by_value], 0.0), evecs[:, by_value], np.asarray(M.diagonal())
 
 
+#: Coarse eigenpairs beyond the ``k`` asked for in :func:`laplacian_basis_from_coarse`: the
+#: Rayleigh–Ritz step then has room to sort out the top of the spectrum.
+COARSE_EXTRA = 20
+#: Steps of shifted inverse iteration on the fine mesh in :func:`laplacian_basis_from_coarse`.
+#: On the TOSCA cat (28k vertices, coarse copy 8k, k = 120): one step left a median relative
+#: residual of 0.10, two of 0.010.
+COARSE_ITERATIONS = 2
+#: The fine iteration's shift, as a fraction of the largest coarse eigenvalue: small enough to
+#: damp the prolongation's high frequencies strongly, large enough that the constant function
+#: does not swamp the other columns (a shift of -1e-8, as in the exact solve, left one column
+#: after two steps).
+COARSE_SHIFT = 0.05
+
+
+def laplacian_basis_from_coarse(
+    mesh: Mesh, owner: np.ndarray, coarse: Mesh, k: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`laplacian_basis_as_numbered` approximated from a coarse copy of ``mesh``
+    (``owner[i]``: the vertex of ``coarse`` that fine vertex ``i`` belongs to).
+
+    The coarse eigenvectors, copied to the fine vertices, span nearly the right subspace but
+    are piecewise constant; :data:`COARSE_ITERATIONS` steps of shifted inverse iteration on
+    the fine Laplacian (one sparse factorisation, block solves) smooth them, and a
+    Rayleigh–Ritz step turns the subspace into mass-orthonormal approximate eigenvectors. On
+    the TOSCA cat (28k vertices): 3.2 s instead of 5-6 s for ARPACK on the fine mesh, the first
+    20, 60 and 120 exact eigenvectors lie in the approximate ones' span to 4 decimals,
+    eigenvalues within 1.6%, and the spectral pass gave the same accuracy (42.3% exact / 0.0147
+    against 42.6% / 0.0145). Raises ``RuntimeError`` when the subspace collapses.
+    """
+    import robust_laplacian
+    import scipy.sparse.linalg as sla
+
+    k = int(min(k, mesh.n_vertices - 2))
+    p = int(min(k + COARSE_EXTRA, coarse.n_vertices - 2))
+    if p < k:
+        raise RuntimeError(f"the coarse copy ({coarse.n_vertices} vertices) is too small for {k}")
+    evals_c, evecs_c, _ = laplacian_basis_as_numbered(coarse, p)
+    L, M = robust_laplacian.mesh_laplacian(mesh.vertices / mesh.scale, mesh.faces)
+    shift = COARSE_SHIFT * max(float(evals_c[-1]), 1e-8)
+    lu = sla.splu((L + shift * M).tocsc())
+    v = evecs_c[owner]
+    for _ in range(COARSE_ITERATIONS):
+        v = lu.solve(np.asfortranarray(M @ v))
+        # Rayleigh–Ritz, robust to a nearly dependent block: orthonormalise through the
+        # eigenvectors of the mass Gram matrix, dropping directions it cannot resolve.
+        gram_m = v.T @ (M @ v)
+        d, q = np.linalg.eigh(0.5 * (gram_m + gram_m.T))
+        keep = d > 1e-10 * d[-1]
+        t = q[:, keep] / np.sqrt(d[keep])
+        gram_l = t.T @ (v.T @ (L @ v)) @ t
+        w, y = np.linalg.eigh(0.5 * (gram_l + gram_l.T))
+        v = v @ (t @ y)
+    if v.shape[1] < k or not np.all(np.isfinite(v[:, :k])):
+        raise RuntimeError("the coarse-seeded eigenbasis collapsed")
+    return np.maximum(w[:k], 0.0), v[:, :k], np.asarray(M.diagonal())
+
+
+def spectral_basis_of(mesh: Mesh, k: int, *, coarse=False) -> tuple:
+    """The spectral pass's eigenpairs ``(evals, evecs, mass)`` of ``mesh``: from its coarse
+    copy when the mesh is dense enough to have one (:func:`laplacian_basis_from_coarse`),
+    otherwise, or should that fail, by ARPACK on the mesh itself
+    (:func:`laplacian_basis_as_numbered`). ``coarse``: the
+    :class:`~hope_rs.multiscale.Coarse` copy if known, ``None`` if known not to exist, ``False``
+    to build it here."""
+    if coarse is False:
+        from .multiscale import coarse_mesh
+
+        coarse = coarse_mesh(mesh)
+    if coarse is not None:
+        try:
+            return laplacian_basis_from_coarse(mesh, coarse.owner, coarse.mesh, k)
+        except (RuntimeError, np.linalg.LinAlgError):
+            pass
+    return laplacian_basis_as_numbered(mesh, k)
+
+
 def hks(evals: np.ndarray, evecs: np.ndarray, n_scales: int = 100) -> np.ndarray:
     """Heat kernel signature at log-spaced times (Sun et al. 2009), each scale normalised."""
     lam = evals[1:] if evals[0] < 1e-10 else evals
