@@ -210,9 +210,7 @@ def test_a_dense_mesh_gets_its_basis_from_its_coarse_copy():
     # The coarse eigenvectors merely copied to the fine vertices span nearly the same
     # subspace, but their steps between coarse cells carry energy: their Ritz values are far
     # off, and the fine iterations are what remove it.
-    import robust_laplacian
-
-    lap, _ = robust_laplacian.mesh_laplacian(mesh.vertices / mesh.scale, mesh.faces)
+    lap, _ = DS._unit_area_laplacian(mesh)
     _, vc, _ = DS.laplacian_basis_as_numbered(coarse.mesh, k)
     raw = vc[coarse.owner]
     ritz = scipy.linalg.eigh(raw.T @ (lap @ raw), raw.T @ (mass[:, None] * raw), eigvals_only=True)

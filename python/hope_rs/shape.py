@@ -130,18 +130,13 @@ class Shape:
         than ``k + 2`` vertices."""
         have = 0 if self._basis is None else self._basis[0].shape[1]
         if have < min(k, self.n_vertices - 2):
-            _, evecs, mass = self._solve_basis(k)
+            # The multiscale coarse copy, when built already, seeds the basis.
+            coarse = self._coarse if self._coarse in (False, None) else self._coarse[0]
+            _, evecs, mass = spectral_basis_of(self.internal, k, coarse=coarse)
             self._basis = (evecs, mass)
         assert self._basis is not None
         evecs, mass = self._basis
         return evecs[:, :k], mass
-
-    def _solve_basis(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The eigenpairs of :meth:`spectral_basis` (see
-        :func:`~hope_rs.descriptors.spectral_basis_of`), reusing the multiscale coarse copy when
-        it is built already."""
-        coarse = self._coarse if self._coarse in (False, None) else self._coarse[0]
-        return spectral_basis_of(self.internal, k, coarse=coarse)
 
     def set_spectral_basis(self, evecs: np.ndarray, mass: np.ndarray) -> None:
         """Store the eigenbasis of :meth:`spectral_basis` computed elsewhere (e.g. read from a
