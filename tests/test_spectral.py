@@ -1,5 +1,6 @@
 """The spectral pass after HOPE: ZoomOut from HOPE's map and the per-region choice."""
 
+import threading
 import warnings
 
 import numpy as np
@@ -11,6 +12,7 @@ from scipy.spatial.distance import cdist
 
 import hope_rs
 from hope_rs import spectral as S
+from hope_rs._blas import single_threaded_blas
 from hope_rs.datasets import Pair
 
 
@@ -64,6 +66,21 @@ def test_nearest_among_candidates_matches_numpy_and_rejects_bad_input():
     ]:
         with pytest.raises(ValueError):
             _core.nearest_among(*args)
+
+
+def test_spectral_neighbours_search_the_k_nearest_vertices_of_each_guess():
+    from scipy.spatial import cKDTree
+
+    b = hope_rs.Shape(hope_rs.Mesh(*bumpy_sphere(800, 2)))
+    rng = np.random.default_rng(0)
+    ea, eb = rng.normal(size=(300, 6)), rng.normal(size=(b.n_vertices, 6))
+    guess = rng.integers(0, b.n_vertices, 300)
+    near = S._SpectralNeighbours(b)
+    for k in (8, 64, 8, 5000):  # the table of spatial neighbours grows once, then is sliced
+        _, cand = cKDTree(b.points).query(b.points[guess], k=min(k, b.n_vertices))
+        d = ((ea[:, None, :] - eb[cand]) ** 2).sum(-1)
+        expect = cand[np.arange(guess.size), d.argmin(1)]
+        np.testing.assert_array_equal(near.best(ea, eb, guess, k), expect)
 
 
 def test_functional_map_of_an_orthonormal_basis_is_its_projection():
@@ -174,6 +191,56 @@ def test_a_failed_eigensolve_keeps_hope_map_with_a_warning(monkeypatch):
     np.testing.assert_array_equal(res.map, hope_rs.match(a, b, max_passes=1, spectral=False).map)
 
 
+class _NoPrefetch:
+    """Stands in for BasisPrefetch: the bases are then solved after the refinement."""
+
+    def __init__(self, a, b):
+        pass
+
+    def start(self):
+        return self
+
+    def finish(self):
+        pass
+
+
+def test_bases_solved_during_the_refinement_give_the_same_match(monkeypatch):
+    a = hope_rs.Mesh(*bumpy_sphere(1500, 1))
+    b = hope_rs.Mesh(*bumpy_sphere(1400, 2))
+    sa, sb = hope_rs.Shape(a), hope_rs.Shape(b)
+    res = hope_rs.match(sa, sb, max_passes=2)
+    assert res.hope_map is not None
+    # The thread stored both bases, and they are the bits a solve in this thread gives.
+    for s in (sa, sb):
+        assert s.has_spectral_basis(S.K_END)
+        np.testing.assert_array_equal(
+            s.spectral_basis(S.K_END)[0], s.solve_spectral_basis(S.K_END)[0]
+        )
+    assert S.BasisPrefetch(sa, hope_rs.Shape(a)).shapes != S.BasisPrefetch(sa, sa).shapes == []
+    monkeypatch.setattr(hope_rs.matching, "BasisPrefetch", _NoPrefetch)
+    after = hope_rs.match(a, b, max_passes=2)
+    np.testing.assert_array_equal(after.map, res.map)
+    np.testing.assert_array_equal(after.hope_map, res.hope_map)
+    monkeypatch.undo()
+
+    # A solve that fails in the thread is solved again afterwards, without a warning.
+    solve = hope_rs.Shape.solve_spectral_basis
+    off_main = []
+
+    def fails_off_the_main_thread(self, k):
+        if threading.current_thread() is not threading.main_thread():
+            off_main.append(k)
+            raise RuntimeError("ARPACK error -9999")
+        return solve(self, k)
+
+    monkeypatch.setattr(hope_rs.Shape, "solve_spectral_basis", fails_off_the_main_thread)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        again = hope_rs.match(a, b, max_passes=2)
+    assert off_main == [S.K_END]
+    np.testing.assert_array_equal(again.map, res.map)
+
+
 def test_spectral_basis_is_cached_and_mass_orthonormal(faust_pair):
     s = hope_rs.Shape(faust_pair[0])
     phi, mass = s.spectral_basis(30)
@@ -227,13 +294,15 @@ def test_the_basis_falls_back_to_arpack_when_the_coarse_route_fails(monkeypatch)
 
     monkeypatch.setattr(DS, "laplacian_basis_from_coarse", collapse)
     v = DS.spectral_basis_of(mesh, 12)[1]
-    v0 = DS.laplacian_basis_as_numbered(mesh, 12)[1]
+    # spectral_basis_of solves on one BLAS thread (the bits depend on the thread count).
+    with single_threaded_blas():
+        v0 = DS.laplacian_basis_as_numbered(mesh, 12)[1]
     np.testing.assert_array_equal(v, v0)
     # A mesh without a coarse copy goes to ARPACK directly.
     small = hope_rs.Shape(hope_rs.Mesh(*bumpy_sphere(3000, 3))).internal
-    np.testing.assert_array_equal(
-        DS.spectral_basis_of(small, 12)[1], DS.laplacian_basis_as_numbered(small, 12)[1]
-    )
+    with single_threaded_blas():
+        v0 = DS.laplacian_basis_as_numbered(small, 12)[1]
+    np.testing.assert_array_equal(DS.spectral_basis_of(small, 12)[1], v0)
 
 
 def test_cli_and_batch_no_spectral_flags(tmp_path, capsys):

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ._blas import single_threaded_blas
 from ._validate import as_index_map
 from .descriptors import check_kind
 from .initial import shapes_initial_map
@@ -14,7 +15,7 @@ from .lmd import MIN_CONSISTENT
 from .mesh import Mesh
 from .refine import MAX_PASSES, POLISH_K, TOP_K, Iteration, refine
 from .shape import K_MAX, Shape
-from .spectral import applies, spectral_refine
+from .spectral import BasisPrefetch, applies, spectral_refine
 
 
 @dataclass
@@ -32,7 +33,8 @@ class MatchResult:
         Per refinement step: k, witness fraction, vertices changed, seconds.
     timings : dict
         Seconds per stage ("shapes", "descriptors", "init" or, with ``multiscale``,
-        "coarse"; "refine", "spectral", "total").
+        "coarse"; "refine", "spectral", "total"). The spectral pass's eigenbases are solved
+        in a background thread during "refine" and count there.
     coarse : MatchResult or None
         With ``multiscale``, the match of the coarse copies.
     hope_map : (n_a,) int64 or None
@@ -166,7 +168,14 @@ def match(
     else:
         f0 = init
     t = time.perf_counter()
-    res = refine(sa, sb, f0, **options)
+    if spectral and applies(sa, sb):
+        # One BLAS thread from before the solves start to after they end (see BasisPrefetch).
+        with single_threaded_blas():
+            prefetch = BasisPrefetch(sa, sb).start()
+            res = refine(sa, sb, f0, **options)
+            prefetch.finish()
+    else:
+        res = refine(sa, sb, f0, **options)
     timings["refine"] = time.perf_counter() - t
     f, hope_map = res.map, None
     if spectral:

@@ -128,15 +128,23 @@ class Shape:
         area and its lumped vertex masses ``(n,)``, in the internal numbering; computed once
         (again only when a larger ``k`` is asked for). Fewer columns when the mesh has fewer
         than ``k + 2`` vertices."""
-        have = 0 if self._basis is None else self._basis[0].shape[1]
-        if have < min(k, self.n_vertices - 2):
-            # The multiscale coarse copy, when built already, seeds the basis.
-            coarse = self._coarse if self._coarse in (False, None) else self._coarse[0]
-            _, evecs, mass = spectral_basis_of(self.internal, k, coarse=coarse)
-            self._basis = (evecs, mass)
+        if not self.has_spectral_basis(k):
+            self._basis = self.solve_spectral_basis(k)
         assert self._basis is not None
         evecs, mass = self._basis
         return evecs[:, :k], mass
+
+    def has_spectral_basis(self, k: int) -> bool:
+        """Whether :meth:`spectral_basis` has ``k`` columns (or all there can be) at hand."""
+        have = 0 if self._basis is None else self._basis[0].shape[1]
+        return have >= min(k, self.n_vertices - 2)
+
+    def solve_spectral_basis(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`spectral_basis`'s ``(evecs, mass)`` solved afresh, without storing them."""
+        # The multiscale coarse copy, when built already, seeds the basis.
+        coarse = self._coarse if self._coarse in (False, None) else self._coarse[0]
+        _, evecs, mass = spectral_basis_of(self.internal, k, coarse=coarse)
+        return evecs, mass
 
     def set_spectral_basis(self, evecs: np.ndarray, mass: np.ndarray) -> None:
         """Store the eigenbasis of :meth:`spectral_basis` computed elsewhere (e.g. read from a
