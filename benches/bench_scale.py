@@ -95,8 +95,7 @@ def run_case(name: str, data: Path, multiscale: bool = False, spectral: bool = T
     ``match(..., multiscale=True)``), and "init" is empty. ``spectral``: as in ``match``."""
     import hope_rs
     from hope_rs.initial import shapes_initial_map
-    from hope_rs.refine import refine
-    from hope_rs.spectral import applies, spectral_refine
+    from hope_rs.spectral import applies, refine_while_solving_bases, spectral_refine
 
     folder, a, b, target = CASES[name]
     ma = hope_rs.load_mesh(data / folder / f"{a}.off")
@@ -130,7 +129,7 @@ def run_case(name: str, data: Path, multiscale: bool = False, spectral: bool = T
         t["init"] = 0.0
         sampler.mark("init")
         t1 = time.perf_counter()
-        res = refine(sa, sb, f0, max_passes=FINE_PASSES)
+        res = refine_while_solving_bases(sa, sb, f0, spectral, max_passes=FINE_PASSES)
     else:
         da, db = sa.internal_descriptors("shot"), sb.internal_descriptors("shot")
         t["descriptors"] = time.perf_counter() - t1
@@ -140,7 +139,7 @@ def run_case(name: str, data: Path, multiscale: bool = False, spectral: bool = T
         t["init"] = time.perf_counter() - t1
         sampler.mark("init")
         t1 = time.perf_counter()
-        res = refine(sa, sb, f0)
+        res = refine_while_solving_bases(sa, sb, f0, spectral)
     t["refine"] = time.perf_counter() - t1
     sampler.mark("refine")
     t1 = time.perf_counter()

@@ -217,7 +217,7 @@ def test_bases_solved_during_the_refinement_give_the_same_match(monkeypatch):
             s.spectral_basis(S.K_END)[0], s.solve_spectral_basis(S.K_END)[0]
         )
     assert S.BasisPrefetch(sa, hope_rs.Shape(a)).shapes != S.BasisPrefetch(sa, sa).shapes == []
-    monkeypatch.setattr(hope_rs.matching, "BasisPrefetch", _NoPrefetch)
+    monkeypatch.setattr(S, "BasisPrefetch", _NoPrefetch)
     after = hope_rs.match(a, b, max_passes=2)
     np.testing.assert_array_equal(after.map, res.map)
     np.testing.assert_array_equal(after.hope_map, res.hope_map)

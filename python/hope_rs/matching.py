@@ -7,15 +7,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._blas import single_threaded_blas
 from ._validate import as_index_map
 from .descriptors import check_kind
 from .initial import shapes_initial_map
 from .lmd import MIN_CONSISTENT
 from .mesh import Mesh
-from .refine import MAX_PASSES, POLISH_K, TOP_K, Iteration, refine
+from .refine import MAX_PASSES, POLISH_K, TOP_K, Iteration
 from .shape import K_MAX, Shape
-from .spectral import BasisPrefetch, applies, spectral_refine
+from .spectral import applies, refine_while_solving_bases, spectral_refine
 
 
 @dataclass
@@ -168,14 +167,7 @@ def match(
     else:
         f0 = init
     t = time.perf_counter()
-    if spectral and applies(sa, sb):
-        # One BLAS thread from before the solves start to after they end (see BasisPrefetch).
-        with single_threaded_blas():
-            prefetch = BasisPrefetch(sa, sb).start()
-            res = refine(sa, sb, f0, **options)
-            prefetch.finish()
-    else:
-        res = refine(sa, sb, f0, **options)
+    res = refine_while_solving_bases(sa, sb, f0, spectral, **options)
     timings["refine"] = time.perf_counter() - t
     f, hope_map = res.map, None
     if spectral:

@@ -297,6 +297,24 @@ class BasisPrefetch:
             self.shapes[i].set_spectral_basis(evecs, mass)
 
 
+def refine_while_solving_bases(
+    a: Shape, b: Shape, f0: np.ndarray, spectral: bool = True, **options
+):
+    """:func:`hope_rs.refine.refine` of ``f0``, with both shapes' eigenbases for
+    :func:`spectral_refine` solved meanwhile (:class:`BasisPrefetch`) when ``spectral`` and the
+    pass applies to these shapes; the refinement's result."""
+    from .refine import refine
+
+    if not (spectral and applies(a, b)):
+        return refine(a, b, f0, **options)
+    # One BLAS thread from before the solves start to after they end (see BasisPrefetch).
+    with single_threaded_blas():
+        prefetch = BasisPrefetch(a, b).start()
+        res = refine(a, b, f0, **options)
+        prefetch.finish()
+    return res
+
+
 def spectral_refine(a: Shape, b: Shape, h: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
     """(the map chosen by region between ``h`` and ZoomOut from it, the ZoomOut map), maps in
     internal numbering. The ZoomOut map is ``None``, and ``h`` is returned unchanged, when a
