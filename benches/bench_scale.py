@@ -120,7 +120,7 @@ def run_case(name: str, data: Path, multiscale: bool = False, spectral: bool = T
     t1 = time.perf_counter()
     # As in match: shapes too coarse to halve take the default path.
     if multiscale and sa.coarse_level() is not None and sb.coarse_level() is not None:
-        from hope_rs.multiscale import FINE_PASSES, coarse_start
+        from hope_rs.multiscale import coarse_start, fine_passes
 
         coarse_spectral = spectral and not applies(sa, sb)  # as in match
         f0 = coarse_start(sa, sb, "shot", spectral=coarse_spectral)[1]  # internal numbering
@@ -129,7 +129,8 @@ def run_case(name: str, data: Path, multiscale: bool = False, spectral: bool = T
         t["init"] = 0.0
         sampler.mark("init")
         t1 = time.perf_counter()
-        res = refine_while_solving_bases(sa, sb, f0, spectral, max_passes=FINE_PASSES)
+        passes = fine_passes(sa.n_vertices, sb.n_vertices)
+        res = refine_while_solving_bases(sa, sb, f0, spectral, max_passes=passes)
     else:
         da, db = sa.internal_descriptors("shot"), sb.internal_descriptors("shot")
         t["descriptors"] = time.perf_counter() - t1

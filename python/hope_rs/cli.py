@@ -132,7 +132,7 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument(
         "--multiscale",
         action="store_true",
-        help="for large meshes: match coarse copies first, then one fine pass (faster, less exact)",
+        help="for large meshes: match coarse copies first, then one or two fine passes (faster, less exact)",
     )
     m.add_argument(
         "--no-spectral",
