@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._blas import single_threaded_blas
 from .mesh import Mesh
 from .numbering import canonical_mesh, canonical_order, inverse_permutation
 
@@ -179,8 +180,6 @@ def spectral_basis_of(mesh: Mesh, k: int, *, coarse=False) -> tuple:
     solves in a background thread while HOPE refines (see
     :class:`~hope_rs.spectral.BasisPrefetch`), the batch cache ahead of the pairs. (Alone, one
     thread is slower: 0.68 s against 0.48 s for a 5k shape.)"""
-    from ._blas import single_threaded_blas
-
     with single_threaded_blas():
         return _spectral_basis_of(mesh, k, coarse)
 

@@ -20,6 +20,8 @@ chosen one bends them, as ZoomOut does between a partial shape and a whole one.
 from __future__ import annotations
 
 import os
+import sys
+import threading
 import warnings
 
 import numpy as np
@@ -31,6 +33,7 @@ from ._blas import single_threaded_blas
 from .anchors import N_ANCHORS, distance_fields, farthest_witnesses, reachable
 from .initial import _nearest_one
 from .lmd import MIN_CONSISTENT, local_map_distortion
+from .refine import RefineResult, refine
 from .shape import Shape
 
 #: ZoomOut's basis sizes: from K_START to K_END eigenfunctions in steps of K_STEP. On the 63
@@ -262,8 +265,6 @@ class BasisPrefetch:
     """
 
     def __init__(self, a: Shape, b: Shape, k: int = K_END):
-        import threading
-
         self.shapes = [s for s in dict.fromkeys((a, b)) if not s.has_spectral_basis(k)]
         self.k = k
         self.results: dict[int, tuple] = {}
@@ -275,9 +276,6 @@ class BasisPrefetch:
         return self
 
     def _run(self) -> None:
-        import sys
-        import threading
-
         if sys.platform.startswith("linux"):
             try:  # on Linux a thread is a task, with its own nice value
                 os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 19)
@@ -299,12 +297,10 @@ class BasisPrefetch:
 
 def refine_while_solving_bases(
     a: Shape, b: Shape, f0: np.ndarray, spectral: bool = True, **options
-):
+) -> RefineResult:
     """:func:`hope_rs.refine.refine` of ``f0``, with both shapes' eigenbases for
     :func:`spectral_refine` solved meanwhile (:class:`BasisPrefetch`) when ``spectral`` and the
     pass applies to these shapes; the refinement's result."""
-    from .refine import refine
-
     if not (spectral and applies(a, b)):
         return refine(a, b, f0, **options)
     # One BLAS thread from before the solves start to after they end (see BasisPrefetch).
