@@ -267,7 +267,7 @@ class BasisPrefetch:
     def __init__(self, a: Shape, b: Shape, k: int = K_END):
         self.shapes = [s for s in dict.fromkeys((a, b)) if not s.has_spectral_basis(k)]
         self.k = k
-        self.results: dict[int, tuple] = {}
+        self.solved: list[tuple[Shape, tuple[np.ndarray, np.ndarray]]] = []
         self.thread = threading.Thread(target=self._run, name="hope_rs-eigenbases", daemon=True)
 
     def start(self) -> BasisPrefetch:
@@ -281,9 +281,9 @@ class BasisPrefetch:
                 os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 19)
             except OSError:
                 pass
-        for i, s in enumerate(self.shapes):
+        for s in self.shapes:
             try:
-                self.results[i] = s.solve_spectral_basis(self.k)
+                self.solved.append((s, s.solve_spectral_basis(self.k)))
             except Exception:  # noqa: BLE001 - the caller solves again and reports it
                 return
 
@@ -291,8 +291,8 @@ class BasisPrefetch:
         """Waits for the thread and stores the bases it solved in their shapes."""
         if self.shapes:
             self.thread.join()
-        for i, (evecs, mass) in self.results.items():
-            self.shapes[i].set_spectral_basis(evecs, mass)
+        for s, (evecs, mass) in self.solved:
+            s.set_spectral_basis(evecs, mass)
 
 
 def refine_while_solving_bases(
