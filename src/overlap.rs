@@ -450,13 +450,17 @@ fn avx512_present() -> bool {
     false
 }
 
-/// Intel CPUs, whose AVX-512 scatters run as a few micro-ops per lane.
+/// Intel CPUs, whose AVX-512 scatters run as a few micro-ops per lane. Asked once per process
+/// (CPUID exits to the hypervisor on a virtual machine), like `is_x86_feature_detected!`.
 fn scatter_is_fast() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
-        let id = std::arch::x86_64::__cpuid(0);
-        let vendor = [id.ebx, id.edx, id.ecx].map(u32::to_le_bytes).concat();
-        vendor == b"GenuineIntel"
+        static INTEL: OnceLock<bool> = OnceLock::new();
+        *INTEL.get_or_init(|| {
+            let id = std::arch::x86_64::__cpuid(0);
+            let vendor = [id.ebx, id.edx, id.ecx].map(u32::to_le_bytes).concat();
+            vendor == b"GenuineIntel"
+        })
     }
     #[cfg(not(target_arch = "x86_64"))]
     false
