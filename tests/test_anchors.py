@@ -73,9 +73,10 @@ def test_global_check_finds_wrong_matches_that_are_marked_trusted(faust_pair):
     a, b, truth, bad, f = scrambled_copy(faust_pair[0], 5, 0.2)
     g = anchor_step(a, b, f, np.ones(a.n_vertices, bool), global_check=True)
     np.testing.assert_array_equal(g[~bad], truth[~bad])
-    assert np.mean(g[bad] == truth[bad]) > 0.9
+    assert np.mean(g[bad] == truth[bad]) > 0.85
     # The rest are draws that landed near enough to their true partner to pass the check,
-    # whose tolerance grows with distance (a random draw is typically 0.5 away).
+    # whose tolerance grows with distance, or to stay (a flagged vertex moves only as far as
+    # a mirror image lies, FLAGGED_MIN_SHIFT); a random draw is typically 0.5 away.
     left = np.flatnonzero(bad & (g != truth))
     off = distance_fields(b, truth[left])[np.arange(left.size), g[left]]
     assert off.max() < 0.25, off.max()
