@@ -33,7 +33,9 @@ def default_schedule(k_max: int) -> list[int]:
 #: more than 4 passes), 2.50 -> 2.38 s per pair and 3.75 -> 2.96 s for the slowest; faust_reg 11
 #: of 12 directed pairs 100% exact either way (018 -> 019 85.1% both); the cat 0 -> 6 42.4% /
 #: 0.0146 -> 40.7% / 0.0149 in 25.6 -> 19.2 s, 6 -> 0 37.9% / 0.0162 -> 37.5% / 0.0158 in
-#: 22.2 -> 19.3 s. A limit of 5 changed nothing on the 63 pairs either (0.01943).
+#: 22.2 -> 19.3 s. A limit of 5 changed nothing on the 63 pairs either (0.01943). A limit of 3,
+#: measured after anchors.FLAGGED_MIN_SHIFT: 0.01885 -> 0.01951 (tosca_r 0.0205 -> 0.0225), the
+#: cat 0 -> 6 41.7% -> 39.0% and 6 -> 0 47.8% -> 40.2% exact.
 MAX_PASSES = 4
 #: Stop after a pass that changed fewer than this fraction of the vertices.
 CONVERGED_FRACTION = 0.01
