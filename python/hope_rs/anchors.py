@@ -166,6 +166,8 @@ def anchor_step(
     if flagged is not None:
         keep = ~flagged[moved] | (shift_lower_bound(db, f[moved], place) > FLAGGED_MIN_SHIFT)
         moved, place = moved[keep], place[keep]
+        if moved.size == 0:
+            return f
     g = f.copy()
     g[moved] = place
     return g
