@@ -3,8 +3,7 @@
 A refinement step costs about linearly in the vertex count, and a k-hop ball of a dense mesh
 covers a small patch, so dense pairs run every pass of the schedule (FAUST subdivided to 110k
 vertices: 46 steps, about 130 s; 250k: 55 steps, over 5 minutes, measured with a limit of 6
-passes, now 4). ``match(...,
-multiscale=True)`` instead
+passes, now 4). ``match(..., multiscale=True)`` instead
 
 1. clusters each dense mesh's vertices on a grid of cells at most ``COARSE_SPACING`` ×
    sqrt(area) wide (the Morton grid of :mod:`hope_rs.sites`, whose cells halve until they fit;
