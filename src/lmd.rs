@@ -371,10 +371,7 @@ mod tests {
     }
 
     fn graph<'a>(v: &'a [[f64; 3]], adj: &'a crate::csr::Csr<()>) -> EdgeGraph<'a> {
-        EdgeGraph {
-            vertices: v,
-            adj: adj.view(),
-        }
+        EdgeGraph::new(v, adj.view())
     }
 
     #[test]

@@ -15,6 +15,7 @@ use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArra
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use rayon::prelude::*;
+use std::borrow::Cow;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::{Arc, Mutex};
 
@@ -210,6 +211,8 @@ fn pattern(
 struct MeshGraph {
     vertices: Vec<[f64; 3]>,
     adj: Csr<()>,
+    /// Edge lengths in `adj`'s entry order (see `EdgeGraph::lengths`).
+    lengths: Vec<f64>,
     balls: HopBalls,
     /// 2-ring distances for LMD; `None` when k_max < 2.
     rings: Option<RingDistances>,
@@ -223,6 +226,7 @@ impl MeshGraph {
         EdgeGraph {
             vertices: &self.vertices,
             adj: self.adj.view(),
+            lengths: Cow::Borrowed(&self.lengths),
         }
     }
 
@@ -252,23 +256,22 @@ impl MeshGraph {
     ) -> PyResult<Self> {
         let vertices = points_vec(&vertices)?;
         let faces = faces_vec(&faces)?;
-        let (adj, balls, rings) = detached(py, || {
+        let (adj, lengths, balls, rings) = detached(py, || {
             let adj = adjacency_from_faces(&faces, vertices.len())?;
             let balls = HopBalls::new(&adj.view(), k_max)?;
+            let g = EdgeGraph::new(&vertices, adj.view());
             let rings = if k_max >= 2 {
-                let g = EdgeGraph {
-                    vertices: &vertices,
-                    adj: adj.view(),
-                };
                 Some(RingDistances::new(&g, &balls)?)
             } else {
                 None
             };
-            Ok((adj, balls, rings))
+            let lengths = g.lengths.into_owned();
+            Ok((adj, lengths, balls, rings))
         })?;
         Ok(MeshGraph {
             vertices,
             adj,
+            lengths,
             balls,
             rings,
             lmd_table: Mutex::new(None),

@@ -36,7 +36,11 @@ def nearest_candidates(da: np.ndarray, db: np.ndarray, n: int) -> tuple[np.ndarr
         mu = both.mean(axis=0)
         sample = both[:: max(1, both.shape[0] // 20000)] - mu
         # Eigenvectors of the small d x d covariance: far cheaper than an SVD of the samples.
-        cov = sample.T.astype(np.float64) @ sample
+        # One cast, then ``x.T @ x`` on a single buffer, which NumPy runs as a symmetric
+        # rank-k update: the mixed float64 @ float32 product took 0.2-0.66 s on the TOSCA
+        # cat's 56k x 352 samples, this half of that or less, with the same values.
+        s64 = sample.astype(np.float64)
+        cov = s64.T @ s64
         with single_threaded_blas():
             _, vecs = np.linalg.eigh(cov)
         basis = vecs[:, ::-1][:, :PCA_DIMS].astype(np.float32)
