@@ -353,3 +353,49 @@ def test_a_partial_shape_keeps_hope_map_when_the_spectral_one_bends_distances(
     monkeypatch.setattr(S, "MAX_ZOOMOUT_DISCREPANCY_RATIO", np.inf)
     unchecked = hope_rs.match(sa, sb).map
     assert error(unchecked) > 1.5 * error(res.map)
+
+
+def _zoomout_spy(monkeypatch) -> list[bool]:
+    """Records, per ZoomOut run, whether it ran on the main thread."""
+    on_main = []
+    zoom = S.zoomout
+
+    def spy(*args, **kwargs):
+        on_main.append(threading.current_thread() is threading.main_thread())
+        return zoom(*args, **kwargs)
+
+    monkeypatch.setattr(S, "zoomout", spy)
+    return on_main
+
+
+def test_zoomout_started_during_the_last_pass_is_zoomout_from_that_map(monkeypatch):
+    a = hope_rs.Mesh(*bumpy_sphere(1500, 1))
+    b = hope_rs.Mesh(*bumpy_sphere(1400, 2))
+    sa, sb = hope_rs.Shape(a), hope_rs.Shape(b)
+    monkeypatch.setattr(S, "EARLY_FROM_PASS", 0)  # the one pass of max_passes=1 is the last
+    on_main = _zoomout_spy(monkeypatch)
+    res = hope_rs.match(sa, sb, max_passes=1)
+    assert on_main == [False]  # once, in the background thread
+
+    # The same refinement again, keeping the map the hook saw, and ZoomOut from it afterwards.
+    seen = []
+    f0 = sa.map_in(sb, res.init_map)
+    again = hope_rs.refine.refine(
+        sa, sb, f0, max_passes=1, on_last_pass=lambda f, n: seen.append((f.copy(), n))
+    )
+    assert len(seen) == 1 and seen[0][1] == 0
+    # It saw the map after the first step, not the one the pass ended with.
+    assert not np.array_equal(seen[0][0], again.map)
+    np.testing.assert_array_equal(res.hope_map, sa.map_out(sb, again.map))
+    z = S.zoomout(sa, sb, seen[0][0])
+    f, _ = S.spectral_refine(sa, sb, again.map, z)
+    np.testing.assert_array_equal(res.map, sa.map_out(sb, f))
+
+
+def test_zoomout_waits_for_the_end_when_the_loop_stops_before_the_early_pass(monkeypatch):
+    a = hope_rs.Mesh(*bumpy_sphere(1500, 1))
+    b = hope_rs.Mesh(*bumpy_sphere(1400, 2))
+    on_main = _zoomout_spy(monkeypatch)
+    res = hope_rs.match(a, b, max_passes=2)  # passes 0 and 1, before EARLY_FROM_PASS
+    assert S.EARLY_FROM_PASS >= 2
+    assert on_main == [True] and res.hope_map is not None

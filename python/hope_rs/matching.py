@@ -33,7 +33,8 @@ class MatchResult:
     timings : dict
         Seconds per stage ("shapes", "descriptors", "init" or, with ``multiscale``,
         "coarse"; "refine", "spectral", "total"). The spectral pass's eigenbases are solved
-        in a background thread during "refine" and count there.
+        in a background thread during "refine" and count there, as does its ZoomOut when the
+        refinement reaches its last pass (:class:`~hope_rs.spectral.EarlyZoomOut`).
     coarse : MatchResult or None
         With ``multiscale``, the match of the coarse copies.
     hope_map : (n_a,) int64 or None
@@ -172,7 +173,7 @@ def match(
     f, hope_map = res.map, None
     if spectral:
         t = time.perf_counter()
-        f, z = spectral_refine(sa, sb, res.map)
+        f, z = spectral_refine(sa, sb, res.map, res.early_zoomout)
         if z is not None:
             timings["spectral"] = time.perf_counter() - t
             hope_map = sa.map_out(sb, res.map).astype(np.int64)

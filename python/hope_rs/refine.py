@@ -98,6 +98,9 @@ class Iteration:
 class RefineResult:
     map: np.ndarray
     history: list[Iteration] = field(default_factory=list)
+    #: ZoomOut's map computed while the last pass ran (set by
+    #: :func:`~hope_rs.spectral.refine_while_solving_bases`), else None.
+    early_zoomout: np.ndarray | None = None
 
 
 # BLAS runs only small products here (the global repair's projections); with more than one
@@ -117,6 +120,7 @@ def refine(
     polish_k: int | None = POLISH_K,
     global_step: bool = True,
     callback=None,
+    on_last_pass=None,
 ) -> RefineResult:
     """Refine the map ``f0`` (A → B) with HOPE.
 
@@ -146,6 +150,10 @@ def refine(
     repair also distrusts vertices whose long-range distances disagree (see
     :data:`GLOBAL_CHECK_PASS`), which LMD alone cannot see, and is preceded by a step that
     moves back whole regions mapped to the wrong place (:data:`REGION_CHECK_PASS`).
+
+    ``on_last_pass(f, n_pass)``, if given, is called once the first step of the last pass that
+    ``max_passes`` allows has run, with the map then (internal numbering) and the pass's
+    0-based index; :func:`~hope_rs.spectral.refine_while_solving_bases` starts ZoomOut there.
     """
     k_max = min(a.k_max, b.k_max)
     schedule = list(schedule) if schedule is not None else default_schedule(k_max)
@@ -177,7 +185,7 @@ def refine(
             history.append(Iteration(0, float(w.mean()), changed, time.perf_counter() - t0))
             if callback is not None:
                 callback(history[-1])
-        for k in schedule:
+        for step, k in enumerate(schedule):
             t0 = time.perf_counter()
             w = voters(lmd, f, min_consistent, min_witness_fraction)
             stay = STAY_COUNTS if n_pass >= STAY_PASS and not w.all() else 0
@@ -188,6 +196,8 @@ def refine(
             history.append(Iteration(k, float(w.mean()), changed, time.perf_counter() - t0))
             if callback is not None:
                 callback(history[-1])
+            if on_last_pass is not None and n_pass == max_passes - 1 and step == 0:
+                on_last_pass(f, n_pass)
         if changed_in_pass < CONVERGED_FRACTION * a.n_vertices:
             break
     if polish_k is not None:
