@@ -315,7 +315,8 @@ class BasisPrefetch:
 class EarlyZoomOut:
     """ZoomOut started from the refinement's map partway through its last pass, in a background
     thread: the pass's auctions run on one core, and ZoomOut fills the other. On the TOSCA cat
-    the match took 18.7-20.2 s against 20.6-21.9 s, on 5k remeshed pairs 0.15-0.2 s less.
+    the match took 19.1-19.8 s against 20.6-21.9 s, FAUST remeshed 002->007 2.46-2.52 s against
+    2.73-2.81 s (see :data:`EARLY_FROM_PASS` for the accuracy).
 
     :meth:`start` is the refinement's ``on_last_pass`` hook. The thread first waits for the
     :class:`BasisPrefetch` of the same match; when either basis is missing after it (its solve
