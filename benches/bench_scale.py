@@ -144,7 +144,8 @@ def run_case(name: str, data: Path, multiscale: bool = False, spectral: bool = T
     t["refine"] = time.perf_counter() - t1
     sampler.mark("refine")
     t1 = time.perf_counter()
-    f = spectral_refine(sa, sb, res.map, res.early_zoomout)[0] if spectral else res.map
+    run = spectral and not res.settled  # as hope_rs.match decides
+    f = spectral_refine(sa, sb, res.map, res.early_zoomout)[0] if run else res.map
     t["spectral"] = time.perf_counter() - t1
     sampler.mark("spectral")
     f0, f, res.map = sa.map_out(sb, f0), sa.map_out(sb, f), sa.map_out(sb, res.map)

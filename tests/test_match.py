@@ -159,3 +159,20 @@ def test_stay_keeps_witnesses_unless_the_overlap_clearly_gains():
     assert np.unique(held).size == a.n_vertices
     with pytest.raises(ValueError, match="stay"):
         assign_by_overlap(a, b, 2, f, w, stay=-1)
+
+
+def test_refine_reports_a_settled_map_only_when_nothing_moves():
+    from hope_rs.refine import refine
+
+    s = hope_rs.Shape(hope_rs.Mesh(*bumpy_sphere(800, 3)))
+    exact = np.arange(s.n_vertices)
+    assert refine(s, s, exact).settled
+    wrong = exact.copy()
+    rng = np.random.default_rng(0)
+    moved = rng.choice(s.n_vertices, s.n_vertices // 10, replace=False)
+    wrong[moved] = rng.permutation(moved)
+    once = refine(s, s, wrong, max_passes=1)
+    assert not once.settled  # its only pass moved vertices
+    full = refine(s, s, wrong)
+    np.testing.assert_array_equal(full.map, exact)
+    assert full.settled

@@ -121,7 +121,11 @@ def match(
         geodesic error 0.042 → 0.024), on identically triangulated ones HOPE's exact map stays.
         It costs two Laplace–Beltrami eigenbases (about 0.7 s each at 5k vertices, 4 s at 28k)
         and is skipped when a shape has more than
-        :data:`~hope_rs.spectral.MAX_VERTICES` vertices.
+        :data:`~hope_rs.spectral.MAX_VERTICES` vertices, and when HOPE's map has settled (its
+        last pass and the polish moved no vertex and LMD trusts every vertex; see
+        :attr:`hope_rs.refine.RefineResult.settled`): every faust_reg pair and TOSCA remeshed
+        wolf, whose maps are exact, and no other remeshed pair; there the pass never changed
+        the map and took 0.3-0.6 s.
     callback : callable, optional
         Called with each :class:`~hope_rs.refine.Iteration` as it finishes (of the coarse
         match too, with ``multiscale``).
@@ -171,7 +175,7 @@ def match(
     res = refine_while_solving_bases(sa, sb, f0, spectral, **options)
     timings["refine"] = time.perf_counter() - t
     f, hope_map = res.map, None
-    if spectral:
+    if spectral and not res.settled:
         t = time.perf_counter()
         f, z = spectral_refine(sa, sb, res.map, res.early_zoomout)
         if z is not None:

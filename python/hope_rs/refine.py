@@ -101,6 +101,9 @@ class RefineResult:
     #: ZoomOut's map computed while the last pass ran (set by
     #: :func:`~hope_rs.spectral.refine_while_solving_bases`), else None.
     early_zoomout: np.ndarray | None = None
+    #: The last pass and the polish moved no vertex, and LMD trusts every vertex of the map: a
+    #: fixed point of the steps that keeps every 2-ring's distances (see :func:`refine`).
+    settled: bool = False
 
 
 # BLAS runs only small products here (the global repair's projections); with more than one
@@ -163,6 +166,7 @@ def refine(
     lmd = LmdTracker(a, b)
     history: list[Iteration] = []
     last_fraction = -1.0
+    last_pass_changed = -1
     for n_pass in range(max_passes):
         changed_in_pass = 0
         if global_step:
@@ -198,8 +202,10 @@ def refine(
                 callback(history[-1])
             if on_last_pass is not None and n_pass == max_passes - 1 and step == 0:
                 on_last_pass(f, n_pass)
+        last_pass_changed = changed_in_pass
         if changed_in_pass < CONVERGED_FRACTION * a.n_vertices:
             break
+    settled = last_pass_changed == 0
     if polish_k is not None:
         t0 = time.perf_counter()
         k = min(polish_k, k_max)
@@ -210,10 +216,12 @@ def refine(
                 k, float(w.mean()), int(np.count_nonzero(f_new != f)), time.perf_counter() - t0
             )
         )
+        settled = settled and history[-1].changed == 0
         f = f_new
         if callback is not None:
             callback(history[-1])
-    return RefineResult(f, history)
+    settled = settled and bool(lmd.witnesses(f, min_consistent=min_consistent).all())
+    return RefineResult(f, history, settled=settled)
 
 
 def global_repair(

@@ -103,13 +103,15 @@ def zoomout(
     k_end: int = K_END,
     step: int = K_STEP,
     max_samples: int = MAX_SAMPLES,
-) -> np.ndarray:
+    stop: threading.Event | None = None,
+) -> np.ndarray | None:
     """ZoomOut (Melzi et al. 2019) from the map ``f`` (A → B, internal numbering).
 
     At each basis size k the functional map C (k × k) is the least-squares fit, in A's mass
     inner product, of B's eigenfunctions pulled back through the current map onto A's; each
     vertex of A then takes the vertex of B whose spectral embedding mapped by C is nearest
-    its own. Returns the map at ``k_end`` (internal numbering).
+    its own. Returns the map at ``k_end`` (internal numbering), or None when ``stop`` was set
+    (checked before each basis size).
     """
     phi_a, mass_a = a.spectral_basis(k_end)
     phi_b, _ = b.spectral_basis(k_end)
@@ -117,7 +119,7 @@ def zoomout(
     # than they give: the whole loop took 1.35 s on one BLAS thread against 2.25 s on two at
     # 5k vertices (the nearest-neighbour search splits its rows between threads itself).
     with single_threaded_blas():
-        return _zoomout(a, b, f, phi_a, mass_a, phi_b, k_start, k_end, step, max_samples)
+        return _zoomout(a, b, f, phi_a, mass_a, phi_b, k_start, k_end, step, max_samples, stop)
 
 
 def _zoomout(
@@ -131,7 +133,8 @@ def _zoomout(
     k_end: int,
     step: int,
     max_samples: int,
-) -> np.ndarray:
+    stop: threading.Event | None = None,
+) -> np.ndarray | None:
     k_end = min(k_end, phi_a.shape[1], phi_b.shape[1])
     sa, sb = _samples(a.n_vertices, max_samples), _samples(b.n_vertices, max_samples)
     sampled = sa.size < a.n_vertices or sb.size < b.n_vertices
@@ -140,6 +143,8 @@ def _zoomout(
     gram = pa.T @ (wa[:, None] * pa)  # the identity when every vertex is a sample
     t = np.asarray(f, dtype=np.int64)[sa]  # vertices of B
     for k in basis_sizes(k_start, k_end, step):
+        if stop is not None and stop.is_set():
+            return None
         c = functional_map(pa[:, :k], wa, phi_b[t, :k], gram[:k, :k])
         eb = phi_b[:, :k] @ c.T
         if k >= LOCAL_FROM and not sampled:
@@ -328,6 +333,7 @@ class EarlyZoomOut:
         self.a, self.b, self.prefetch = a, b, prefetch
         self.thread: threading.Thread | None = None
         self.result: np.ndarray | None = None
+        self.stop = threading.Event()
 
     def start(self, f: np.ndarray, n_pass: int) -> None:
         if n_pass < EARLY_FROM_PASS or self.thread is not None:
@@ -350,13 +356,20 @@ class EarlyZoomOut:
                 k_end=K_END,
                 step=K_STEP,
                 max_samples=MAX_SAMPLES,
+                stop=self.stop,
             )
         except Exception:  # noqa: BLE001 - spectral_refine runs it again and reports it
             self.result = None
 
-    def join(self) -> None:
+    def join(self, cancel: bool = False) -> None:
+        """Waits for the thread; with ``cancel``, first tells it to stop at its next basis size
+        (its result is then None)."""
+        if cancel:
+            self.stop.set()
         if self.thread is not None:
             self.thread.join()
+        if cancel:
+            self.result = None
 
 
 def refine_while_solving_bases(
@@ -372,10 +385,12 @@ def refine_while_solving_bases(
     with single_threaded_blas():
         prefetch = BasisPrefetch(a, b).start()
         early = EarlyZoomOut(a, b, prefetch)
+        res = None
         try:
             res = refine(a, b, f0, on_last_pass=early.start, **options)
         finally:
-            early.join()
+            # A settled map skips the spectral pass (see hope_rs.match), as does an error.
+            early.join(cancel=res is None or res.settled)
         prefetch.finish()
     res.early_zoomout = early.result
     return res
