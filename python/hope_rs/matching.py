@@ -123,9 +123,9 @@ def match(
         and is skipped when a shape has more than
         :data:`~hope_rs.spectral.MAX_VERTICES` vertices, and when HOPE's map has settled (its
         last pass and the polish moved no vertex and LMD trusts every vertex; see
-        :attr:`hope_rs.refine.RefineResult.settled`): every faust_reg pair and TOSCA remeshed
-        wolf, whose maps are exact, and no other remeshed pair; there the pass never changed
-        the map and took 0.3-0.6 s.
+        :attr:`hope_rs.refine.RefineResult.settled`): 5 of the 6 faust_reg pairs of the
+        bench and TOSCA remeshed wolf, whose maps are exact, and no other remeshed pair; there
+        the pass never changed the map and took 0.3-0.6 s.
     callback : callable, optional
         Called with each :class:`~hope_rs.refine.Iteration` as it finishes (of the coarse
         match too, with ``multiscale``).
