@@ -405,3 +405,27 @@ def test_zoomout_waits_for_the_end_when_the_loop_stops_before_the_early_pass(mon
     res = hope_rs.match(a, b, max_passes=2)  # passes 0 and 1, before EARLY_FROM_PASS
     assert S.EARLY_FROM_PASS >= 2
     assert on_main == [True] and res.hope_map is not None
+
+
+def test_the_early_zoomout_leaves_a_failed_basis_to_the_main_thread(monkeypatch):
+    a = hope_rs.Mesh(*bumpy_sphere(1500, 1))
+    b = hope_rs.Mesh(*bumpy_sphere(1400, 2))
+    want = hope_rs.match(a, b, max_passes=1)
+    monkeypatch.setattr(S, "EARLY_FROM_PASS", 0)
+    solve = hope_rs.Shape.solve_spectral_basis
+    off_main = []
+
+    def fails_off_the_main_thread(self, k):
+        if threading.current_thread() is not threading.main_thread():
+            off_main.append(k)
+            raise RuntimeError("ARPACK error -9999")
+        return solve(self, k)
+
+    monkeypatch.setattr(hope_rs.Shape, "solve_spectral_basis", fails_off_the_main_thread)
+    on_main = _zoomout_spy(monkeypatch)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        got = hope_rs.match(a, b, max_passes=1)
+    # Only the prefetch tried off the main thread; ZoomOut then ran once, after the loop.
+    assert off_main == [S.K_END] and on_main == [True]
+    np.testing.assert_array_equal(got.map, want.map)
