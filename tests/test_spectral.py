@@ -429,3 +429,17 @@ def test_the_early_zoomout_leaves_a_failed_basis_to_the_main_thread(monkeypatch)
     # Only the prefetch tried off the main thread; ZoomOut then ran once, after the loop.
     assert off_main == [S.K_END] and on_main == [True]
     np.testing.assert_array_equal(got.map, want.map)
+
+
+def test_zoomout_stops_at_its_next_basis_size_when_told():
+    sa = hope_rs.Shape(hope_rs.Mesh(*bumpy_sphere(600, 1)))
+    sb = hope_rs.Shape(hope_rs.Mesh(*bumpy_sphere(500, 2)))
+    f = np.zeros(sa.n_vertices, dtype=np.int64)
+    stop = threading.Event()
+    assert S.zoomout(sa, sb, f, stop=stop) is not None
+    stop.set()
+    assert S.zoomout(sa, sb, f, stop=stop) is None
+    early = S.EarlyZoomOut(sa, sb, S.BasisPrefetch(sa, sb).start())
+    early.start(f, S.EARLY_FROM_PASS)
+    early.join(cancel=True)
+    assert early.result is None
