@@ -210,6 +210,22 @@ class _NoPrefetch:
         pass
 
 
+def _basis_solves_fail_off_the_main_thread(monkeypatch) -> list[int]:
+    """Makes every eigenbasis solve off the main thread fail (as ARPACK can); returns the list
+    of basis sizes those attempts asked for."""
+    solve = hope_rs.Shape.solve_spectral_basis
+    off_main = []
+
+    def fails_off_the_main_thread(self, k):
+        if threading.current_thread() is not threading.main_thread():
+            off_main.append(k)
+            raise RuntimeError("ARPACK error -9999")
+        return solve(self, k)
+
+    monkeypatch.setattr(hope_rs.Shape, "solve_spectral_basis", fails_off_the_main_thread)
+    return off_main
+
+
 def test_bases_solved_during_the_refinement_give_the_same_match(monkeypatch):
     a = hope_rs.Mesh(*bumpy_sphere(1500, 1))
     b = hope_rs.Mesh(*bumpy_sphere(1400, 2))
@@ -230,16 +246,7 @@ def test_bases_solved_during_the_refinement_give_the_same_match(monkeypatch):
     monkeypatch.undo()
 
     # A solve that fails in the thread is solved again afterwards, without a warning.
-    solve = hope_rs.Shape.solve_spectral_basis
-    off_main = []
-
-    def fails_off_the_main_thread(self, k):
-        if threading.current_thread() is not threading.main_thread():
-            off_main.append(k)
-            raise RuntimeError("ARPACK error -9999")
-        return solve(self, k)
-
-    monkeypatch.setattr(hope_rs.Shape, "solve_spectral_basis", fails_off_the_main_thread)
+    off_main = _basis_solves_fail_off_the_main_thread(monkeypatch)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         again = hope_rs.match(a, b, max_passes=2)
@@ -412,16 +419,7 @@ def test_the_early_zoomout_leaves_a_failed_basis_to_the_main_thread(monkeypatch)
     b = hope_rs.Mesh(*bumpy_sphere(1400, 2))
     want = hope_rs.match(a, b, max_passes=1)
     monkeypatch.setattr(S, "EARLY_FROM_PASS", 0)
-    solve = hope_rs.Shape.solve_spectral_basis
-    off_main = []
-
-    def fails_off_the_main_thread(self, k):
-        if threading.current_thread() is not threading.main_thread():
-            off_main.append(k)
-            raise RuntimeError("ARPACK error -9999")
-        return solve(self, k)
-
-    monkeypatch.setattr(hope_rs.Shape, "solve_spectral_basis", fails_off_the_main_thread)
+    off_main = _basis_solves_fail_off_the_main_thread(monkeypatch)
     on_main = _zoomout_spy(monkeypatch)
     with warnings.catch_warnings():
         warnings.simplefilter("error")

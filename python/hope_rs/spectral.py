@@ -317,6 +317,15 @@ class BasisPrefetch:
             s.set_spectral_basis(evecs, mass)
 
 
+def _pass_zoomout(
+    a: Shape, b: Shape, f: np.ndarray, stop: threading.Event | None = None
+) -> np.ndarray | None:
+    """The spectral pass's ZoomOut, with the module's basis sizes as they are when called."""
+    return zoomout(
+        a, b, f, k_start=K_START, k_end=K_END, step=K_STEP, max_samples=MAX_SAMPLES, stop=stop
+    )
+
+
 class EarlyZoomOut:
     """ZoomOut started from the refinement's map partway through its last pass, in a background
     thread: the pass's auctions run on one core, and ZoomOut fills the other. On the TOSCA cat
@@ -348,18 +357,9 @@ class EarlyZoomOut:
         if not (self.a.has_spectral_basis(K_END) and self.b.has_spectral_basis(K_END)):
             return
         try:
-            self.result = zoomout(
-                self.a,
-                self.b,
-                f,
-                k_start=K_START,
-                k_end=K_END,
-                step=K_STEP,
-                max_samples=MAX_SAMPLES,
-                stop=self.stop,
-            )
+            self.result = _pass_zoomout(self.a, self.b, f, self.stop)
         except Exception:  # noqa: BLE001 - spectral_refine runs it again and reports it
-            self.result = None
+            return
 
     def join(self, cancel: bool = False) -> None:
         """Waits for the thread; with ``cancel``, first tells it to stop at its next basis size
@@ -408,7 +408,7 @@ def spectral_refine(
         return h, None
     try:
         if z is None:
-            z = zoomout(a, b, h, k_start=K_START, k_end=K_END, step=K_STEP, max_samples=MAX_SAMPLES)
+            z = _pass_zoomout(a, b, h)
     except RuntimeError as e:  # ARPACK did not converge, or a singular factorisation
         warnings.warn(f"spectral pass skipped, HOPE's map kept: {e}", RuntimeWarning, stacklevel=3)
         return h, None
