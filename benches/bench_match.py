@@ -75,8 +75,9 @@ def run_pair(pair: Pair, renumber: int | None = None, spectral: bool = True) -> 
 def table(rows: list[dict]) -> str:
     head = (
         "| set | pair | n | init exact / mean | HOPE exact / mean | final exact | final mean "
-        "| final AUC | steps | descr (s) | init (s) | refine (s) | spectral (s) | total (s) |\n"
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
+        "| final AUC | steps | descr (s) | init (s) | refine (s) | spectral (s) | faces (s) "
+        "| total (s) |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
     )
     lines = []
     for r in rows:
@@ -87,7 +88,8 @@ def table(rows: list[dict]) -> str:
             f"| {100 * r['hope'].exact:.1f}% / {r['hope'].mean:.4f} "
             f"| {100 * r['final'].exact:.1f}% | {r['final'].mean:.4f} | {r['final'].auc:.3f} "
             f"| {r['steps']} | {t.get('descriptors', 0):.2f} | {t.get('init', 0):.2f} "
-            f"| {t['refine']:.2f} | {t.get('spectral', 0):.2f} | {r['seconds']:.2f} |"
+            f"| {t['refine']:.2f} | {t.get('spectral', 0):.2f} | {t.get('faces', 0):.2f} "
+            f"| {r['seconds']:.2f} |"
         )
     return head + "\n".join(lines) + "\n"
 

@@ -95,7 +95,8 @@ def run_case(name: str, data: Path, multiscale: bool = False, spectral: bool = T
     ``match(..., multiscale=True)``), and "init" is empty. ``spectral``: as in ``match``."""
     import hope_rs
     from hope_rs.initial import shapes_initial_map
-    from hope_rs.spectral import applies, refine_while_solving_bases, spectral_refine
+    from hope_rs.matching import refine_spectral_finish
+    from hope_rs.spectral import applies
 
     folder, a, b, target = CASES[name]
     ma = hope_rs.load_mesh(data / folder / f"{a}.off")
@@ -128,9 +129,7 @@ def run_case(name: str, data: Path, multiscale: bool = False, spectral: bool = T
         sampler.mark("descriptors")
         t["init"] = 0.0
         sampler.mark("init")
-        t1 = time.perf_counter()
-        passes = fine_passes(sa.n_vertices, sb.n_vertices)
-        res = refine_while_solving_bases(sa, sb, f0, spectral, max_passes=passes)
+        options = {"max_passes": fine_passes(sa.n_vertices, sb.n_vertices)}
     else:
         da, db = sa.internal_descriptors("shot"), sb.internal_descriptors("shot")
         t["descriptors"] = time.perf_counter() - t1
@@ -139,15 +138,13 @@ def run_case(name: str, data: Path, multiscale: bool = False, spectral: bool = T
         f0 = shapes_initial_map(sa, sb, da, db, "shot")  # the shapes' internal numbering
         t["init"] = time.perf_counter() - t1
         sampler.mark("init")
-        t1 = time.perf_counter()
-        res = refine_while_solving_bases(sa, sb, f0, spectral)
-    t["refine"] = time.perf_counter() - t1
-    sampler.mark("refine")
-    t1 = time.perf_counter()
-    run = spectral and not res.settled  # as hope_rs.match decides
-    f = spectral_refine(sa, sb, res.map, res.early_zoomout)[0] if run else res.map
-    t["spectral"] = time.perf_counter() - t1
-    sampler.mark("spectral")
+        options = {}
+    # As in match, stage by stage; a stage that did not run takes 0 s.
+    f, res = refine_spectral_finish(
+        sa, sb, f0, spectral=spectral, timings=t, on_stage=sampler.mark, **options
+    )
+    t.setdefault("spectral", 0.0)
+    t.setdefault("faces", 0.0)
     f0, f, res.map = sa.map_out(sb, f0), sa.map_out(sb, f), sa.map_out(sb, res.map)
     t["total"] = time.perf_counter() - t0
     init = hope_rs.score(hope_rs.geodesic_errors(sb, f0, a_idx=ai, b_idx=bi))
@@ -171,21 +168,22 @@ def run_case(name: str, data: Path, multiscale: bool = False, spectral: bool = T
 def table(rows: list[dict]) -> str:
     head = (
         "| case | n | shapes (s) | descr (s) | init (s) | refine (s) | steps | spectral (s) "
-        "| total (s) | peak descr / init / refine / spectral (GiB) | max RSS (GiB) "
-        "| init exact / mean | HOPE exact / mean | final exact / mean |\n"
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
+        "| faces (s) | total (s) | peak descr / init / refine / spectral / faces (GiB) "
+        "| max RSS (GiB) | init exact / mean | HOPE exact / mean | final exact / mean |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
     )
     lines = []
     for r in rows:
         if "error" in r:
-            lines.append(f"| {r['case']} |" + " |" * 12 + f" {r['error']} |")
+            lines.append(f"| {r['case']} |" + " |" * 13 + f" {r['error']} |")
             continue
         s, p = r["seconds"], r["peak_gib"]
         lines.append(
             f"| {r['case']} | {r['n']} | {s['shapes']:.2f} | {s['descriptors']:.2f} "
             f"| {s['init']:.2f} | {s['refine']:.2f} | {r['steps']} | {s['spectral']:.2f} "
-            f"| {s['total']:.1f} "
+            f"| {s['faces']:.2f} | {s['total']:.1f} "
             f"| {p['descriptors']:.2f} / {p['init']:.2f} / {p['refine']:.2f} / {p['spectral']:.2f} "
+            f"/ {p['faces']:.2f} "
             f"| {r['maxrss_gib']:.2f} | {100 * r['init'][0]:.1f}% / {r['init'][1]:.4f} "
             f"| {100 * r['hope'][0]:.1f}% / {r['hope'][1]:.4f} "
             f"| {100 * r['final'][0]:.1f}% / {r['final'][1]:.4f} |"

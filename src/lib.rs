@@ -12,6 +12,7 @@ pub mod memory;
 pub mod nearest;
 pub mod overlap;
 pub mod pairing;
+pub mod rotation;
 pub mod shot;
 pub mod step;
 

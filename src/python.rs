@@ -11,7 +11,10 @@ use crate::memory::zeroed_vec;
 use crate::overlap::{overlap_rows, BallsAt, OverlapOptions, OverlapRows};
 use crate::shot::{shot_descriptors, shot_descriptors_at};
 use crate::step::{best_overlap, overlap_assignment};
-use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{
+    IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2,
+    PyReadonlyArray3,
+};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use rayon::prelude::*;
@@ -664,6 +667,31 @@ fn py_nearest_among<'py>(
     Ok(owned(py, &best))
 }
 
+/// For each 3 × 3 matrix `M` of an (n, 3, 3) array, the rotation maximising `tr(R M)` (see
+/// `rotation.rs`).
+#[pyfunction]
+fn closest_rotations<'py>(
+    py: Python<'py>,
+    m: PyReadonlyArray3<'py, f64>,
+) -> PyResult<Bound<'py, PyArray3<f64>>> {
+    let a = m.as_array();
+    if a.shape()[1..] != [3, 3] {
+        return Err(PyValueError::new_err(format!(
+            "closest_rotations needs an (n, 3, 3) array, got {:?}",
+            a.shape()
+        )));
+    }
+    let n = a.shape()[0];
+    let flat: Vec<f64> = match a.as_slice() {
+        Some(s) => s.to_vec(),
+        None => a.iter().copied().collect(),
+    };
+    let r = detached(py, || crate::rotation::closest_rotations(&flat))?;
+    Ok(numpy::ndarray::Array3::from_shape_vec((n, 3, 3), r)
+        .expect("n * 9 values")
+        .into_pyarray(py))
+}
+
 /// Paired row and column indices.
 type PairsOut<'py> = (Bound<'py, PyArray1<i64>>, Bound<'py, PyArray1<i64>>);
 
@@ -701,5 +729,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(py_shot_descriptors, m)?)?;
     m.add_function(wrap_pyfunction!(greedy_pairs, m)?)?;
     m.add_function(wrap_pyfunction!(py_nearest_among, m)?)?;
+    m.add_function(wrap_pyfunction!(closest_rotations, m)?)?;
     Ok(())
 }

@@ -26,3 +26,20 @@ def random_rigid(rng) -> tuple[np.ndarray, np.ndarray]:
     if np.linalg.det(q) < 0:
         q[:, 0] = -q[:, 0]
     return q, rng.normal(size=3) * 5
+
+
+def moved_copy(a, seed: int):
+    """B = the hope_rs.Mesh A relabelled, rotated, scaled by 1.7 and shifted; returns B and A's
+    vertex v's image in B."""
+    from conftest import relabel
+
+    import hope_rs
+
+    rng = np.random.default_rng(seed)
+    perm = rng.permutation(a.n_vertices)  # B's vertex i is A's vertex perm[i]
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    q *= np.sign(np.linalg.det(q))
+    b = hope_rs.Mesh(1.7 * a.vertices[perm] @ q.T + 1.0, relabel(a.faces, perm))
+    truth = np.empty_like(perm)
+    truth[perm] = np.arange(perm.size)
+    return b, truth

@@ -41,10 +41,14 @@ def nearest_candidates(da: np.ndarray, db: np.ndarray, n: int) -> tuple[np.ndarr
         # cat's 28k x 352 samples, this 0.08-0.2 s, with the same values.
         s64 = sample.astype(np.float64)
         cov = s64.T @ s64
+        # One BLAS thread for the projection: with numpy 2.4's OpenBLAS a float32 product
+        # gave other bits on two threads than on one (1.5e-7 on a 300-vertex pair, 13 of its
+        # 300 initial matches), so the map depended on the process's thread count (a Ray
+        # worker runs with one).
         with single_threaded_blas():
             _, vecs = np.linalg.eigh(cov)
-        basis = vecs[:, ::-1][:, :PCA_DIMS].astype(np.float32)
-        da, db = (da - mu) @ basis, (db - mu) @ basis
+            basis = vecs[:, ::-1][:, :PCA_DIMS].astype(np.float32)
+            da, db = (da - mu) @ basis, (db - mu) @ basis
     n = min(n, db.shape[0])
     if db.shape[0] > EXACT_SEARCH_LIMIT:
         return _inverted_file_candidates(da, db, n)

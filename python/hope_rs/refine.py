@@ -124,6 +124,7 @@ def refine(
     global_step: bool = True,
     callback=None,
     on_last_pass=None,
+    last_pass_if=None,
 ) -> RefineResult:
     """Refine the map ``f0`` (A → B) with HOPE.
 
@@ -154,9 +155,14 @@ def refine(
     :data:`GLOBAL_CHECK_PASS`), which LMD alone cannot see, and is preceded by a step that
     moves back whole regions mapped to the wrong place (:data:`REGION_CHECK_PASS`).
 
-    ``on_last_pass(f, n_pass)``, if given, is called once the first step of the last pass that
-    ``max_passes`` allows has run, with the map then (internal numbering) and the pass's
-    0-based index; :func:`~hope_rs.spectral.refine_while_solving_bases` starts ZoomOut there.
+    ``on_last_pass(f, n_pass)``, if given, is called once the first step of the last pass has
+    run, with the map then (internal numbering) and the pass's 0-based index;
+    :func:`~hope_rs.spectral.refine_while_solving_bases` starts ZoomOut there.
+
+    ``last_pass_if(f)``, if given, is called with the map at the start of every pass from the
+    second on; once it returns True, that pass is the last (and ``on_last_pass`` fires in it).
+    :func:`hope_rs.match` stops there when the finishing rounds of
+    :mod:`hope_rs.shared_faces` will take over.
     """
     k_max = min(a.k_max, b.k_max)
     schedule = list(schedule) if schedule is not None else default_schedule(k_max)
@@ -167,8 +173,11 @@ def refine(
     history: list[Iteration] = []
     last_fraction = -1.0
     last_pass_changed = -1
+    last_pass = max_passes - 1
     for n_pass in range(max_passes):
         changed_in_pass = 0
+        if last_pass_if is not None and 1 <= n_pass < last_pass and last_pass_if(f):
+            last_pass = n_pass
         if global_step:
             t0 = time.perf_counter()
             w = lmd.witnesses(f, min_consistent=min_consistent)
@@ -200,10 +209,10 @@ def refine(
             history.append(Iteration(k, float(w.mean()), changed, time.perf_counter() - t0))
             if callback is not None:
                 callback(history[-1])
-            if on_last_pass is not None and n_pass == max_passes - 1 and step == 0:
+            if on_last_pass is not None and n_pass == last_pass and step == 0:
                 on_last_pass(f, n_pass)
         last_pass_changed = changed_in_pass
-        if changed_in_pass < CONVERGED_FRACTION * a.n_vertices:
+        if changed_in_pass < CONVERGED_FRACTION * a.n_vertices or n_pass == last_pass:
             break
     settled = last_pass_changed == 0
     if polish_k is not None:

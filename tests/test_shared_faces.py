@@ -1,0 +1,143 @@
+"""The finishing rounds for shapes that share their triangulation (hope_rs.shared_faces)."""
+
+import numpy as np
+import pytest
+from conftest import data_path
+from meshes import bumpy_sphere, moved_copy, random_rigid
+
+import hope_rs
+from hope_rs import _core
+from hope_rs import shared_faces as SF
+from hope_rs.refine import refine
+
+
+def test_face_keys_ignore_rotation_but_not_orientation():
+    f = np.array([[0, 1, 2], [1, 2, 0], [2, 0, 1], [0, 2, 1], [5, 3, 4]])
+    k = SF._face_keys(f, 6)
+    assert k[0] == k[1] == k[2] and k[3] != k[0]
+    assert k[4] == SF._face_keys(np.array([[3, 4, 5]]), 6)[0]
+
+
+def test_handles_are_the_vertices_whose_faces_all_map_onto_faces_one_to_one():
+    s = hope_rs.Shape(bumpy_sphere(200, 0))
+    f = np.arange(s.n_vertices)
+    assert SF.face_handles(s, s, f).all()
+    faces = s.internal.faces
+    u, v = faces[0, 0], faces[0, 1]  # swap the images of two neighbours
+    g = f.copy()
+    g[[u, v]] = g[[v, u]]
+    h = SF.face_handles(s, s, g)
+    touching = np.unique(faces[(faces == u).any(axis=1) | (faces == v).any(axis=1)])
+    assert not h[touching].any() and h[np.setdiff1d(f, touching)].all()
+    g = f.copy()
+    g[u] = v  # two vertices on one image: neither is a handle
+    assert not SF.face_handles(s, s, g)[[u, v]].any()
+    # The mirror image of the identity (every face reversed) has no handle.
+    mirror = hope_rs.Shape(hope_rs.Mesh(s.mesh.vertices, s.mesh.faces[:, ::-1]))
+    assert not SF.face_handles(s, mirror, f).any()
+
+
+def test_arap_puts_a_rigidly_moved_mesh_back_from_a_third_of_its_vertices():
+    v, faces = bumpy_sphere(300, 1)
+    s = hope_rs.Shape((v, faces))
+    rng = np.random.default_rng(2)
+    q, t = random_rigid(rng)
+    target = s.points @ q.T + t
+    handles = rng.random(s.n_vertices) < 0.3
+    start = target + rng.normal(scale=0.02, size=target.shape)
+    y = SF.arap_to_handles(s.points, s.edges, start, handles)
+    np.testing.assert_array_equal(y[handles], start[handles])
+    assert np.abs(y[~handles] - target[~handles]).max() < 0.05  # the noise was 0.02 per axis
+    err_free = np.linalg.norm(y[~handles] - target[~handles], axis=1).mean()
+    assert err_free < 0.5 * np.linalg.norm(start[~handles] - target[~handles], axis=1).mean()
+
+
+def test_closest_rotations_match_the_svd_and_reject_bad_input():
+    rng = np.random.default_rng(3)
+    m = rng.normal(size=(500, 3, 3))
+    u, _, vt = np.linalg.svd(m)
+    flip = np.ones((500, 3))
+    flip[:, 2] = np.sign(np.linalg.det(u @ vt))
+    want = np.einsum("nji,nj,nkj->nik", vt, flip, u)
+    np.testing.assert_allclose(_core.closest_rotations(m), want, atol=1e-9)
+    with pytest.raises(ValueError, match=r"\(n, 3, 3\)"):
+        _core.closest_rotations(np.zeros((4, 3, 2)))
+    bad = m.copy()
+    bad[7, 1, 1] = np.nan
+    with pytest.raises(ValueError, match="finite"):
+        _core.closest_rotations(bad)
+
+
+def drifted(a: hope_rs.Mesh, truth: np.ndarray, centre: int, radius: float) -> np.ndarray:
+    """``truth`` with a ball around vertex ``centre`` mapped one vertex along (each vertex to
+    the image of the next vertex of one of its faces): a patch the overlaps cannot see."""
+    region = np.linalg.norm(a.vertices - a.vertices[centre], axis=1) < radius * a.scale
+    step = np.arange(a.n_vertices)
+    step[a.faces[:, 0]] = a.faces[:, 1]
+    f = truth.copy()
+    f[region] = truth[step[region]]
+    return f
+
+
+def test_finish_puts_a_drifted_patch_back_on_a_scaled_relabelled_copy(faust_pair):
+    a = faust_pair[0]
+    b, truth = moved_copy(a, 4)  # relabelled, rotated, scaled by 1.7
+    sa, sb = hope_rs.Shape(a), hope_rs.Shape(b)
+    f = drifted(a, truth, 3000, 0.15)
+    assert 0.08 < (f != truth).mean() < 0.3
+    g, rounds = SF.finish(sa, sb, sa.map_in(sb, f))
+    assert rounds >= 1
+    np.testing.assert_array_equal(sa.map_out(sb, g), truth)
+
+
+def test_finish_leaves_differently_triangulated_shapes_alone():
+    a = hope_rs.Shape(hope_rs.load_mesh(data_path("faust_r", "tr_reg_000.off")))
+    b = hope_rs.Shape(hope_rs.load_mesh(data_path("faust_r", "tr_reg_001.off")))
+    f = hope_rs.match(a, b, shared_faces=False).map
+    fi = a.map_in(b, f)
+    assert SF.face_handles(a, b, fi).mean() < SF.MIN_HANDLES / 2
+    g, rounds = SF.finish(a, b, fi)
+    assert rounds == 0 and g is not None
+    np.testing.assert_array_equal(g, fi)
+    res = hope_rs.match(a, b)
+    assert "faces" not in res.timings
+    np.testing.assert_array_equal(res.map, f)
+
+
+def test_a_partial_shape_of_the_same_triangulation_becomes_exact(faust_pair):
+    # A = FAUST 012 without its legs (the lowest 30% of its vertices), B = the whole 018.
+    a, b = faust_pair
+    keep = a.vertices[:, 1] > np.quantile(a.vertices[:, 1], 0.3)
+    idx = np.flatnonzero(keep)
+    new = np.full(a.n_vertices, -1)
+    new[idx] = np.arange(idx.size)
+    part = hope_rs.Shape(hope_rs.Mesh(a.vertices[idx], new[a.faces[keep[a.faces].all(axis=1)]]))
+    sb = hope_rs.Shape(b)
+    without = hope_rs.match(part, sb, shared_faces=False)
+    res = hope_rs.match(part, sb)
+    assert "faces" in res.timings and "faces" not in without.timings
+    assert (without.map == idx).mean() < 0.95  # measured 93.1%
+    assert (res.map == idx).mean() > 0.999  # measured 99.98%
+
+
+def test_last_pass_if_makes_that_pass_the_last(faust_pair):
+    a, b = faust_pair
+    sa, sb = hope_rs.Shape(a), hope_rs.Shape(b)
+    f0 = sa.map_in(sb, hope_rs.match(sa, sb, spectral=False, max_passes=1).init_map)
+    seen, calls = [], []
+
+    def on_last(f, n_pass):
+        calls.append(n_pass)
+
+    def after_first(f):
+        seen.append(f.copy())
+        return True
+
+    res = refine(sa, sb, f0, last_pass_if=after_first, on_last_pass=on_last)
+    passes = sum(it.k == 0 for it in res.history)
+    assert passes == 2 and len(seen) == 1 and calls == [1]
+    # Never True: the same as without it.
+    plain = refine(sa, sb, f0)
+    never = refine(sa, sb, f0, last_pass_if=lambda f: False)
+    np.testing.assert_array_equal(never.map, plain.map)
+    assert len(never.history) == len(plain.history)
