@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from conftest import data_path
 from meshes import bumpy_sphere, moved_copy, random_rigid
+from test_mesh_and_cli import write_off
 
 import hope_rs
 from hope_rs import _core
@@ -104,20 +105,46 @@ def test_finish_leaves_differently_triangulated_shapes_alone():
     np.testing.assert_array_equal(res.map, f)
 
 
-def test_a_partial_shape_of_the_same_triangulation_becomes_exact(faust_pair):
-    # A = FAUST 012 without its legs (the lowest 30% of its vertices), B = the whole 018.
-    a, b = faust_pair
+def legless(a: hope_rs.Mesh) -> tuple[hope_rs.Mesh, np.ndarray]:
+    """A without its lowest 30% of vertices (a FAUST body's legs), and the kept vertices."""
     keep = a.vertices[:, 1] > np.quantile(a.vertices[:, 1], 0.3)
     idx = np.flatnonzero(keep)
     new = np.full(a.n_vertices, -1)
     new[idx] = np.arange(idx.size)
-    part = hope_rs.Shape(hope_rs.Mesh(a.vertices[idx], new[a.faces[keep[a.faces].all(axis=1)]]))
-    sb = hope_rs.Shape(b)
-    without = hope_rs.match(part, sb, shared_faces=False)
-    res = hope_rs.match(part, sb)
+    return hope_rs.Mesh(a.vertices[idx], new[a.faces[keep[a.faces].all(axis=1)]]), idx
+
+
+def test_a_partial_shape_of_the_same_triangulation_becomes_exact(faust_pair):
+    # A = FAUST 012 without its legs, B = the whole 018.
+    part, idx = legless(faust_pair[0])
+    sa, sb = hope_rs.Shape(part), hope_rs.Shape(faust_pair[1])
+    without = hope_rs.match(sa, sb, shared_faces=False)
+    res = hope_rs.match(sa, sb)
     assert "faces" in res.timings and "faces" not in without.timings
     assert (without.map == idx).mean() < 0.95  # measured 93.1%
     assert (res.map == idx).mean() > 0.999  # measured 99.98%
+
+
+def test_cli_and_batch_no_shared_faces_flags(faust_pair, tmp_path, capsys):
+    from hope_rs.cli import main
+
+    part, _ = legless(faust_pair[0])
+    pa, pb = tmp_path / "a.off", tmp_path / "b.off"
+    write_off(pa, part.vertices, part.faces)
+    write_off(pb, faust_pair[1].vertices, faust_pair[1].faces)
+    a, b = hope_rs.load_mesh(pa), hope_rs.load_mesh(pb)
+    for flag, kw in [([], {}), (["--no-shared-faces"], {"shared_faces": False})]:
+        want = hope_rs.match(a, b, **kw).map
+        out = tmp_path / "map.txt"
+        assert main(["match", str(pa), str(pb), "-o", str(out), "-q", *flag]) == 0
+        np.testing.assert_array_equal(np.loadtxt(out, dtype=np.int64), want)
+    pairs = tmp_path / "pairs.txt"
+    pairs.write_text(f"{pa} {pb}\n")
+    args = ["batch", str(pairs), "--out", str(tmp_path / "o"), "-q", "-j", "1", "--no-cache"]
+    assert main(args + ["--no-shared-faces"]) == 0
+    (got,) = list((tmp_path / "o").iterdir())
+    np.testing.assert_array_equal(np.loadtxt(got, dtype=np.int64), want)
+    capsys.readouterr()
 
 
 def test_last_pass_if_makes_that_pass_the_last(faust_pair):

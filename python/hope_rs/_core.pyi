@@ -101,3 +101,7 @@ def nearest_among(
     base: npt.NDArray[np.float32],
     cand: npt.NDArray[np.int64],
 ) -> npt.NDArray[np.int64]: ...
+def closest_rotations(m: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """For each 3 x 3 matrix ``M`` of an (n, 3, 3) array, the rotation ``R`` maximising
+    ``tr(R M)`` (Horn's quaternion method); raises ValueError on other shapes or non-finite
+    values."""

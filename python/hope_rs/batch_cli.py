@@ -34,6 +34,11 @@ def add_batch_parser(sub) -> None:
     p.add_argument(
         "--no-spectral", action="store_true", help="match(..., spectral=False) for every pair"
     )
+    p.add_argument(
+        "--no-shared-faces",
+        action="store_true",
+        help="match(..., shared_faces=False) for every pair",
+    )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress output")
     p.set_defaults(func=cmd_batch)
 
@@ -62,6 +67,7 @@ def cmd_batch(args) -> int:
         k_max=args.k_max,
         multiscale=args.multiscale,
         spectral=not args.no_spectral,
+        shared_faces=not args.no_shared_faces,
         progress=not args.quiet,
         ray_options={"address": args.ray_address} if args.backend == "ray" else None,
     ):

@@ -98,7 +98,8 @@ def cmd_match(args) -> int:
     try:
         res = match(
             a, b, init=args.init, k_max=args.k_max, multiscale=args.multiscale,
-            spectral=not args.no_spectral, callback=progress.step,
+            spectral=not args.no_spectral, shared_faces=not args.no_shared_faces,
+            callback=progress.step,
         )  # fmt: skip
     finally:
         progress.close()
@@ -138,6 +139,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--no-spectral",
         action="store_true",
         help="return HOPE's own map, without the spectral (ZoomOut) pass after it",
+    )
+    m.add_argument(
+        "--no-shared-faces",
+        action="store_true",
+        help="skip the finishing rounds for shapes that share their triangulation",
     )
     m.add_argument("--json", action="store_true", help="print timings and a summary as JSON")
     m.add_argument("-q", "--quiet", action="store_true", help="no progress bar")

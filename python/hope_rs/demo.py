@@ -25,7 +25,8 @@ def demo_pair() -> tuple[Mesh, Mesh]:
 
 def run_demo(*, verbose: bool = True) -> dict:
     """Match the bundled pair; score the initial map, HOPE's map and the final one (after the
-    spectral pass) against the ground truth; return a report."""
+    spectral pass and the shared-face finish, where they ran) against the ground truth; return
+    a report."""
     from .evaluate import geodesic_errors, score
     from .matching import match
 
@@ -47,8 +48,10 @@ def run_demo(*, verbose: bool = True) -> dict:
         print(report["pair"])
         print(f"  initial map (SHOT, NN) : {init}")
         print(f"  HOPE                    : {hope}")
-        # The pass is skipped when HOPE's map has settled (see hope_rs.match's `spectral`).
-        label = "final (spectral pass)" if res.hope_map is not None else "final (HOPE's, settled)"
+        # Both later stages are skipped when HOPE's map has settled or already sends every
+        # face onto a face (see hope_rs.match's `spectral` and `shared_faces`).
+        stages = [s for s in ("spectral", "faces") if s in res.timings]
+        label = f"final (+{', '.join(stages)})" if stages else "final (HOPE's)"
         print(f"  {label:<23} : {final}")
         print(
             f"  time: {seconds:.2f} s  ("

@@ -130,14 +130,20 @@ def match(
         last pass and the polish moved no vertex and LMD trusts every vertex; see
         :attr:`hope_rs.refine.RefineResult.settled`): 5 of the 6 faust_reg pairs of the
         bench and TOSCA remeshed wolf, whose maps are exact, and no other remeshed pair; there
-        the pass never changed the map and took 0.3-0.6 s.
+        the pass never changed the map and took 0.3-0.6 s. With ``shared_faces`` it is also
+        skipped when HOPE's map sends every face of A onto a face of B one to one.
     shared_faces : bool
         Last, on shapes that share most of their triangulation (at least
         :data:`~hope_rs.shared_faces.MIN_HANDLES` of A's vertices have all their faces mapped
         onto faces of B), run the finishing rounds of :mod:`hope_rs.shared_faces`: deform A as
         rigidly as possible onto the images of those vertices, move the others to the nearest
-        vertex of B and repair with HOPE steps. On the TOSCA cat (28k vertices, 94% of its edges
-        shared) ... ; shapes remeshed independently never qualify.
+        vertex of B and repair with HOPE steps. The refinement then hands over after the pass
+        in which such vertices reach that share (from its second pass on). On the TOSCA cat
+        (28k vertices, 94% of its edges shared) 41.7% → 71.5% exact and a mean geodesic error
+        of 0.0139 → 0.0049, in about the same time; on FAUST 012 without its legs against 018
+        93.1% → 99.98% exact. Shapes remeshed independently never qualify (at most 8.6% on 45
+        FAUST pairs), and the map is the same as with ``False``. Skipped above
+        :data:`~hope_rs.shared_faces.MAX_VERTICES` vertices.
     callback : callable, optional
         Called with each :class:`~hope_rs.refine.Iteration` as it finishes (of the coarse
         match too, with ``multiscale``).

@@ -1,22 +1,23 @@
 """Finishing rounds for shapes that share most of their triangulation.
 
-Where A and B are one triangulation in two poses (FAUST registrations, the TOSCA cat), the true
-map sends faces onto faces. HOPE's k-hop overlaps cannot see an error of a few edges where a
-pose stretches the surface: the TOSCA cat's cat0 → cat6 changes the length of 5% of its edges by
-more than 27%, and there HOPE's map drifts smoothly by a median 3 edges, a drift that the
-overlaps of drifted witnesses reproduce (from the SHOT map: 41.7% exact; repeating the paper's
-steps from that map gains a few points per pass).
+Where A and B are one triangulation in two poses (FAUST registrations, the TOSCA cat) or a part
+of one, the true map sends faces onto faces. HOPE's k-hop overlaps cannot see an error of a few
+edges where a pose stretches the surface: the TOSCA cat's cat0 -> cat6 changes the length of 5%
+of its shared edges by more than 27%, and there HOPE's map drifts smoothly by a median 3 edges,
+a drift that the overlaps of drifted witnesses reproduce.
 
-Each round here takes the vertices whose faces all map onto faces of B (with their
-orientation) and whose image no other vertex shares as fixed handles, deforms A as rigidly as
-possible (ARAP, Sorkine and Alexa 2007) so that the handles sit on their images, moves every
-other vertex to the vertex of B nearest its deformed position, and then runs a few HOPE steps at
-a fixed hop radius with every vertex as a witness, which pull the moved vertices onto a
-one-to-one map. Right handles fix the stretched regions between them far better than hop
-counts do, and the steps repair the snapping where the handles are sparse.
+Each round takes as handles the vertices whose faces all map onto faces of B (with their
+orientation) and whose image no other vertex shares, deforms A as rigidly as possible (ARAP,
+Sorkine and Alexa 2007) so that the handles sit on their images, moves every other vertex to
+the vertex of B nearest its deformed position, and then runs a few HOPE steps at a fixed hop
+radius with every vertex voting, which pull the moved vertices onto a one-to-one map. Rounds
+repeat while the handles grow. On the cat (after two HOPE passes and the spectral pass; see
+:func:`hope_rs.match`) the map went from 41.7% to 71.5% exact, mean geodesic error 0.0139 ->
+0.0049; FAUST 012 without its legs against the whole 018 from 93.1% to 99.98%. The README's
+"Shared-face finish" lists the variants measured.
 
-Shapes without shared faces (independently remeshed ones) give almost no handles, and the
-rounds do not run (see :data:`MIN_HANDLES`).
+Shapes without shared faces (independently remeshed ones: at most 8.6% of the vertices are
+handles on 45 FAUST pairs) do not qualify (see :data:`MIN_HANDLES`).
 """
 
 from __future__ import annotations
