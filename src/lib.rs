@@ -6,6 +6,7 @@ pub mod csr;
 pub mod error;
 pub mod geodesic;
 pub mod graph;
+pub mod jacobi;
 pub mod khop;
 pub mod lmd;
 pub mod memory;

@@ -7,12 +7,11 @@
 //! proper rotation and needs no sign fix. NumPy's batched SVD took 43 ms per call for the
 //! 28k-vertex TOSCA cat; this takes a few.
 use crate::error::{invalid, Result};
+use crate::jacobi::sym_eigen;
 use rayon::prelude::*;
 
 /// Matrices per rayon task.
 const CHUNK: usize = 1024;
-/// Jacobi sweeps at most; a 4 × 4 matrix converges in well under ten.
-const SWEEPS: usize = 30;
 
 /// The rotation maximising `tr(R M)` for each row-major 3 × 3 matrix `M` of `m` (9 values
 /// each), row-major. A matrix of zeros gives the identity.
@@ -65,52 +64,13 @@ fn closest_rotation(m: &[f64; 9]) -> [f64; 9] {
     ]
 }
 
-/// The unit eigenvector of the largest eigenvalue of a symmetric 4 × 4 matrix, by cyclic
-/// Jacobi rotations (ties go to the lower index; the zero matrix gives (1, 0, 0, 0)).
-fn top_eigenvector(mut a: [[f64; 4]; 4]) -> [f64; 4] {
-    let mut v = [[0.0; 4]; 4];
-    for (i, row) in v.iter_mut().enumerate() {
-        row[i] = 1.0;
-    }
-    let scale: f64 = a.iter().flatten().map(|x| x * x).sum::<f64>().sqrt();
-    for _ in 0..SWEEPS {
-        let off: f64 = (0..4)
-            .flat_map(|p| (p + 1..4).map(move |q| (p, q)))
-            .map(|(p, q)| a[p][q] * a[p][q])
-            .sum::<f64>()
-            .sqrt();
-        if off <= 1e-15 * scale || off == 0.0 {
-            break;
-        }
-        for p in 0..3 {
-            for q in p + 1..4 {
-                if a[p][q] == 0.0 {
-                    continue;
-                }
-                let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
-                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-                let t = if theta == 0.0 { 1.0 } else { t };
-                let c = 1.0 / (t * t + 1.0).sqrt();
-                let s = t * c;
-                for row in a.iter_mut() {
-                    let (akp, akq) = (row[p], row[q]);
-                    row[p] = c * akp - s * akq;
-                    row[q] = s * akp + c * akq;
-                }
-                let (rp, rq) = (a[p], a[q]);
-                a[p] = std::array::from_fn(|k| c * rp[k] - s * rq[k]);
-                a[q] = std::array::from_fn(|k| s * rp[k] + c * rq[k]);
-                for row in v.iter_mut() {
-                    let (vp, vq) = (row[p], row[q]);
-                    row[p] = c * vp - s * vq;
-                    row[q] = s * vp + c * vq;
-                }
-            }
-        }
-    }
+/// The unit eigenvector of the largest eigenvalue of a symmetric 4 × 4 matrix (ties go to
+/// the lower index; the zero matrix gives (1, 0, 0, 0)).
+fn top_eigenvector(a: [[f64; 4]; 4]) -> [f64; 4] {
+    let (vals, v) = sym_eigen(a);
     let mut best = 0;
     for i in 1..4 {
-        if a[i][i] > a[best][best] {
+        if vals[i] > vals[best] {
             best = i;
         }
     }

@@ -27,6 +27,7 @@
 //! Coincident neighbours (distance 0) carry no direction and are ignored. A vertex with fewer
 //! than 5 usable neighbours gets an all-zero row.
 use crate::error::{invalid, Result};
+use crate::jacobi::sym_eigen;
 use rayon::prelude::*;
 use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, PI};
 
@@ -269,51 +270,6 @@ impl Grid {
     }
 }
 
-/// Eigen-decomposition of a symmetric 3x3 matrix by cyclic Jacobi rotations.
-/// Returns the eigenvalues and the eigenvectors as the columns of the second matrix.
-fn sym_eigen3(mut a: [[f64; 3]; 3]) -> (V3, [[f64; 3]; 3]) {
-    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-    for _sweep in 0..64 {
-        let off = a[0][1].abs() + a[0][2].abs() + a[1][2].abs();
-        let diag = a[0][0].abs() + a[1][1].abs() + a[2][2].abs();
-        if off == 0.0 || off <= 1e-18 * diag || !off.is_finite() {
-            break;
-        }
-        for &(p, q) in &[(0usize, 1usize), (0, 2), (1, 2)] {
-            let apq = a[p][q];
-            if apq == 0.0 {
-                continue;
-            }
-            let theta = (a[q][q] - a[p][p]) / (2.0 * apq);
-            let t = if theta.abs() > 1e150 {
-                0.5 / theta
-            } else {
-                theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt())
-            };
-            let c = 1.0 / (t * t + 1.0).sqrt();
-            let s = t * c;
-            for row in a.iter_mut() {
-                let (akp, akq) = (row[p], row[q]);
-                row[p] = c * akp - s * akq;
-                row[q] = s * akp + c * akq;
-            }
-            let (row_p, row_q) = (a[p], a[q]);
-            for k in 0..3 {
-                a[p][k] = c * row_p[k] - s * row_q[k];
-                a[q][k] = s * row_p[k] + c * row_q[k];
-            }
-            a[p][q] = 0.0;
-            a[q][p] = 0.0;
-            for row in v.iter_mut() {
-                let (vkp, vkq) = (row[p], row[q]);
-                row[p] = c * vkp - s * vkq;
-                row[q] = s * vkp + c * vkq;
-            }
-        }
-    }
-    ([a[0][0], a[1][1], a[2][2]], v)
-}
-
 /// `atan(x)` for `|x| <= tan(pi / 8)`: the single-precision minimax polynomial of Cephes'
 /// `atanf`, evaluated in f64 (absolute error below 1e-7 rad, which is all a histogram needs).
 #[inline]
@@ -482,7 +438,7 @@ fn local_frame(nb: &Scratch, radius: f64, normal: V3) -> Option<[V3; 3]> {
         return None;
     }
     let m = m.map(|v| v / wsum);
-    let (vals, vecs) = sym_eigen3([[m[0], m[1], m[2]], [m[1], m[3], m[4]], [m[2], m[4], m[5]]]);
+    let (vals, vecs) = sym_eigen([[m[0], m[1], m[2]], [m[1], m[3], m[4]], [m[2], m[4], m[5]]]);
     let mut order = [0usize, 1, 2];
     order.sort_by(|&i, &j| vals[j].total_cmp(&vals[i]));
     let column = |k: usize| [vecs[0][k], vecs[1][k], vecs[2][k]];
@@ -1106,7 +1062,7 @@ mod tests {
             cases.push(m);
         }
         for m in cases {
-            let (vals, vecs) = sym_eigen3(m);
+            let (vals, vecs) = sym_eigen(m);
             let scale = m
                 .iter()
                 .flatten()
