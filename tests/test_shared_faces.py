@@ -17,6 +17,10 @@ def test_face_keys_ignore_rotation_but_not_orientation():
     k = SF._face_keys(f, 6)
     assert k[0] == k[1] == k[2] and k[3] != k[0]
     assert k[4] == SF._face_keys(np.array([[3, 4, 5]]), 6)[0]
+    # Above 2M vertices the keys are records (n**3 would overflow int64): the same rules.
+    big = SF._face_keys(f, 3_000_000)
+    assert big[0] == big[1] == big[2] and big[3] != big[0]
+    np.testing.assert_array_equal(np.isin(big, big[[1, 4]]), [True, True, True, False, True])
 
 
 def test_handles_are_the_vertices_whose_faces_all_map_onto_faces_one_to_one():
