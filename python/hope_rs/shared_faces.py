@@ -97,27 +97,40 @@ def arap_to_handles(
     """Positions of A's vertices after deforming ``points`` as rigidly as possible (uniform
     edge weights) with the ``handles`` held at ``start``; ``start`` also seeds the rotations
     and weakly anchors the free vertices (:data:`ANCHOR_WEIGHT`)."""
-    n = len(points)
-    i = np.concatenate([edges[:, 0], edges[:, 1]])  # every edge in both directions
-    j = np.concatenate([edges[:, 1], edges[:, 0]])
-    w = sp.csr_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
-    lap = (sp.diags(np.asarray(w.sum(axis=1)).ravel()) - w).tocsr()
-    # Sums over each vertex's edges as one sparse product (np.add.at took 0.3 s at 28k).
-    per_vertex = sp.csr_matrix((np.ones(len(i)), (i, np.arange(len(i)))), shape=(n, len(i)))
-    free = ~handles
-    lff = (lap[free][:, free] + ANCHOR_WEIGHT * sp.eye(int(free.sum()))).tocsc()
-    lfh = lap[free][:, handles]
-    solve = sla.splu(lff).solve
-    y = np.array(start, dtype=np.float64)
-    ex = points[i] - points[j]
-    for _ in range(ARAP_ITERATIONS):
-        ey = y[i] - y[j]
-        cov = (per_vertex @ (ex[:, :, None] * ey[:, None, :]).reshape(-1, 9)).reshape(n, 3, 3)
-        rot = _core.closest_rotations(cov)
-        rhs = per_vertex @ (0.5 * np.einsum("nij,nj->ni", rot[i] + rot[j], ex))
-        rhs = rhs[free] - lfh @ y[handles] + ANCHOR_WEIGHT * start[free]
-        y[free] = np.column_stack([solve(np.ascontiguousarray(rhs[:, c])) for c in range(3)])
-    return y
+    return _Arap(points, edges).fit(start, handles)
+
+
+class _Arap:
+    """The parts of :func:`arap_to_handles` that depend on the mesh alone, built once for all
+    the rounds of a finish."""
+
+    def __init__(self, points: np.ndarray, edges: np.ndarray):
+        n = self.n = len(points)
+        i = self.i = np.concatenate([edges[:, 0], edges[:, 1]])  # every edge both ways
+        j = self.j = np.concatenate([edges[:, 1], edges[:, 0]])
+        w = sp.csr_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
+        self.lap = (sp.diags(np.asarray(w.sum(axis=1)).ravel()) - w).tocsr()
+        # Sums over each vertex's edges as one sparse product (np.add.at took 0.3 s at 28k).
+        self.per_vertex = sp.csr_matrix(
+            (np.ones(len(i)), (i, np.arange(len(i)))), shape=(n, len(i))
+        )
+        self.ex = points[i] - points[j]
+
+    def fit(self, start: np.ndarray, handles: np.ndarray) -> np.ndarray:
+        i, j, ex, per_vertex = self.i, self.j, self.ex, self.per_vertex
+        free = ~handles
+        lff = (self.lap[free][:, free] + ANCHOR_WEIGHT * sp.eye(int(free.sum()))).tocsc()
+        lfh = self.lap[free][:, handles]
+        solve = sla.splu(lff).solve
+        y = np.array(start, dtype=np.float64)
+        for _ in range(ARAP_ITERATIONS):
+            ey = y[i] - y[j]
+            cov = per_vertex @ (ex[:, :, None] * ey[:, None, :]).reshape(-1, 9)
+            rot = _core.closest_rotations(cov.reshape(self.n, 3, 3))
+            rhs = per_vertex @ (0.5 * np.einsum("nij,nj->ni", rot[i] + rot[j], ex))
+            rhs = rhs[free] - lfh @ y[handles] + ANCHOR_WEIGHT * start[free]
+            y[free] = np.column_stack([solve(np.ascontiguousarray(rhs[:, c])) for c in range(3)])
+        return y
 
 
 # SuperLU's solves call BLAS; one thread keeps their bits, and so the map, the same whatever
@@ -130,9 +143,8 @@ def finish(a: Shape, b: Shape, f: np.ndarray, *, rounds: int = ROUNDS) -> tuple[
     f = np.asarray(f, dtype=np.int64)
     n_a = a.n_vertices
     k = min(STEP_K, a.k_max, b.k_max)
-    # In B's units, so that a scaled copy deforms by rotations alone.
-    points = a.points * (b.scale / a.scale)
-    tree = None
+    every = np.ones(n_a, dtype=bool)
+    arap = tree = None  # built by the first round that runs
     last = 0.0
     done = 0
     for _ in range(rounds):
@@ -141,12 +153,12 @@ def finish(a: Shape, b: Shape, f: np.ndarray, *, rounds: int = ROUNDS) -> tuple[
         if share < MIN_HANDLES or share < last + MIN_GROWTH or handles.all():
             break
         last = share
-        if tree is None:
+        if arap is None:
+            # In B's units, so that a scaled copy deforms by rotations alone.
+            arap = _Arap(a.points * (b.scale / a.scale), a.edges)
             tree = cKDTree(b.points)
-        y = arap_to_handles(points, a.edges, b.points[f], handles)
-        g = tree.query(y)[1].astype(np.int64)
+        g = tree.query(arap.fit(b.points[f], handles))[1].astype(np.int64)
         g[handles] = f[handles]
-        every = np.ones(n_a, dtype=bool)
         for _ in range(STEPS):
             g = assign_by_overlap(a, b, k, g, every)
         f = g
