@@ -4,6 +4,7 @@
 pub mod auction;
 pub mod csr;
 pub mod error;
+pub mod face_growth;
 pub mod geodesic;
 pub mod graph;
 pub mod jacobi;

@@ -692,6 +692,27 @@ fn closest_rotations<'py>(
         .into_pyarray(py))
 }
 
+/// Grows a partial map (−1 where unknown) across the faces A and B share (see
+/// `face_growth.rs`).
+#[pyfunction]
+fn grow_across_faces<'py>(
+    py: Python<'py>,
+    faces_a: PyReadonlyArray2<'py, i64>,
+    points_a: PyReadonlyArray2<'py, f64>,
+    faces_b: PyReadonlyArray2<'py, i64>,
+    points_b: PyReadonlyArray2<'py, f64>,
+    partial_map: PyReadonlyArray1<'py, i64>,
+    max_error: f64,
+) -> PyResult<Bound<'py, PyArray1<i64>>> {
+    let (fa, pa) = (faces_vec(&faces_a)?, points_vec(&points_a)?);
+    let (fb, pb) = (faces_vec(&faces_b)?, points_vec(&points_b)?);
+    let map = plain_vec(&partial_map);
+    let g = detached(py, || {
+        crate::face_growth::grow_across_faces(&fa, &pa, &fb, &pb, &map, max_error)
+    })?;
+    Ok(owned(py, &g))
+}
+
 /// Paired row and column indices.
 type PairsOut<'py> = (Bound<'py, PyArray1<i64>>, Bound<'py, PyArray1<i64>>);
 
@@ -730,5 +751,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(greedy_pairs, m)?)?;
     m.add_function(wrap_pyfunction!(py_nearest_among, m)?)?;
     m.add_function(wrap_pyfunction!(closest_rotations, m)?)?;
+    m.add_function(wrap_pyfunction!(grow_across_faces, m)?)?;
     Ok(())
 }
