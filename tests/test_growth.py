@@ -2,11 +2,12 @@
 
 import numpy as np
 import pytest
-from meshes import moved_copy
+from meshes import bumpy_sphere, moved_copy
 from test_shared_faces import drifted
 
 import hope_rs
 from hope_rs import _core, growth
+from hope_rs import shared_faces as SF
 
 
 def flip_edges(faces: np.ndarray, inside: np.ndarray, rng) -> np.ndarray:
@@ -69,13 +70,20 @@ def test_growth_rebuilds_a_stretched_retriangulated_patch(stretched_patch, monke
     assert (faces_only[ball] == truth[ball]).mean() < exact - 0.1  # measured 21%
 
 
-def test_only_large_handle_patches_seed(stretched_patch):
-    a, b, truth, ball, f = stretched_patch
-    sa, sb = hope_rs.Shape(a), hope_rs.Shape(b)
-    fi, ti = sa.map_in(sb, f), sa.map_in(sb, truth)
-    seeds = growth.seed_handles(sa, sb, fi)
-    assert seeds.mean() > 0.5
-    np.testing.assert_array_equal(fi[seeds], ti[seeds])
+def test_only_handle_patches_above_the_seed_share_seed():
+    s = hope_rs.Shape(bumpy_sphere(2000, 3))
+    z = s.points[:, 2]
+    order = np.argsort(-z)
+    cap, band = order[:35], order[35:135]  # 1.75% of the vertices, then a ring below them
+    f = np.arange(s.n_vertices)
+    f[band[0::2]], f[band[1::2]] = band[1::2], band[0::2]  # the ring's images swapped in pairs
+    handles = SF.face_handles(s, s, f)
+    seeds = growth.seed_handles(s, s, f)
+    in_cap = np.zeros(s.n_vertices, dtype=bool)
+    in_cap[cap] = True
+    assert handles[cap].sum() >= 5 and not seeds[cap].any()  # 8 handles in the cap
+    np.testing.assert_array_equal(seeds, handles & ~in_cap)
+    assert seeds.mean() > 0.8
 
 
 def test_grow_across_faces_rejects_bad_input():

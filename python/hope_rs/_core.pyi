@@ -105,3 +105,18 @@ def closest_rotations(m: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     """For each 3 x 3 matrix ``M`` of an (n, 3, 3) array, the rotation ``R`` maximising
     ``tr(R M)`` (Horn's quaternion method); raises ValueError on other shapes or non-finite
     values."""
+
+def grow_across_faces(
+    faces_a: npt.NDArray[np.int64],
+    points_a: npt.NDArray[np.float64],
+    faces_b: npt.NDArray[np.int64],
+    points_b: npt.NDArray[np.float64],
+    partial_map: npt.NDArray[np.int64],
+    max_error: float,
+) -> npt.NDArray[np.int64]:
+    """``partial_map`` (A -> B, -1 where unknown, one-to-one where known) extended across the
+    faces of A whose mapped edge bounds a face of B on the same side, best-shaped first, where
+    the two triangles' shapes differ by less than ``max_error`` (the third vertex's coordinates
+    relative to the edge, in edge lengths). Known entries stay. Raises ValueError on faces out
+    of range, a map of the wrong length, entries outside -1..n_b-1, a map that is not
+    one-to-one, or a negative or NaN ``max_error``."""

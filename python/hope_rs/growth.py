@@ -150,9 +150,5 @@ class _AffineGrowth:
         free[rows, first] = False
         second = np.argmax(free, axis=1)
         d2 = np.where(free.any(axis=1), d[rows, second], np.inf)
-        ok = (
-            ~used[target]
-            & (d1 < accept * self.spacing[target])
-            & (d2 > ratio * d1)
-        )
+        ok = ~used[target] & (d1 < accept * self.spacing[target]) & (d2 > ratio * d1)
         return target, ok
