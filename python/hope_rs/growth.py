@@ -14,9 +14,11 @@ of the map it can trust and rebuilds the rest outward from it, vertex by vertex:
   vertex with enough mapped vertices in its 2-ring gets the affine map that best carries those
   onto their images; the B vertex nearest its predicted position is taken if it is clearly the
   nearest free one (:data:`AFFINE_STAGES`).
+- **From both sides**: the same growth from B to A, and rounds that keep what the two agree on
+  (see :func:`grow`).
 
-Vertices never reached keep their image. On the cat, after the finish's rounds, 72.1% -> 89.0%
-exact (cat0 -> cat6) and 74.7% -> 87.6% (cat6 -> cat0), in 1.1 s.
+Vertices never reached keep their image. On the cat, after the finish's rounds, 68.6% -> 93.3%
+exact (cat0 -> cat6) and 71.5% -> 92.4% (cat6 -> cat0), in 1.4 s.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from scipy.spatial import cKDTree
 
 from . import _core
 from .shape import Shape
+from .shared_faces import face_handles
 
 #: Handle patches with fewer of A's vertices than this share do not seed the growth.
 SEED_SHARE = 0.02
@@ -41,15 +44,27 @@ FACE_ERROR = 0.5
 AFFINE_STAGES = ((0.35, 2.0), (0.5, 1.5), (0.7, 1.2))
 #: An unmapped vertex is fitted once at least this many vertices of its 2-ring are mapped.
 MIN_KNOWN = 6
-#: Alternations of growth across faces and affine growth.
+#: At most this many rounds of growth (each one step across shared faces and the three affine
+#: stages, in one of the two orders below); they stop when a round maps nothing new.
 ROUNDS = 3
+#: The first growth's order: across shared faces first, since the seeds lie in shared regions.
+FACES_FIRST = ("faces", 0, 1, 2)
+#: The order after the retriangulated regions were cleared (see :func:`grow`): the affine
+#: stages first, so that fits from every side of a region place its vertices before wrong
+#: face proposals spread in (on the cat, from the true map outside the two patches: 71% / 72%
+#: of the patches exact with faces first, 85% / 81% this way).
+AFFINE_FIRST = (0, 1, 2, "faces")
+#: The order of the agreement rounds (measured on the cat: 93.3% / 92.4% exact in 2.9 s, with
+#: :data:`AFFINE_FIRST` 93.2% / 92.3% in 3.6 s).
+AGREEMENT_ORDER = (0, 1, "faces", 2)
+#: Rounds in which the growths from A's side and from B's side (inverted) keep the vertices
+#: they agree on and grow the rest again.
+AGREEMENT_ROUNDS = 3
 
 
 def seed_handles(a: Shape, b: Shape, f: np.ndarray) -> np.ndarray:
     """The handles of ``f`` (see :func:`hope_rs.shared_faces.face_handles`) in connected
     patches of at least :data:`SEED_SHARE` of A's vertices."""
-    from .shared_faces import face_handles
-
     handles = face_handles(a, b, f)
     e = a.edges[handles[a.edges[:, 0]] & handles[a.edges[:, 1]]]
     n = a.n_vertices
@@ -61,18 +76,69 @@ def seed_handles(a: Shape, b: Shape, f: np.ndarray) -> np.ndarray:
 
 def grow(a: Shape, b: Shape, f: np.ndarray) -> np.ndarray:
     """The map ``f`` (internal numbering) rebuilt from its seed handles outward; vertices the
-    growth does not reach keep their image."""
-    g = np.where(seed_handles(a, b, f), np.asarray(f, dtype=np.int64), -1)
-    fa, fb = a.internal.faces.astype(np.int64), b.internal.faces.astype(np.int64)
-    grower = _AffineGrowth(a, b)
-    for _ in range(ROUNDS):
-        before = int((g >= 0).sum())
-        g = _core.grow_across_faces(fa, a.points, fb, b.points, g, FACE_ERROR)
-        for accept, ratio in AFFINE_STAGES:
-            g = grower.grow(g, accept, ratio)
-        if (g >= 0).sum() == before:
-            break
+    growth does not reach keep their image.
+
+    The growth runs from both sides: A -> B from the seeds, and B -> A from their inverse.
+    Each first grows faces first, then clears the vertices that are not handles of what it
+    grew, with their 1-ring (the retriangulated regions, and wrong picks at their edges), and
+    grows again affine first. Then, :data:`AGREEMENT_ROUNDS` times, both keep only what they
+    agree on and grow again from it. On the cat grown from A's side alone 92.8% / 88.4%
+    (cat0 -> cat6 / cat6 -> cat0) of the vertices were exact, from B's side 89.1% / 92.1%;
+    after the agreement rounds 93.3% / 92.4% either way.
+    """
+    f = np.asarray(f, dtype=np.int64)
+    n_a, n_b = a.n_vertices, b.n_vertices
+    ab, ba = _Growth(a, b), _Growth(b, a)
+    seeds = np.where(seed_handles(a, b, f), f, -1)
+    g = ab.regrow(ab.grow(seeds, FACES_FIRST))
+    h = _inverse(ba.regrow(ba.grow(_inverse(seeds, n_b), FACES_FIRST)), n_a)
+    for _ in range(AGREEMENT_ROUNDS):
+        agreed = np.where(g == h, g, -1)
+        g = ab.grow(agreed, AGREEMENT_ORDER)
+        h = _inverse(ba.grow(_inverse(agreed, n_b), AGREEMENT_ORDER), n_a)
     return np.where(g >= 0, g, f)
+
+
+def _inverse(g: np.ndarray, n: int) -> np.ndarray:
+    """The inverse of the one-to-one partial map ``g`` (-1 where unknown), with ``n`` entries."""
+    out = np.full(n, -1, dtype=np.int64)
+    known = g >= 0
+    out[g[known]] = np.flatnonzero(known)
+    return out
+
+
+class _Growth:
+    """Growth of partial maps from shape A to shape B (-1 where unknown)."""
+
+    def __init__(self, a: Shape, b: Shape):
+        self.a, self.b = a, b
+        self.fa = a.internal.faces.astype(np.int64)
+        self.fb = b.internal.faces.astype(np.int64)
+        self.affine = _AffineGrowth(a, b)
+
+    def grow(self, g: np.ndarray, order: tuple) -> np.ndarray:
+        """``g`` grown in rounds of the steps in ``order`` (see :data:`FACES_FIRST`)."""
+        a, b = self.a, self.b
+        for _ in range(ROUNDS):
+            before = int((g >= 0).sum())
+            for step in order:
+                if step == "faces":
+                    g = _core.grow_across_faces(self.fa, a.points, self.fb, b.points, g, FACE_ERROR)
+                else:
+                    g = self.affine.grow(g, *AFFINE_STAGES[step])
+            if (g >= 0).sum() == before:
+                break
+        return g
+
+    def regrow(self, g: np.ndarray) -> np.ndarray:
+        """``g`` with its vertices that are not handles, and their 1-ring, cleared and grown
+        again affine first."""
+        clear = ~face_handles(self.a, self.b, g)
+        e = self.a.edges
+        near = clear.copy()
+        near[e[:, 0][clear[e[:, 1]]]] = True
+        near[e[:, 1][clear[e[:, 0]]]] = True
+        return self.grow(np.where(near, -1, g), AFFINE_FIRST)
 
 
 class _AffineGrowth:
@@ -98,18 +164,32 @@ class _AffineGrowth:
         """``g`` with every vertex mapped that passes the stage's tests, repeated until none
         does."""
         g = g.copy()
+        n = len(g)
         used = np.zeros(len(self.pb), dtype=bool)
         used[g[g >= 0]] = True
+        k = min(8, len(self.pb))
+        # Mapped vertices only ever join, so a vertex whose 2-ring count of them is unchanged
+        # has the same fit and the same nearest B vertices as before: only the test, which
+        # depends on which of those are used, is redone.
+        fitted_with = np.full(n, -1.0)
+        dist = np.zeros((n, k))
+        near = np.zeros((n, k), dtype=np.int64)
         while True:
             known = g >= 0
-            front = np.flatnonzero(~known & (self.ring @ known.astype(np.float64) >= MIN_KNOWN))
+            count = self.ring @ known.astype(np.float64)
+            front = np.flatnonzero(~known & (count >= MIN_KNOWN))
             if len(front) == 0:
                 return g
-            target, ok = self._nearest_free(self._predict(front, g, known), used, accept, ratio)
+            stale = front[count[front] != fitted_with[front]]
+            if len(stale):
+                d, j = self.tree.query(self._predict(stale, g, known), k=k)
+                dist[stale], near[stale] = d.reshape(len(stale), k), j.reshape(len(stale), k)
+                fitted_with[stale] = count[stale]
+            target, ok = self._nearest_free(dist[front], near[front], used, accept, ratio)
             front, target = front[ok], target[ok]
             # A B vertex two vertices both want goes to neither in this pass.
-            value, count = np.unique(target, return_counts=True)
-            alone = np.isin(target, value[count == 1])
+            value, times = np.unique(target, return_counts=True)
+            alone = np.isin(target, value[times == 1])
             if not alone.any():
                 return g
             g[front[alone]] = target[alone]
@@ -138,13 +218,12 @@ class _AffineGrowth:
         return np.linalg.solve(xtx, xty)[:, 3, :]
 
     def _nearest_free(
-        self, y: np.ndarray, used: np.ndarray, accept: float, ratio: float
+        self, d: np.ndarray, j: np.ndarray, used: np.ndarray, accept: float, ratio: float
     ) -> tuple[np.ndarray, np.ndarray]:
-        """The nearest free B vertex to each predicted point among its 8 nearest, and whether
-        it passes the stage's tests."""
-        d, j = self.tree.query(y, k=min(8, len(self.pb)))
+        """Among each predicted point's nearest B vertices (distances ``d``, indices ``j``),
+        the nearest free one, and whether it passes the stage's tests."""
         free = ~used[j]
-        rows = np.arange(len(y))
+        rows = np.arange(len(d))
         first = np.argmax(free, axis=1)
         d1, target = d[rows, first], j[rows, first]
         free[rows, first] = False
