@@ -29,6 +29,8 @@ import scipy.sparse.linalg as sla
 
 from . import _core
 from ._blas import with_single_threaded_blas
+from .growth import grow
+from .handles import face_handles, seed_handles
 from .refine import assign_by_overlap
 from .shape import Shape
 
@@ -37,10 +39,13 @@ from .shape import Shape
 MAX_VERTICES = 60_000
 #: Rounds run only while at least this share of A's vertices are handles.
 MIN_HANDLES = 0.2
-#: At most this many rounds; they stop earlier once the handles grow by less than
-#: :data:`MIN_GROWTH` of A's vertices.
+#: At most this many rounds. They stop earlier once the share of A's vertices in handle
+#: patches large enough to seed the growth (:func:`~hope_rs.handles.seed_handles`) grows by
+#: less than :data:`MIN_GROWTH`: the rounds are there to seed it. On the cat the growth gave
+#: the same maps after 8 and 5 rounds (cat0 -> cat6 / cat6 -> cat0; 97.96% / 97.64% exact) as
+#: after 10, where the earlier rule (handles growing by 0.2%) stopped, 1.4 s and 4.0 s sooner.
 ROUNDS = 10
-MIN_GROWTH = 0.002
+MIN_GROWTH = 0.01
 #: HOPE steps after each round's snapping, and their hop radius.
 STEPS = 3
 STEP_K = 5
@@ -61,39 +66,6 @@ def qualifies(a: Shape, b: Shape, f: np.ndarray) -> bool:
     """Whether the map ``f`` (internal numbering) has at least :data:`MIN_HANDLES` of A's
     vertices as handles (see :func:`face_handles`)."""
     return bool(face_handles(a, b, f).mean() >= MIN_HANDLES)
-
-
-def face_handles(a: Shape, b: Shape, f: np.ndarray) -> np.ndarray:
-    """Vertices of A whose faces all map onto faces of B, with the same orientation, and
-    whose image is the image of no other vertex. ``f`` may be partial (-1 where unknown):
-    unknown vertices are not handles, nor are those with an unknown neighbour on a face."""
-    fa, fb = a.internal.faces.astype(np.int64), b.internal.faces.astype(np.int64)
-    n_b = b.n_vertices
-    f = np.asarray(f, dtype=np.int64)
-    known = f >= 0
-    f = np.where(known, f, 0)
-    mapped = f[fa]
-    ok = np.isin(_face_keys(mapped, n_b), _face_keys(fb, n_b)) & known[fa].all(axis=1)
-    bad = np.zeros(a.n_vertices, dtype=bool)
-    bad[fa[~ok].ravel()] = True
-    shared = np.bincount(f[known], minlength=n_b)[f] > 1
-    return known & ~bad & ~shared
-
-
-def _face_keys(faces: np.ndarray, n: int) -> np.ndarray:
-    """One integer per oriented face, the same for its three rotations."""
-    # Rotate each face so that its smallest index comes first, which keeps the orientation.
-    first = np.argmin(faces, axis=1)
-    rows = np.arange(len(faces))[:, None]
-    rot = faces[rows, (first[:, None] + np.arange(3)) % 3]
-    n = np.int64(n)
-    if n > 2_000_000:  # n**3 would overflow int64; fall back to a structured key
-        return (
-            np.ascontiguousarray(rot)
-            .view([("a", np.int64), ("b", np.int64), ("c", np.int64)])
-            .ravel()
-        )
-    return (rot[:, 0] * n + rot[:, 1]) * n + rot[:, 2]
 
 
 def arap_to_handles(
@@ -155,10 +127,10 @@ def finish(a: Shape, b: Shape, f: np.ndarray, *, rounds: int = ROUNDS) -> tuple[
     done = 0
     for _ in range(rounds):
         handles = face_handles(a, b, f)
-        share = handles.mean()
-        if share < MIN_HANDLES or share < last + MIN_GROWTH or handles.all():
+        seeded = seed_handles(a, b, f).mean()
+        if handles.mean() < MIN_HANDLES or seeded < last + MIN_GROWTH or handles.all():
             break
-        last = share
+        last = seeded
         if arap is None:
             # In B's units, so that a scaled copy deforms by rotations alone.
             arap = _Arap(a.points * (b.scale / a.scale), a.edges)
@@ -170,7 +142,5 @@ def finish(a: Shape, b: Shape, f: np.ndarray, *, rounds: int = ROUNDS) -> tuple[
         f = g
         done += 1
     if done:
-        from .growth import grow  # growth.py imports face_handles from here
-
         f = grow(a, b, f)
     return f, done

@@ -1,0 +1,66 @@
+"""Handles: the vertices a map has placed consistently with the faces both shapes share.
+
+A vertex of A is a handle of a map ``f`` when every face around it maps onto a face of B with
+the same orientation and no other vertex shares its image. On shapes that are one
+triangulation in two poses, the true map makes almost every vertex a handle; on shapes
+remeshed independently few vertices are (at most 8.6% on 45 FAUST pairs). The shared-face
+finish (:mod:`hope_rs.shared_faces`) deforms towards them, and the growth
+(:mod:`hope_rs.growth`) starts from those in large connected patches.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from .shape import Shape
+
+#: Handle patches with fewer of A's vertices than this share do not seed the growth (on the
+#: TOSCA cat every wrong handle lay in a patch of at most 1%; see :mod:`hope_rs.growth`).
+SEED_SHARE = 0.02
+
+
+def face_handles(a: Shape, b: Shape, f: np.ndarray) -> np.ndarray:
+    """Vertices of A whose faces all map onto faces of B, with the same orientation, and
+    whose image is the image of no other vertex. ``f`` may be partial (-1 where unknown):
+    unknown vertices are not handles, nor are those with an unknown neighbour on a face."""
+    fa, fb = a.internal.faces.astype(np.int64), b.internal.faces.astype(np.int64)
+    n_b = b.n_vertices
+    f = np.asarray(f, dtype=np.int64)
+    known = f >= 0
+    f = np.where(known, f, 0)
+    mapped = f[fa]
+    ok = np.isin(face_keys(mapped, n_b), face_keys(fb, n_b)) & known[fa].all(axis=1)
+    bad = np.zeros(a.n_vertices, dtype=bool)
+    bad[fa[~ok].ravel()] = True
+    shared = np.bincount(f[known], minlength=n_b)[f] > 1
+    return known & ~bad & ~shared
+
+
+def face_keys(faces: np.ndarray, n: int) -> np.ndarray:
+    """One integer per oriented face, the same for its three rotations."""
+    # Rotate each face so that its smallest index comes first, which keeps the orientation.
+    first = np.argmin(faces, axis=1)
+    rows = np.arange(len(faces))[:, None]
+    rot = faces[rows, (first[:, None] + np.arange(3)) % 3]
+    n = np.int64(n)
+    if n > 2_000_000:  # n**3 would overflow int64; fall back to a structured key
+        return (
+            np.ascontiguousarray(rot)
+            .view([("a", np.int64), ("b", np.int64), ("c", np.int64)])
+            .ravel()
+        )
+    return (rot[:, 0] * n + rot[:, 1]) * n + rot[:, 2]
+
+
+def seed_handles(a: Shape, b: Shape, f: np.ndarray) -> np.ndarray:
+    """The handles of ``f`` (see :func:`face_handles`) in connected
+    patches of at least :data:`SEED_SHARE` of A's vertices."""
+    handles = face_handles(a, b, f)
+    e = a.edges[handles[a.edges[:, 0]] & handles[a.edges[:, 1]]]
+    n = a.n_vertices
+    graph = sp.csr_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    label = connected_components(graph, directed=False)[1]
+    size = np.bincount(label, weights=handles)
+    return handles & (size[label] >= SEED_SHARE * n)
