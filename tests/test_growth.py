@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from conftest import data_path
 from meshes import bumpy_sphere, moved_copy
 from test_shared_faces import drifted
 
@@ -119,3 +120,14 @@ def test_grow_across_faces_rejects_bad_input():
         _core.grow_across_faces(f[:, :2], p, f, p, np.array([0, 1, -1, -1]), 0.5)
     with pytest.raises(ValueError, match="index"):
         _core.grow_across_faces(f + 5, p, f, p, np.array([0, 1, -1, -1]), 0.5)
+
+
+@pytest.mark.parametrize("a, b", [("cat0", "cat6"), ("cat6", "cat0")])
+def test_the_tosca_cat_is_matched_above_95_percent_exact(a, b):
+    # The goal on its one TOSCA pair (the ground truth is the identity). Measured
+    # 98.0% / 97.6% exact; without the growth 71.5% / 68.6%.
+    ma = hope_rs.load_mesh(data_path("tosca", f"{a}.off"))
+    mb = hope_rs.load_mesh(data_path("tosca", f"{b}.off"))
+    res = hope_rs.match(ma, mb)
+    assert "faces" in res.timings
+    assert (res.map == np.arange(ma.n_vertices)).mean() > 0.95
