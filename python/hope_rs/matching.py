@@ -140,9 +140,9 @@ def match(
         vertex of B and repair with HOPE steps; then rebuild the map outward from its trusted
         patches (:mod:`hope_rs.growth`). The refinement hands over after the pass
         in which such vertices reach that share (from its second pass on). On the TOSCA cat
-        (28k vertices, 85% of its faces shared) 41.7% → 93.3% exact and a mean geodesic error
-        of 0.0139 → 0.0013, in about the same time; on FAUST 012 without its legs against 018
-        93.1% → 99.98% exact. Shapes remeshed independently never qualify (at most 8.6% on 45
+        (28k vertices, 85% of its faces shared) 41.7% → 98.0% exact and a mean geodesic error
+        of 0.0139 → 0.0003, in 1–3 s more; on FAUST 012 without its legs against 018
+        93.1% → 100% exact. Shapes remeshed independently never qualify (at most 8.6% on 45
         FAUST pairs), and the map is the same as with ``False``. Skipped above
         :data:`~hope_rs.shared_faces.MAX_VERTICES` vertices.
     callback : callable, optional
