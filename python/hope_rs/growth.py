@@ -4,9 +4,9 @@ The last step of the shared-face finish (:mod:`hope_rs.shared_faces`). It keeps 
 of the map it can trust and rebuilds the rest outward from it, vertex by vertex:
 
 - **Seeds**: handles (vertices whose faces all map onto faces of B) in connected patches of at
-  least :data:`~hope_rs.handles.SEED_SHARE` of A's vertices. On the TOSCA cat every wrong handle lay in a patch
-  of at most 1% of the vertices (a region that HOPE shifted as a whole by a few edges), and
-  every patch above 2% was at least 95% right.
+  least :data:`~hope_rs.handles.SEED_SHARE` of A's vertices. On the TOSCA cat every wrong
+  handle lay in a patch of at most 1% of the vertices (a region that HOPE shifted as a whole
+  by a few edges), and every patch above 2% was at least 95% right.
 - **Across shared faces**: a face of A with two mapped vertices names the image of its third
   vertex, if the two triangles have nearly the same shape (see ``_core.grow_across_faces``).
 - **By local affine fits**: where the triangulations differ (TOSCA's cat6 is retriangulated

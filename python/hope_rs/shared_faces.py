@@ -11,12 +11,13 @@ orientation) and whose image no other vertex shares, deforms A as rigidly as pos
 Sorkine and Alexa 2007) so that the handles sit on their images, moves every other vertex to
 the vertex of B nearest its deformed position, and then runs a few HOPE steps at a fixed hop
 radius with every vertex voting, which pull the moved vertices onto a one-to-one map. Rounds
-repeat while the handle patches that can seed the growth grow. On the cat (after two HOPE passes and the spectral pass; see
-:func:`hope_rs.match`) the rounds took the map from 41.7% to about 70% exact, mean geodesic
-error 0.0139 -> 0.005; FAUST 012 without its legs against the whole 018 from 93.1% to 99.98%.
-Last, :func:`hope_rs.growth.grow` rebuilds the map from its trusted patches outward (the cat:
-to 98.0% / 97.6% exact both ways, mean error 0.0003 / 0.0007). The README's "Shared-face finish"
-and "Growth from trusted patches" list the variants measured.
+repeat while the handle patches that can seed the growth grow. On the cat (after two HOPE
+passes and the spectral pass; see :func:`hope_rs.match`) the rounds took the map from 41.7% to
+about 70% exact, mean geodesic error 0.0139 -> 0.005; FAUST 012 without its legs against the
+whole 018 from 93.1% to 99.98%. Last, :func:`hope_rs.growth.grow` rebuilds the map from its
+trusted patches outward (the cat: to 98.0% / 97.6% exact both ways, mean error 0.0003 /
+0.0007). The README's "Shared-face finish" and "Growth from trusted patches" list the variants
+measured.
 
 Shapes without shared faces (independently remeshed ones: at most 8.6% of the vertices are
 handles on 45 FAUST pairs) do not qualify (see :data:`MIN_HANDLES`).
