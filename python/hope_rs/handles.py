@@ -55,12 +55,17 @@ def face_keys(faces: np.ndarray, n: int) -> np.ndarray:
 
 
 def seed_handles(a: Shape, b: Shape, f: np.ndarray) -> np.ndarray:
-    """The handles of ``f`` (see :func:`face_handles`) in connected
-    patches of at least :data:`SEED_SHARE` of A's vertices."""
-    handles = face_handles(a, b, f)
-    e = a.edges[handles[a.edges[:, 0]] & handles[a.edges[:, 1]]]
+    """The handles of ``f`` (see :func:`face_handles`) in connected patches of at least
+    :data:`SEED_SHARE` of A's vertices."""
+    return large_patches(a, face_handles(a, b, f))
+
+
+def large_patches(a: Shape, mask: np.ndarray) -> np.ndarray:
+    """``mask`` restricted to its connected patches (over A's edges) of at least
+    :data:`SEED_SHARE` of A's vertices."""
+    e = a.edges[mask[a.edges[:, 0]] & mask[a.edges[:, 1]]]
     n = a.n_vertices
     graph = sp.csr_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
     label = connected_components(graph, directed=False)[1]
-    size = np.bincount(label, weights=handles)
-    return handles & (size[label] >= SEED_SHARE * n)
+    size = np.bincount(label, weights=mask)
+    return mask & (size[label] >= SEED_SHARE * n)

@@ -32,7 +32,7 @@ import scipy.sparse.linalg as sla
 from . import _core
 from ._blas import with_single_threaded_blas
 from .growth import grow
-from .handles import face_handles, seed_handles
+from .handles import face_handles, large_patches
 from .refine import assign_by_overlap
 from .shape import Shape
 
@@ -129,7 +129,7 @@ def finish(a: Shape, b: Shape, f: np.ndarray, *, rounds: int = ROUNDS) -> tuple[
     done = 0
     for _ in range(rounds):
         handles = face_handles(a, b, f)
-        seeded = seed_handles(a, b, f).mean()
+        seeded = large_patches(a, handles).mean()
         if handles.mean() < MIN_HANDLES or seeded < last + MIN_GROWTH or handles.all():
             break
         last = seeded
