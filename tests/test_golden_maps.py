@@ -8,18 +8,14 @@ after; restructuring code must keep them bit-identical. Regenerate with
 from __future__ import annotations
 
 import hashlib
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
+from conftest import DATA
+from test_sites import subdivided
 
 import hope_rs
 from hope_rs.demo import demo_pair
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from conftest import DATA  # noqa: E402
-from test_sites import subdivided  # noqa: E402
 
 #: case name -> SHA-256 of ``match(...).map`` as little-endian int64.
 GOLDEN = {
