@@ -8,6 +8,7 @@ after; restructuring code must keep them bit-identical. Regenerate with
 from __future__ import annotations
 
 import hashlib
+
 import numpy as np
 import pytest
 from conftest import DATA
@@ -15,7 +16,6 @@ from test_sites import subdivided
 
 import hope_rs
 from hope_rs.demo import demo_pair
-
 
 #: case name -> SHA-256 of ``match(...).map`` as little-endian int64.
 GOLDEN = {
