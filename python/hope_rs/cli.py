@@ -11,6 +11,8 @@ import sys
 import tempfile
 import time
 
+from . import __version__
+
 
 class Progress:
     """A one-line progress report on stderr, rewritten after every refinement step.
@@ -123,6 +125,7 @@ def cmd_demo(args) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="hope-rs", description="Dense 3D shape matching with HOPE.")
+    p.add_argument("--version", action="version", version=f"hope-rs {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     m = sub.add_parser("match", help="match mesh A to mesh B; writes one B vertex index per line")
     m.add_argument("a", help="source mesh (OFF, OBJ, PLY, STL)")
