@@ -61,7 +61,11 @@ def orient_faces(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
         return np.zeros(0, dtype=bool)
     srt = np.sort(f, axis=1)
     # Work in the order of the sorted vertex triples: independent of face order and winding.
-    by_key = np.lexsort((srt[:, 2], srt[:, 1], srt[:, 0]))
+    n = int(srt[:, 2].max()) + 1
+    if n < 2**21:  # the triple fits one int64 key
+        by_key = np.argsort((srt[:, 0] * n + srt[:, 1]) * n + srt[:, 2], kind="stable")
+    else:
+        by_key = np.lexsort((srt[:, 2], srt[:, 1], srt[:, 0]))
     f, srt = f[by_key], srt[by_key]
     # +1 if the face runs its vertices in the ascending cyclic order, -1 otherwise.
     sign = np.where(_is_ascending_cycle(f), 1.0, -1.0)
@@ -99,7 +103,8 @@ def _manifold_pairs(f: np.ndarray, usable: np.ndarray):
     forward = u < w
     keep = lo != hi
     lo, hi, forward, face = lo[keep], hi[keep], forward[keep], face[keep]
-    order = np.lexsort((face, hi, lo))
+    # One int64 key per undirected edge; the stable sort keeps faces ascending within an edge.
+    order = np.argsort(lo * (int(hi.max()) + 1) + hi, kind="stable")
     lo, hi, forward, face = lo[order], hi[order], forward[order], face[order]
     new = np.ones(lo.size, dtype=bool)
     new[1:] = (lo[1:] != lo[:-1]) | (hi[1:] != hi[:-1])
@@ -155,7 +160,7 @@ def _outward_sign(p: np.ndarray, srt: np.ndarray, orient: np.ndarray, comp: np.n
     """Per component: +1 if the faces with signs ``orient`` point outward, else -1."""
     n_comp = int(comp.max()) + 1
     q0, q1, q2 = p[srt[:, 0]], p[srt[:, 1]], p[srt[:, 2]]
-    normal = np.cross(q1 - q0, q2 - q0)  # of the ascending cycle; orientation-free
+    normal = _cross(q1 - q0, q2 - q0)  # of the ascending cycle; orientation-free
     area = 0.5 * np.linalg.norm(normal, axis=1)
     total = np.bincount(comp, weights=area, minlength=n_comp)
     centre = (q0 + q1 + q2) / 3.0
@@ -164,7 +169,7 @@ def _outward_sign(p: np.ndarray, srt: np.ndarray, orient: np.ndarray, comp: np.n
         axis=1,
     ) / np.where(total > 0, total, 1.0)[:, None]
     cf = c[comp]
-    det = np.einsum("ij,ij->i", q0 - cf, np.cross(q1 - cf, q2 - cf))
+    det = np.einsum("ij,ij->i", q0 - cf, _cross(q1 - cf, q2 - cf))
     vol = np.bincount(comp, weights=orient * det, minlength=n_comp) / 6.0
     vec = np.stack(
         [np.bincount(comp, weights=orient * normal[:, j], minlength=n_comp) for j in range(3)],
@@ -179,3 +184,12 @@ def _outward_sign(p: np.ndarray, srt: np.ndarray, orient: np.ndarray, comp: np.n
     first = np.full(n_comp, srt.shape[0], dtype=np.int64)
     np.minimum.at(first, comp, np.arange(srt.shape[0]))
     return np.where(out == 0, orient[first], out)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross product (``np.cross`` without its axis handling)."""
+    out = np.empty_like(a)
+    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return out
