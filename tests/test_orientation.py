@@ -47,7 +47,9 @@ def two_components():
     return np.vstack([v, v + [5.0, 0, 0]]), np.vstack([f, f + len(v)])
 
 
-@pytest.mark.parametrize("surface", [SPHERE, open_cap(), two_components()], ids=["closed", "open", "two"])
+@pytest.mark.parametrize(
+    "surface", [SPHERE, open_cap(), two_components()], ids=["closed", "open", "two"]
+)
 @settings(max_examples=25, deadline=None)
 @given(data=st.data())
 def test_a_random_subset_of_flipped_faces_is_repaired(surface, data):
@@ -62,7 +64,9 @@ def test_a_random_subset_of_flipped_faces_is_repaired(surface, data):
     np.testing.assert_array_equal(c_bad.faces, c_good.faces)
 
 
-@pytest.mark.parametrize("surface", [SPHERE, open_cap(), two_components()], ids=["closed", "open", "two"])
+@pytest.mark.parametrize(
+    "surface", [SPHERE, open_cap(), two_components()], ids=["closed", "open", "two"]
+)
 def test_inward_surfaces_are_turned_outward(surface):
     v, f = surface
     inward = f[:, ::-1]

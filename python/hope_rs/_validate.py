@@ -9,7 +9,9 @@ def _array(x, name: str, shape: str) -> np.ndarray:
     try:
         return np.asarray(x)
     except (ValueError, TypeError):
-        raise ValueError(f"{name} must be an {shape} array; its rows have different lengths") from None
+        raise ValueError(
+            f"{name} must be an {shape} array; its rows have different lengths"
+        ) from None
 
 
 def as_faces(

@@ -228,7 +228,7 @@ def load_mesh(path: str | os.PathLike, *, merge_duplicates: bool | None = None) 
         mesh = Mesh(v, f)
     except _LineError as e:
         raise ValueError(f"cannot read {path!r}: line {e.line}: {e.message}") from None
-    except (ValueError, TypeError) as e:
+    except (ValueError, TypeError, OverflowError) as e:
         raise ValueError(f"cannot read {path!r} as a triangle mesh: {_one_line(e)}") from None
     if not merge and merge_duplicates is None:
         n_unique = np.unique(mesh.vertices + 0.0, axis=0).shape[0]
@@ -296,6 +296,13 @@ def _float(s: str, line: int, what: str) -> float:
     return x
 
 
+def _number(s: str, line: int) -> float:
+    try:
+        return float(s)
+    except ValueError:
+        raise _LineError(line, f"expected a number, got {_show([s])}") from None
+
+
 def _int(s: str, line: int, what: str) -> int:
     try:
         return int(s)
@@ -328,7 +335,9 @@ def _read_off(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     else:
         raise _LineError(no, "the header has no vertex and face counts ('OFF' then 'V F E')")
     if len(head) not in (2, 3):
-        raise _LineError(head_no, f"expected the counts 'vertices faces [edges]', got {_show(head)}")
+        raise _LineError(
+            head_no, f"expected the counts 'vertices faces [edges]', got {_show(head)}"
+        )
     nv, nf = (_int(x, head_no, "a count") for x in head[:2])
     if nv < 0 or nf < 0:
         raise _LineError(head_no, f"negative counts: {nv} vertices, {nf} faces")
@@ -404,9 +413,45 @@ def _off_faces(rows, nv: int) -> np.ndarray:
 # --- OBJ -----------------------------------------------------------------------------------
 
 _OBJ_IGNORED = frozenset(
-    "vt vn vp l p g o s mtllib usemtl usemap maplib cstype deg bmat step curv curv2 surf parm "
-    "trim hole scrv sp end con mg bevel c_interp d_interp lod shadow_obj trace_obj ctech stech "
-    "call csh".split()
+    [
+        "vt",
+        "vn",
+        "vp",
+        "l",
+        "p",
+        "g",
+        "o",
+        "s",
+        "mtllib",
+        "usemtl",
+        "usemap",
+        "maplib",
+        "cstype",
+        "deg",
+        "bmat",
+        "step",
+        "curv",
+        "curv2",
+        "surf",
+        "parm",
+        "trim",
+        "hole",
+        "scrv",
+        "sp",
+        "end",
+        "con",
+        "mg",
+        "bevel",
+        "c_interp",
+        "d_interp",
+        "lod",
+        "shadow_obj",
+        "trace_obj",
+        "ctech",
+        "stech",
+        "call",
+        "csh",
+    ]
 )
 
 
@@ -430,6 +475,8 @@ def _read_obj(data: bytes) -> tuple[np.ndarray, np.ndarray]:
                 i = _int(c.split("/", 1)[0], no, "a vertex index")
                 if i == 0:
                     raise _LineError(no, "vertex index 0: OBJ indices start at 1")
+                if abs(i) > 2**62:
+                    raise _LineError(no, f"vertex index {i} is out of range")
                 i = i - 1 if i > 0 else len(verts) + i
                 if i < 0:
                     raise _LineError(no, f"relative index {c} points before the first vertex")
@@ -540,7 +587,8 @@ def _ply_ascii(body: bytes, elements, first_line: int) -> dict:
                 if len(p) == 2:
                     if k >= len(t):
                         raise _LineError(no, f"too few values for element {name!r}")
-                    cols[p[0]].append(_float(t[k], no, p[0]))
+                    x = t[k]
+                    cols[p[0]].append(_float(x, no, p[0]) if p[0] in ("x", "y", "z") else _number(x, no))
                     k += 1
                 else:
                     n = _int(t[k], no, "a list length") if k < len(t) else -1

@@ -135,9 +135,7 @@ def _relative_orientation(m: int, a: np.ndarray, b: np.ndarray, parity: np.ndarr
     relative = sheet[:m] != sheet[root]
     bad = np.flatnonzero(sheet[first] == sheet[first + m])
     if bad.size:
-        weights = sp.coo_matrix(
-            (np.where(parity, 2.0, 1.0), (a, b)), shape=(m, m)
-        ).tocsr()
+        weights = sp.coo_matrix((np.where(parity, 2.0, 1.0), (a, b)), shape=(m, m)).tocsr()
         weights = weights.maximum(weights.T)
         for k in bad:
             relative[comp == k] = False
@@ -164,10 +162,13 @@ def _outward_sign(p: np.ndarray, srt: np.ndarray, orient: np.ndarray, comp: np.n
     area = 0.5 * np.linalg.norm(normal, axis=1)
     total = np.bincount(comp, weights=area, minlength=n_comp)
     centre = (q0 + q1 + q2) / 3.0
-    c = np.stack(
-        [np.bincount(comp, weights=area * centre[:, j], minlength=n_comp) for j in range(3)],
-        axis=1,
-    ) / np.where(total > 0, total, 1.0)[:, None]
+    c = (
+        np.stack(
+            [np.bincount(comp, weights=area * centre[:, j], minlength=n_comp) for j in range(3)],
+            axis=1,
+        )
+        / np.where(total > 0, total, 1.0)[:, None]
+    )
     cf = c[comp]
     det = np.einsum("ij,ij->i", q0 - cf, _cross(q1 - cf, q2 - cf))
     vol = np.bincount(comp, weights=orient * det, minlength=n_comp) / 6.0
