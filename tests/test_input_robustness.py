@@ -175,14 +175,17 @@ def test_split_seams_keep_the_file_order_with_a_warning(tmp_path):
     f[0, 0] = 4
     for ext, data in (("obj", obj_text(v, f)), ("ply", ply_ascii(v, f)), ("off", off_text(v, f))):
         p = write(tmp_path, "seam", ext, data)
-        with pytest.warns(UserWarning, match="1 vertices lie exactly on another"):
+        with pytest.warns(UserWarning, match="boundary edges lie exactly on other edges"):
             m = hope_rs.load_mesh(p)
         np.testing.assert_array_equal(m.faces, f)
         merged = hope_rs.load_mesh(p, merge_duplicates=True)
         assert merged.n_vertices == 4
+    # Coincident vertices that split nothing (here an unused copy) load without a warning.
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         hope_rs.load_mesh(write(tmp_path, "plain", "off", TET_OFF))
+        m = hope_rs.load_mesh(write(tmp_path, "copy", "off", off_text(v, TET_F)))
+        assert m.n_vertices == 5
 
 
 def test_binary_and_ascii_ply_agree_with_the_off_file(tmp_path):

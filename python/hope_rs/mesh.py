@@ -7,9 +7,9 @@ problem is reported in one line naming the file and, where there is one, the lin
 STL stores a soup of separate triangles, with no shared vertices and no vertex order, so its
 exactly coincident corners are merged (first appearance first): vertex indices of an STL mesh
 refer to that merged mesh. OFF, OBJ and PLY keep the file's vertex order, which ground-truth
-correspondences index into; vertices they duplicate at one position (seams split for texture
-coordinates or normals) are kept apart, with a warning, because merging them would renumber the
-file (``load_mesh(path, merge_duplicates=True)`` merges them anyway).
+correspondences index into; vertices they duplicate at one position are kept apart, and when
+that splits the surface along a seam (texture coordinates or normals) :func:`load_mesh` warns,
+because merging them would renumber the file (``merge_duplicates=True`` merges them anyway).
 """
 
 from __future__ import annotations
@@ -32,6 +32,7 @@ __all__ = [
     "load_mesh",
     "merge_coincident_vertices",
     "scale_exponent",
+    "seam_edges",
     "unique_edges",
 ]
 
@@ -167,12 +168,35 @@ def merge_coincident_vertices(
     """Merge vertices at exactly the same position (``-0.0`` equals ``0.0``), keeping the first
     appearance of each position and that order: returns the new vertices and faces."""
     v = np.asarray(vertices, dtype=np.float64) + 0.0  # turns -0.0 into 0.0
+    new_id, keep = _coincident_ids(v)
+    return v[keep], new_id[np.asarray(faces, dtype=np.int64)]
+
+
+def _coincident_ids(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(the merged id of each vertex, the vertex kept for each merged id), first appearance
+    first."""
     _, first, inverse = np.unique(v, axis=0, return_index=True, return_inverse=True)
-    inverse = inverse.reshape(-1)
     by_first = np.argsort(first, kind="stable")
     new_id = np.empty_like(by_first)
     new_id[by_first] = np.arange(by_first.size)
-    return v[first[by_first]], new_id[inverse][np.asarray(faces, dtype=np.int64)]
+    return new_id[inverse.reshape(-1)], first[by_first]
+
+
+def seam_edges(mesh: Mesh) -> int:
+    """How many boundary edges of ``mesh`` lie exactly on another edge: the surface is split
+    there (typically along texture or normal seams) although merging the coincident vertices
+    would close it."""
+    new_id, keep = _coincident_ids(mesh.vertices + 0.0)
+    if keep.size == mesh.n_vertices:
+        return 0
+    f = mesh.faces
+    e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+    e = e[e[:, 0] != e[:, 1]]
+    edges, count = np.unique(e, axis=0, return_counts=True)
+    merged = np.sort(new_id[edges], axis=1)
+    _, where, merged_count = np.unique(merged, axis=0, return_inverse=True, return_counts=True)
+    boundary = count == 1
+    return int(np.sum(boundary & (merged_count[where.reshape(-1)] > 1)))
 
 
 def load_mesh(path: str | os.PathLike, *, merge_duplicates: bool | None = None) -> Mesh:
@@ -189,8 +213,8 @@ def load_mesh(path: str | os.PathLike, *, merge_duplicates: bool | None = None) 
         Merge vertices at exactly the same position (first appearance first, see
         :func:`merge_coincident_vertices`). ``None`` (default): for STL only, which stores
         every triangle separately and has no vertex order; OFF, OBJ and PLY keep their
-        numbering and warn when vertices coincide (seams split for texture coordinates or
-        normals cut the surface apart there). ``True`` merges for every format (indices then
+        numbering and warn when coincident vertices split the surface along a seam (as texture
+        coordinates or normals do; see :func:`seam_edges`). ``True`` merges for every format (indices then
         refer to the merged mesh), ``False`` never (an STL file stays a soup of triangles).
 
     Raises
@@ -231,13 +255,13 @@ def load_mesh(path: str | os.PathLike, *, merge_duplicates: bool | None = None) 
     except (ValueError, TypeError, OverflowError) as e:
         raise ValueError(f"cannot read {path!r} as a triangle mesh: {_one_line(e)}") from None
     if not merge and merge_duplicates is None:
-        n_unique = np.unique(mesh.vertices + 0.0, axis=0).shape[0]
-        if n_unique < mesh.n_vertices:
+        seams = seam_edges(mesh)
+        if seams:
             warnings.warn(
-                f"{path!r}: {mesh.n_vertices - n_unique} vertices lie exactly on another "
-                "vertex (seams split for texture coordinates or normals?); they stay separate, "
-                "so the surface is cut there. If the file's numbering does not matter, pass "
-                "merge_duplicates=True",
+                f"{path!r}: {seams} boundary edges lie exactly on other edges (seams split "
+                "for texture coordinates or normals?); the vertices there stay separate to "
+                "keep the file's numbering, so the surface is cut along them. If the numbering "
+                "does not matter, pass merge_duplicates=True",
                 stacklevel=2,
             )
     return mesh
@@ -346,13 +370,13 @@ def _read_off(data: bytes) -> tuple[np.ndarray, np.ndarray]:
         end = body[-1][0] if body else head_no
         raise _LineError(
             end,
-            f"the file is shorter than its header says: line {head_no} promises {nv} vertices "
-            f"and {nf} faces ({nv + nf} lines), the file ends after {n_body} of them",
+            f"the file is shorter than its OFF header (line {head_no}) says: it promises {nv} "
+            f"vertices and {nf} faces ({nv + nf} lines), the file ends after {n_body} of them",
         )
     if n_body > nv + nf:
         raise _LineError(
             body[nv + nf][0],
-            f"more lines than the {nv} vertices and {nf} faces the header (line {head_no}) "
+            f"more lines than the {nv} vertices and {nf} faces the OFF header (line {head_no}) "
             "promises: the counts must match the body",
         )
     extra = {0} if not st else {0, 2}
@@ -387,6 +411,14 @@ def _off_vertices(rows, allowed: list[int]) -> np.ndarray:
 
 
 def _off_faces(rows, nv: int) -> np.ndarray:
+    # Fast path for the usual all-triangle file; anything unusual goes line by line below.
+    if rows and all(len(t) == 4 and t[0] == "3" for _, t in rows):
+        try:
+            f = np.array([t[1:] for _, t in rows]).astype(np.int64)
+        except (ValueError, OverflowError):
+            f = None
+        if f is not None and f.min() >= 0 and f.max() < nv:
+            return f
     tris: list[list[int]] = []
     for no, t in rows:
         k = _int(t[0], no, "the corner count of a face")
@@ -588,7 +620,9 @@ def _ply_ascii(body: bytes, elements, first_line: int) -> dict:
                     if k >= len(t):
                         raise _LineError(no, f"too few values for element {name!r}")
                     x = t[k]
-                    cols[p[0]].append(_float(x, no, p[0]) if p[0] in ("x", "y", "z") else _number(x, no))
+                    cols[p[0]].append(
+                        _float(x, no, p[0]) if p[0] in ("x", "y", "z") else _number(x, no)
+                    )
                     k += 1
                 else:
                     n = _int(t[k], no, "a list length") if k < len(t) else -1
