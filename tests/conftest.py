@@ -41,4 +41,6 @@ def relabel(faces: np.ndarray, perm: np.ndarray) -> np.ndarray:
 
 
 def pytest_configure(config):
-    config.addinivalue_line("markers", "slow: takes more than a few seconds")
+    config.addinivalue_line(
+        "markers", "slow: takes more than a few seconds (28k meshes, remeshed data, Ray, kills)"
+    )
