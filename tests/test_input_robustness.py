@@ -48,7 +48,7 @@ def good_off(tmp_path):
     return p
 
 
-# --- the corpus through load_mesh, match and the CLI ------------------------------------------
+# --- the corpus through load_mesh, match and the CLI ---------------------------------------------
 
 
 @pytest.mark.parametrize("name", sorted(BAD))
@@ -87,8 +87,8 @@ def test_odd_but_valid_files_load_and_match(tmp_path, name):
 def run_cli(args, cwd):
     env = dict(os.environ, PYTHONPATH=os.path.join(ROOT, "python"))
     return subprocess.run(
-        [sys.executable, "-m", "hope_rs.cli", *args], check=False, capture_output=True, text=True, env=env,
-        cwd=cwd, timeout=120,
+        [sys.executable, "-m", "hope_rs.cli", *args], check=False, capture_output=True,
+        text=True, env=env, cwd=cwd, timeout=120,
     )  # fmt: skip
 
 
@@ -144,7 +144,7 @@ def test_a_missing_file_and_a_folder(tmp_path, good_off, capsys):
     check_cli_error(proc, out)
 
 
-# --- formats -----------------------------------------------------------------------------------
+# --- formats -------------------------------------------------------------------------------------
 
 
 def test_stl_corners_are_merged_in_first_appearance_order(tmp_path):
@@ -228,7 +228,7 @@ def test_geodesic_errors_are_in_the_meshes_units_at_any_scale():
     np.testing.assert_array_equal(hope_rs.geodesic_errors(hope_rs.Shape(big), f), want)
 
 
-# --- arrays ----------------------------------------------------------------------------------------
+# --- arrays --------------------------------------------------------------------------------------
 
 
 def test_a_mesh_copies_the_callers_arrays():
@@ -267,7 +267,7 @@ def test_integral_float_and_unsigned_faces_are_accepted():
         hope_rs.Mesh(TET_V.astype(bool), TET_F)
 
 
-# --- other mesh types --------------------------------------------------------------------------------
+# --- other mesh types ----------------------------------------------------------------------------
 
 
 def test_trimesh_and_duck_typed_meshes_are_accepted_everywhere():
@@ -300,7 +300,7 @@ def test_other_objects_get_a_one_line_type_error(x):
         hope_rs.match(x, TET_MESH)
 
 
-# --- fuzzing the readers -------------------------------------------------------------------------------
+# --- fuzzing the readers -------------------------------------------------------------------------
 
 
 SEEDS = {

@@ -1,4 +1,4 @@
-"""Face orientation: Shape orients its internal mesh consistently and outward (hope_rs.orientation)."""
+"""Face orientation: Shape orients its internal mesh consistently and outward."""
 
 import numpy as np
 import pytest

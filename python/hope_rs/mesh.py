@@ -213,9 +213,10 @@ def load_mesh(path: str | os.PathLike, *, merge_duplicates: bool | None = None) 
         Merge vertices at exactly the same position (first appearance first, see
         :func:`merge_coincident_vertices`). ``None`` (default): for STL only, which stores
         every triangle separately and has no vertex order; OFF, OBJ and PLY keep their
-        numbering and warn when coincident vertices split the surface along a seam (as texture
-        coordinates or normals do; see :func:`seam_edges`). ``True`` merges for every format (indices then
-        refer to the merged mesh), ``False`` never (an STL file stays a soup of triangles).
+        numbering and warn when coincident vertices split the surface along a seam (as
+        texture coordinates or normals do; see :func:`seam_edges`). ``True`` merges for every
+        format (indices then refer to the merged mesh), ``False`` never (an STL file stays a
+        soup of triangles).
 
     Raises
     ------

@@ -86,14 +86,15 @@ def canonical_faces(faces: np.ndarray, rank: np.ndarray) -> np.ndarray:
     return f[np.lexsort((f[:, 2], f[:, 1], f[:, 0]))]
 
 
-def canonical_mesh(mesh: Mesh) -> tuple[Mesh, np.ndarray, np.ndarray]:
+def canonical_mesh(mesh: Mesh, *, orient: bool = True) -> tuple[Mesh, np.ndarray, np.ndarray]:
     """``mesh`` renumbered by position: (the renumbered mesh, ``order``, ``rank``), where
     internal vertex ``i`` is ``mesh``'s vertex ``order[i]`` and ``rank`` is the inverse.
 
     The renumbered mesh is also scaled by ``4**scale_exponent(mesh.vertices)`` (exact; a no-op
     for meshes of ordinary size, see :func:`hope_rs.mesh.scale_exponent`) and its faces are
-    oriented consistently and outward (:func:`hope_rs.orientation.orient_faces`), so that
-    neither the size of the coordinates nor the winding of the input's faces changes a result.
+    oriented consistently and outward (:func:`hope_rs.orientation.orient_faces`; ``orient=False``
+    keeps them as given, for meshes derived from an oriented one), so that neither the size of
+    the coordinates nor the winding of the input's faces changes a result.
     """
     k = scale_exponent(mesh.vertices)
     v = np.ldexp(mesh.vertices, 2 * k) if k else mesh.vertices
@@ -101,7 +102,7 @@ def canonical_mesh(mesh: Mesh) -> tuple[Mesh, np.ndarray, np.ndarray]:
     rank = inverse_permutation(order)
     v = v[order]
     f = canonical_faces(mesh.faces, rank)
-    flip = orient_faces(v, f)
+    flip = orient_faces(v, f) if orient else np.zeros(f.shape[0], dtype=bool)
     if flip.any():
         f = f.copy()
         f[flip] = f[flip][:, [0, 2, 1]]  # keeps the smallest vertex first

@@ -41,9 +41,12 @@ class Shape:
     mesh : Mesh, (vertices, faces), or an object with ``vertices`` and ``faces`` (trimesh)
     k_max : int, keyword-only
         Largest hop radius the refinement may use.
+    orient : bool, keyword-only
+        Orient the internal mesh's faces (:mod:`hope_rs.orientation`); ``False`` keeps them as
+        given (for meshes derived from an oriented one, such as the multiscale coarse copy).
     """
 
-    def __init__(self, mesh, *, k_max: int = K_MAX):
+    def __init__(self, mesh, *, k_max: int = K_MAX, orient: bool = True):
         mesh = as_mesh(mesh)
         if (
             isinstance(k_max, bool)
@@ -53,7 +56,7 @@ class Shape:
             raise ValueError(f"k_max must be an integer in [2, 64], got {k_max!r}")
         self.mesh = mesh
         self.k_max = int(k_max)
-        self.internal, self.order, self.rank = canonical_mesh(mesh)
+        self.internal, self.order, self.rank = canonical_mesh(mesh, orient=orient)
         # The internal mesh's coordinates are the input's times 4**scale_exponent (exact).
         self.scale_exponent = scale_exponent(mesh.vertices)
         # From the internal mesh, so that its float sums run in an order that does not depend
@@ -124,7 +127,9 @@ class Shape:
             from .multiscale import coarse_mesh
 
             c = coarse_mesh(self.internal)
-            self._coarse = None if c is None else (c, Shape(c.mesh, k_max=self.k_max))
+            # The coarse copy keeps the faces of this oriented mesh as they come: vertex
+            # clustering leaves non-manifold spots that a second orientation would flip.
+            self._coarse = None if c is None else (c, Shape(c.mesh, k_max=self.k_max, orient=False))
         return self._coarse
 
     def spectral_basis(self, k: int) -> tuple[np.ndarray, np.ndarray]:
