@@ -308,7 +308,8 @@ SEEDS = {
     "obj": obj_text(TET_V, TET_F),
     "ply_ascii": ply_ascii(TET_V, TET_F),
     "ply_binary": ply_binary(TET_V, TET_F),
-    "stl": stl_ascii(TET_V, TET_F),
+    "stl_ascii": stl_ascii(TET_V, TET_F),
+    "stl_binary": stl_binary(TET_V, TET_F),
 }
 
 
