@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from .cache import ShapeCache, cached_shape, descriptor_params, file_digest, mesh_digest
-from .mesh import Mesh
+from .mesh import Mesh, as_mesh
 from .shape import K_MAX, Shape
 from .spectral import applies_to_size
 
@@ -139,14 +139,14 @@ def _spec(s) -> tuple:
             s.mesh.faces,
             {k: s.descriptors(k) for k in s._descriptors},
         )
-    if isinstance(s, Mesh):
-        return ("mesh", s.vertices, s.faces, {})
-    if isinstance(s, (tuple, list)) and len(s) == 2:
-        m = Mesh(*s)
-        return ("mesh", m.vertices, m.faces, {})
-    raise TypeError(
-        f"shapes must be mesh file paths, hope_rs.Mesh or hope_rs.Shape objects, got {type(s)}"
-    )
+    try:
+        m = as_mesh(s)
+    except TypeError:
+        raise TypeError(
+            "shapes must be mesh file paths, hope_rs.Mesh or hope_rs.Shape objects, (vertices, "
+            f"faces) pairs or objects with .vertices and .faces, got {type(s).__name__}"
+        ) from None
+    return ("mesh", m.vertices, m.faces, {})
 
 
 def _resolve_pairs(pairs, names: list[str]) -> list[tuple[int, int]]:

@@ -12,7 +12,7 @@ from ._validate import as_index_map
 from .descriptors import check_kind
 from .initial import shapes_initial_map
 from .lmd import MIN_CONSISTENT
-from .mesh import Mesh
+from .mesh import as_mesh
 from .refine import MAX_PASSES, POLISH_K, TOP_K, Iteration, RefineResult
 from .shape import K_MAX, Shape
 from .shared_faces import applies as finish_applies
@@ -61,11 +61,7 @@ def _as_shape(x, k_max: int, name: str) -> Shape:
         if x.k_max < k_max:
             raise ValueError(f"{name} was built with k_max={x.k_max} < requested k_max={k_max}")
         return x
-    if isinstance(x, Mesh):
-        return Shape(x, k_max=k_max)
-    if isinstance(x, (tuple, list)) and len(x) == 2:
-        return Shape(Mesh(*x), k_max=k_max)
-    raise TypeError(f"{name} must be a hope_rs.Shape, a hope_rs.Mesh or a (vertices, faces) pair")
+    return Shape(as_mesh(x, name), k_max=k_max)
 
 
 def match(
