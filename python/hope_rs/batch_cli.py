@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import textwrap
 import time
 
 __all__ = ["ENVIRONMENT", "EXIT_STATUS", "add_batch_parser", "cmd_batch", "environment_help"]
@@ -32,10 +33,16 @@ EXIT_STATUS = {
 
 def environment_help() -> str:
     """The ``exit status`` and ``environment`` sections of a help epilog."""
+
+    def item(head: str, text: str, width: int) -> str:
+        return textwrap.fill(
+            text, 78, initial_indent=f"  {head:<{width}} ", subsequent_indent=" " * (width + 3)
+        )
+
     lines = ["exit status:"]
-    lines += [f"  {code:<4} {text}" for code, text in EXIT_STATUS.items()]
+    lines += [item(str(code), text, 4) for code, text in EXIT_STATUS.items()]
     lines.append("environment:")
-    lines += [f"  {name:<18} {text}" for name, text in ENVIRONMENT.items()]
+    lines += [item(name, text, 18) for name, text in ENVIRONMENT.items()]
     return "\n".join(lines)
 
 
@@ -44,12 +51,15 @@ def add_batch_parser(sub) -> None:
     p = sub.add_parser(
         "batch",
         help="match every pair of a pairs file; one map file per pair in --out",
-        description="Match every pair listed in PAIRS_FILE (one pair per line: two mesh paths, "
-        "relative ones resolved against the file's folder; quote paths holding spaces or "
-        "separate the two with a tab). Each map is written atomically to OUT/<a>__<b>.txt as "
-        "soon as it is done; a rerun (e.g. after Ctrl-C or a crash) skips pairs whose map file "
-        "is whole and redoes the others. Exit status 1 when some pair failed (the others "
-        "still finish).",
+        description=textwrap.fill(
+            "Match every pair listed in PAIRS_FILE (one pair per line: two mesh paths, relative "
+            "ones resolved against the file's folder; quote paths holding spaces or separate "
+            "the two with a tab). Each map is written atomically to OUT/<a>__<b>.txt as soon as "
+            "it is done; a rerun (e.g. after Ctrl-C or a crash) skips pairs whose map file is "
+            "whole and redoes the others. Exit status 1 when some pair failed (the others still "
+            "finish).",
+            78,
+        ),
         epilog=environment_help(),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

@@ -7,10 +7,10 @@ come back to the driver, which writes them.
 
 A local Ray instance that the batch starts itself (no cluster running, no ``address``) is shut
 down on every exit path the driver lives through: the end of the batch, an error, Ctrl-C
-(``close``), and interpreter exit (``atexit``). A driver killed with SIGKILL runs none of them;
-Ray's own processes then notice the lost driver, ending its tasks and workers, while the local
-instance itself (``gcs_server``, ``raylet``) is left to Ray (see the README's "Failure
-behaviour"). Connecting to an existing cluster never shuts it down.
+(``close``, which also cancels the running tasks), and interpreter exit (``atexit``). A driver
+killed with SIGKILL runs none of them; Ray's fate sharing then ends the instance it started
+(``gcs_server``, ``raylet`` and the workers exit within seconds on Linux). On a cluster the
+batch connected to, Ray ends the tasks of a dead driver's job and the cluster stays up.
 """
 
 from __future__ import annotations
