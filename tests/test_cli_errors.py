@@ -47,7 +47,7 @@ def print_help(*args) -> None:
 
 
 def test_help_documents_exit_statuses_and_the_environment(capsys):
-    for args in ([], ["batch"]):
+    for args in ([], ["batch"], ["match"]):
         print_help(*args)
         out = capsys.readouterr().out
         for code in (0, 1, 2, 130):

@@ -121,7 +121,12 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     sub = p.add_subparsers(dest="command", required=True)
-    m = sub.add_parser("match", help="match mesh A to mesh B; writes one B vertex index per line")
+    m = sub.add_parser(
+        "match",
+        help="match mesh A to mesh B; writes one B vertex index per line",
+        epilog=environment_help(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     m.add_argument("a", help="source mesh (OFF, OBJ, PLY, STL)")
     m.add_argument("b", help="target mesh")
     m.add_argument(
