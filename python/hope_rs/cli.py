@@ -182,7 +182,7 @@ def main(argv=None) -> int:
     """Run the command line; returns the exit status (see ``hope-rs --help``)."""
     args = build_parser().parse_args(argv)
     debug = os.environ.get("HOPE_RS_DEBUG", "") not in ("", "0")
-    warnings.formatwarning = _one_line_warning
+    formatwarning, warnings.formatwarning = warnings.formatwarning, _one_line_warning
     try:
         return args.func(args)
     except KeyboardInterrupt:
@@ -207,6 +207,8 @@ def main(argv=None) -> int:
             file=sys.stderr,
         )
         return 1
+    finally:
+        warnings.formatwarning = formatwarning
 
 
 if __name__ == "__main__":
