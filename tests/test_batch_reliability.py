@@ -266,3 +266,16 @@ def test_a_batch_over_damaged_cache_entries_gives_the_right_maps(folder, referen
         warnings.simplefilter("error")  # every entry was rewritten whole
         for s in shapes:
             cached_shape(s, cache=ShapeCache(cache))
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_a_damaged_map_among_missing_ones_is_redone(folder, reference, tmp_path, jobs):
+    # Its shapes are prepared in full for the missing pairs, before its file is checked.
+    shapes, pairs = shapes_and_pairs(folder)
+    name = map_name("s1", "s2")
+    (tmp_path / name).write_text("1\n2\n")
+    with pytest.warns(RuntimeWarning, match=f"{name}' has 2 entries"):
+        res = hope_rs.match_many(shapes, pairs, out_dir=tmp_path, jobs=jobs, cache=tmp_path / "c")
+    assert [r.ok and not r.skipped for r in res] == [True] * 3
+    for r in res:
+        np.testing.assert_array_equal(read_map(r.path, N, N), reference[r.path.name])

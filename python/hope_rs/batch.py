@@ -604,7 +604,11 @@ def imatch_many(
                             r.error = failed.get(i) or failed.get(j)
                             report(r)
                             yield r
-                        elif check and i in sizes and j in sizes:
+                            continue
+                        if check:
+                            if i not in sizes or j not in sizes:
+                                still.append(t)
+                                continue
                             m, why = existing_map(path, sizes[i], sizes[j])
                             if why is None:
                                 r = PairResult(n, names[i], names[j], m, skipped=True, path=path)
@@ -612,10 +616,10 @@ def imatch_many(
                                 yield r
                                 continue
                             warnings.warn(f"{why}; computing it again", RuntimeWarning)
+                            t = (n, i, j, path, False)
                             prepare(i, True)
                             prepare(j, True)
-                            still.append((n, i, j, path, False))
-                        elif not check and i in ready and j in ready:
+                        if i in ready and j in ready:
                             handles[ex.submit(pair_task, job, ready[i], ready[j])] = ("pair", t)
                         else:
                             still.append(t)
@@ -631,6 +635,8 @@ def imatch_many(
                             write_map(path, r.map)
                     report(r)
                     yield r
+        if waiting:  # every pair ends as a map, a skip or a failure: never dropped silently
+            raise RuntimeError(f"{len(waiting)} pair(s) of the batch were never run")
         finished = True
     finally:
         ex.close(abort=not finished)
