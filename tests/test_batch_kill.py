@@ -130,7 +130,9 @@ def test_sigkill_of_a_ray_driver_leaves_no_ray_process(pairs_file, tmp_path):
     cmd.remove("1")
     done = kill_after_first_map(cmd, out, tag)
     assert_whole(done)
-    assert_no_survivors(tag, grace=60)  # Ray's fate sharing ends the instance it started
+    # Ray's fate sharing ends the instance it started; its agents poll for the lost raylet,
+    # slowly when the machine is busy.
+    assert_no_survivors(tag, grace=240)
 
 
 def test_ctrl_c_of_a_pool_batch_prints_the_summary_and_ends_its_workers(pairs_file, tmp_path):

@@ -9,7 +9,8 @@ A local Ray instance that the batch starts itself (no cluster running, no ``addr
 down on every exit path the driver lives through: the end of the batch, an error, Ctrl-C
 (``close``, which also cancels the running tasks), and interpreter exit (``atexit``). A driver
 killed with SIGKILL runs none of them; Ray's fate sharing then ends the instance it started
-(``gcs_server``, ``raylet`` and the workers exit within seconds on Linux). On a cluster the
+(``gcs_server``, ``raylet``, its agents and workers notice and exit on their own, which can
+take a minute or more on a loaded machine). On a cluster the
 batch connected to, Ray ends the tasks of a dead driver's job and the cluster stays up.
 """
 
