@@ -12,6 +12,7 @@ import time
 import traceback
 import warnings
 
+from . import __version__
 from .batch_cli import add_batch_parser, environment_help
 from .map_io import check_writable_folder, map_format, write_map
 
@@ -120,6 +121,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=environment_help(),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+    p.add_argument("--version", action="version", version=f"hope-rs {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     m = sub.add_parser(
         "match",
