@@ -12,6 +12,7 @@ from .batch import PairResult, match_many, read_pairs
 from .cache import ShapeCache
 from .evaluate import geodesic_errors, load_vts, score
 from .kernels import khop_neighbourhoods, overlap_cost
+from .map_io import read_map, write_map
 from .matching import MatchResult, match
 from .mesh import Mesh, load_mesh
 from .shape import Shape
@@ -30,8 +31,10 @@ __all__ = [
     "match",
     "match_many",
     "overlap_cost",
+    "read_map",
     "read_pairs",
     "score",
+    "write_map",
 ]
 
 try:
