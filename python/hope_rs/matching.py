@@ -8,6 +8,8 @@ from functools import partial
 
 import numpy as np
 
+from . import shared_faces as _faces_module
+from . import spectral as _spectral_module
 from ._validate import as_index_map
 from .descriptors import check_kind
 from .initial import shapes_initial_map
@@ -16,11 +18,9 @@ from .mesh import Mesh
 from .progress import ProgressBar, StageInfo, StageLog, step_detail
 from .refine import MAX_PASSES, POLISH_K, TOP_K, Iteration, RefineResult, default_schedule
 from .shape import K_MAX, Shape
-from .shared_faces import MAX_VERTICES as FINISH_MAX_VERTICES
-from .shared_faces import MIN_HANDLES, face_handles, finish, qualifies
 from .shared_faces import applies as finish_applies
-from .spectral import K_START, applies, refine_while_solving_bases, spectral_refine
-from .spectral import MAX_VERTICES as SPECTRAL_MAX_VERTICES
+from .shared_faces import face_handles, finish, qualifies
+from .spectral import applies, refine_while_solving_bases, spectral_refine
 
 
 @dataclass
@@ -357,15 +357,16 @@ def refine_spectral_finish(
             log.ran("faces", timings["faces"], f"{rounds} rounds, then growth from trusted patches")
         else:
             share = float(face_handles(sa, sb, f).mean())
+            need = _faces_module.MIN_HANDLES
             log.skipped(
                 "faces",
                 f"not applicable: {share:.1%} of A's vertices have all their faces mapped "
-                f"onto faces of B (the finish needs {MIN_HANDLES:.0%} and patches to grow from)",
+                f"onto faces of B (the finish needs {need:.0%} and patches to grow from)",
             )
     elif not shared_faces:
         log.skipped("faces", "turned off (shared_faces=False)")
     elif not finishing:
-        log.skipped("faces", f"a shape has more than {FINISH_MAX_VERTICES} vertices")
+        log.skipped("faces", f"a shape has more than {_faces_module.MAX_VERTICES} vertices")
     else:
         log.skipped("faces", _done_reason(True, "faces", res.settled))
     if on_stage is not None:
@@ -388,7 +389,7 @@ def _spectral_skip_reason(sa: Shape, sb: Shape) -> str:
     if not applies(sa, sb):
         return (
             f"shapes of {sa.n_vertices} and {sb.n_vertices} vertices; the pass runs on "
-            f"{K_START + 2} to {SPECTRAL_MAX_VERTICES}"
+            f"{_spectral_module.K_START + 2} to {_spectral_module.MAX_VERTICES}"
         )
     return "an eigenbasis could not be computed (see the warning)"
 
