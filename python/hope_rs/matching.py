@@ -323,7 +323,7 @@ def refine_spectral_finish(
     finishing = shared_faces and finish_applies(sa, sb)
     if finishing:
         options["last_pass_if"] = partial(qualifies, sa, sb)
-    steps = _RefineSteps(sa, sb, log, options)
+    steps = _RefineSteps(sa, sb, log, options, background=spectral and applies(sa, sb))
     options["callback"] = steps
     t = log.start("refine", steps.total, f"pass 1/{steps.n_passes}")
     res = refine_while_solving_bases(sa, sb, f0, spectral, **options)
@@ -396,10 +396,11 @@ def _spectral_skip_reason(sa: Shape, sb: Shape) -> str:
 
 class _RefineSteps:
     """The refinement's ``callback``: logs and reports each step, labels the polish step,
-    and calls the user's callback."""
+    and calls the user's callback. With ``background``, the spectral pass's start is
+    reported after the polish: the refinement then waits for its background work."""
 
-    def __init__(self, sa: Shape, sb: Shape, log: StageLog, options: dict):
-        self.log, self.user = log, options.get("callback")
+    def __init__(self, sa: Shape, sb: Shape, log: StageLog, options: dict, background: bool):
+        self.log, self.user, self.background = log, options.get("callback"), background
         schedule = options.get("schedule")
         if schedule is None:
             schedule = default_schedule(min(sa.k_max, sb.k_max))
@@ -415,6 +416,8 @@ class _RefineSteps:
             self.log.ran("refine", seconds, self._summary(), self.done, self.total)
             self.log.step("polish", 1, 1, step_detail(it, self.n_passes), it)
             self.log.ran("polish", it.seconds, f"k={it.k}, changed {it.changed}", 1, 1)
+            if self.background:  # the refinement now waits for the eigenbases and ZoomOut
+                self.log.start("spectral", detail="finishing the eigenbases and ZoomOut")
         else:
             self.done, self.passes = self.done + 1, it.n_pass + 1
             self.log.step("refine", self.done, self.total, step_detail(it, self.n_passes), it)

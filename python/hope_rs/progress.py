@@ -88,7 +88,8 @@ class ProgressEvent:
     done : bool
         This is the stage's last event (it finished, or it was skipped).
     ran : bool
-        ``False`` for a skipped stage (a single event with ``done=True``).
+        ``False`` on the done event of a skipped stage (usually its only event; the spectral
+        pass may have announced its start before HOPE's map turned out to be settled).
     detail : str
         One line for people: the step ("pass 2/4 k=5 witnesses 93.1% changed 120"), or when
         done the stage's :attr:`StageInfo.reason`.
