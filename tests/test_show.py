@@ -53,6 +53,7 @@ def test_png_has_the_requested_size(pair):
     assert main([*argv(d), "--png", str(d / "small.png"), "--size", "640x400"]) == 0
     assert png_size(d / "small.png") == (640, 400)
     assert not [p for p in d.iterdir() if p.name.startswith(".hope-rs-")]  # no leftovers
+    assert (d / "big.png").stat().st_mode & 0o044 == (d / "a.off").stat().st_mode & 0o044
 
 
 @pytest.mark.parametrize(
