@@ -1,6 +1,7 @@
 """Logging, progress events, stage records and the CLI's -v flag."""
 
 import io
+import json
 import logging
 import subprocess
 import sys
@@ -201,6 +202,11 @@ def test_cli_verbose_logs_stages_and_restores_the_logger(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "hope-rs: refine: pass 1/4 repair" in err and "hope-rs: polish: polish k=3" in err
     assert logger.handlers == handlers and logger.level == level
+    # The JSON summary lists the stages and marks the polish step.
+    assert main([*argv, "--json", "-q"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert [s["name"] for s in summary["stages"]] == DEFAULT_STAGES
+    assert [it["polish"] for it in summary["iterations"]][-2:] == [False, True]
     # --multiscale that does not apply: a one-line note without -v.
     assert main([*argv, "--multiscale"]) == 0
     err = capsys.readouterr().err

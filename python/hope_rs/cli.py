@@ -36,10 +36,13 @@ def _summary(res) -> dict:
                 "witness_fraction": h.witness_fraction,
                 "changed": h.changed,
                 "seconds": h.seconds,
+                "pass": h.n_pass,
+                "polish": h.polish,
             }
             for h in res.history
         ],
         "timings": res.timings,
+        "stages": [vars(s) for s in res.stages],
     }
 
 
