@@ -98,11 +98,11 @@ def cmd_demo(args) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="hope-rs", description="Dense 3D shape matching with HOPE.")
+    sub = p.add_subparsers(dest="command", required=True)
     p.add_argument(
         "-v", "--verbose", action="count", default=0,
         help="log each stage with its time and why a stage was skipped (-vv: every step) on stderr",
     )  # fmt: skip
-    sub = p.add_subparsers(dest="command", required=True)
     m = sub.add_parser("match", help="match mesh A to mesh B; writes one B vertex index per line")
     m.add_argument("a", help="source mesh (OFF, OBJ, PLY, STL)")
     m.add_argument("b", help="target mesh")
