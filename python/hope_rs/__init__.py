@@ -4,6 +4,9 @@
 other way: it lists, for each vertex of shape 2, a vertex of shape 1.)
 """
 
+from importlib.metadata import PackageNotFoundError
+from importlib.metadata import version as _dist_version
+
 from .assignment import auction_assignment
 from .batch import PairResult, match_many, read_pairs
 from .cache import ShapeCache
@@ -31,4 +34,7 @@ __all__ = [
     "score",
 ]
 
-__version__ = "0.1.0"
+try:
+    __version__ = _dist_version("hope-rs")
+except PackageNotFoundError:  # a source tree on sys.path without installed metadata
+    __version__ = "0+unknown"

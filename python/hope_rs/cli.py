@@ -11,6 +11,8 @@ import os
 import sys
 import tempfile
 
+from . import __version__
+
 
 def write_map_atomically(path: str, mapping) -> None:
     """One B index per line; the file appears whole or not at all."""
@@ -98,6 +100,7 @@ def cmd_demo(args) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="hope-rs", description="Dense 3D shape matching with HOPE.")
+    p.add_argument("--version", action="version", version=f"hope-rs {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     p.add_argument(
         "-v", "--verbose", action="count", default=0,
