@@ -8,8 +8,8 @@ from functools import partial
 
 import numpy as np
 
+from ._options import check_options
 from ._validate import as_index_map
-from .descriptors import check_kind
 from .initial import shapes_initial_map
 from .lmd import MIN_CONSISTENT
 from .mesh import Mesh
@@ -56,16 +56,21 @@ class MatchResult:
     hope_map: np.ndarray | None = None
 
 
-def _as_shape(x, k_max: int, name: str) -> Shape:
+def _as_mesh(x, k_max: int, name: str) -> Shape | Mesh:
+    """``x`` as a Shape or Mesh, checked: the cheap part of :func:`_as_shape`."""
     if isinstance(x, Shape):
         if x.k_max < k_max:
             raise ValueError(f"{name} was built with k_max={x.k_max} < requested k_max={k_max}")
         return x
     if isinstance(x, Mesh):
-        return Shape(x, k_max=k_max)
+        return x
     if isinstance(x, (tuple, list)) and len(x) == 2:
-        return Shape(Mesh(*x), k_max=k_max)
+        return Mesh(*x)
     raise TypeError(f"{name} must be a hope_rs.Shape, a hope_rs.Mesh or a (vertices, faces) pair")
+
+
+def _as_shape(x: Shape | Mesh, k_max: int) -> Shape:
+    return x if isinstance(x, Shape) else Shape(x, k_max=k_max)
 
 
 def match(
@@ -94,18 +99,18 @@ def match(
     init : {"shot", "wks", "hks"} or (n_a,) array_like of int, keyword-only
         Descriptors for the initial map, or an initial map itself (``init[i]`` a vertex of B).
     k_max : int
-        Largest hop radius.
+        Largest hop radius, in [2, 64].
     schedule : list of int, optional
-        Hop radii of one refinement pass; default k_max → 1.
+        Hop radii of one refinement pass, each in [1, k_max]; default k_max → 1.
     max_passes : int
-        Passes of the schedule at most; refinement stops earlier once a pass changes almost
-        nothing.
+        Passes of the schedule at most (at least 1); refinement stops earlier once a pass
+        changes almost nothing.
     min_consistent : float
-        Witness rule (see :data:`hope_rs.lmd.MIN_CONSISTENT`).
+        Witness rule, in [0, 1] (see :data:`hope_rs.lmd.MIN_CONSISTENT`).
     top_k : int
-        Candidates kept per vertex in each overlap cost.
+        Candidates kept per vertex in each overlap cost (at least 1).
     polish_k : int or None
-        Hop radius of a final step in which each vertex takes its best-overlapping candidate;
+        Hop radius, in [1, k_max], of a final step in which each vertex takes its best-overlapping candidate;
         ``None`` returns the one-to-one map of the last assignment instead (with
         ``spectral=False``: the spectral pass is not one-to-one).
     global_step : bool
@@ -147,20 +152,34 @@ def match(
         :data:`~hope_rs.shared_faces.MAX_VERTICES` vertices.
     callback : callable, optional
         Called with each :class:`~hope_rs.refine.Iteration` as it finishes (of the coarse
-        match too, with ``multiscale``).
+        match too, with ``multiscale``). An exception it raises ends the match and propagates.
 
     Returns
     -------
     MatchResult
+
+    Raises
+    ------
+    TypeError, ValueError
+        For a bad option or input, before any expensive work (one line: what is allowed, what
+        was given). Whatever the exit (an error, a raising ``callback``, Ctrl-C), the
+        background threads of the spectral pass have stopped when ``match`` returns or raises.
     """
     t0 = time.perf_counter()
+    # Every option, then the inputs, before any expensive work.
+    check_options(
+        init=init, k_max=k_max, schedule=schedule, max_passes=max_passes,
+        min_consistent=min_consistent, top_k=top_k, polish_k=polish_k, global_step=global_step,
+        multiscale=multiscale, spectral=spectral, shared_faces=shared_faces, callback=callback,
+    )  # fmt: skip
+    ma, mb = _as_mesh(a, k_max, "a"), _as_mesh(b, k_max, "b")
+    if not isinstance(init, str):
+        init = as_index_map(init, ma.n_vertices, mb.n_vertices, name="init")
     timings: dict[str, float] = {}
-    sa, sb = _as_shape(a, k_max, "a"), _as_shape(b, k_max, "b")
+    sa, sb = _as_shape(ma, k_max), _as_shape(mb, k_max)
     timings["shapes"] = time.perf_counter() - t0
-    if isinstance(init, str):
-        check_kind(init)
-    else:
-        init = sa.map_in(sb, as_index_map(init, sa.n_vertices, sb.n_vertices, name="init"))
+    if not isinstance(init, str):
+        init = sa.map_in(sb, init)
     options = {
         "schedule": schedule, "max_passes": max_passes, "min_consistent": min_consistent,
         "top_k": top_k, "polish_k": polish_k, "global_step": global_step, "callback": callback,
