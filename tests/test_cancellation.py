@@ -166,3 +166,21 @@ def test_ctrl_c_in_the_cli_exits_130_at_once(pair, tmp_path):
     assert not out.exists()
     # Generous: the point is that no solve runs on to its end (a full match takes seconds).
     assert elapsed < 20, elapsed
+
+
+def test_a_settled_map_does_not_wait_for_the_bases(pair, monkeypatch):
+    """No spectral pass follows a settled map, so its eigensolves are stopped, not awaited."""
+    made = []
+
+    class Recorded(spectral.BasisPrefetch):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            made.append(self)
+
+    monkeypatch.setattr(spectral, "BasisPrefetch", Recorded)
+    a, b = (hope_rs.Shape(m) for m in pair)
+    res = hope_rs.match(a, b, init=np.arange(a.n_vertices))
+    assert res.hope_map is None and "spectral" not in res.timings  # settled: no pass after
+    np.testing.assert_array_equal(res.map, np.arange(a.n_vertices))
+    assert len(made) == 1 and made[0].stop.is_set()
+    assert ours() == []

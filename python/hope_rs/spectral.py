@@ -395,7 +395,8 @@ def refine_while_solving_bases(
     ``spectral`` and the pass applies to these shapes; the refinement's result.
 
     Both threads have ended when this returns or raises: on an error, Ctrl-C or a raising
-    ``callback`` they are told to stop first (within one solver step or basis size)."""
+    ``callback``, and when the map settled (no spectral pass follows), they are told to stop
+    first (within one solver step or basis size); bases solved by then stay in the shapes."""
     if not (spectral and applies(a, b)):
         return refine(a, b, f0, **options)
     # One BLAS thread from before the solves start to after they end (see BasisPrefetch).
@@ -407,12 +408,13 @@ def refine_while_solving_bases(
             prefetch.start()
             res = refine(a, b, f0, on_last_pass=early.start, **options)
         finally:
-            if res is None:
+            # A settled map skips the spectral pass (see hope_rs.match), as does an error: no
+            # need to wait for either thread's work then.
+            if res is None or res.settled:
                 # Both flags before any wait, so that a second Ctrl-C during the joins below
                 # still leaves the threads stopping.
                 early.stop.set()
                 prefetch.stop.set()
-            # A settled map skips the spectral pass (see hope_rs.match), as does an error.
             early.join(cancel=res is None or res.settled)
             prefetch.finish()
     res.early_zoomout = early.result
