@@ -5,6 +5,9 @@ import numpy as np
 import pytest
 from hypothesis import settings
 
+from hope_rs.demo import demo_pair
+from hope_rs.mesh import load_mesh
+
 # CI runs a fixed sequence of examples, so a landing never hinges on the draw; local runs stay
 # random to keep finding new cases.
 settings.register_profile("ci", derandomize=True)
@@ -25,12 +28,12 @@ def data_path(*parts: str) -> Path:
 
 @pytest.fixture(scope="session")
 def faust_pair():
-    from hope_rs.mesh import load_mesh
-
-    return (
-        load_mesh(data_path("faust_reg", "tr_reg_012.off")),
-        load_mesh(data_path("faust_reg", "tr_reg_018.off")),
-    )
+    """FAUST tr_reg_012 and tr_reg_018 from the shared data, else the package's bundled copy
+    (the same meshes, coordinates stored as float32)."""
+    a, b = DATA / "faust_reg" / "tr_reg_012.off", DATA / "faust_reg" / "tr_reg_018.off"
+    if a.exists() and b.exists():
+        return load_mesh(a), load_mesh(b)
+    return demo_pair()
 
 
 def relabel(faces: np.ndarray, perm: np.ndarray) -> np.ndarray:
@@ -38,3 +41,9 @@ def relabel(faces: np.ndarray, perm: np.ndarray) -> np.ndarray:
     inv = np.empty_like(perm)
     inv[perm] = np.arange(perm.size)
     return inv[faces]
+
+
+def pytest_configure(config):
+    config.addinivalue_line(
+        "markers", "slow: takes more than a few seconds (28k meshes, remeshed data, Ray, kills)"
+    )

@@ -4,11 +4,15 @@
 other way: it lists, for each vertex of shape 2, a vertex of shape 1.)
 """
 
+from importlib.metadata import PackageNotFoundError
+from importlib.metadata import version as _dist_version
+
 from .assignment import auction_assignment
 from .batch import PairResult, match_many, read_pairs
 from .cache import ShapeCache
 from .evaluate import geodesic_errors, load_vts, score
 from .kernels import khop_neighbourhoods, overlap_cost
+from .map_io import read_map, write_map
 from .matching import MatchResult, match
 from .mesh import Mesh, load_mesh
 from .shape import Shape
@@ -27,8 +31,13 @@ __all__ = [
     "match",
     "match_many",
     "overlap_cost",
+    "read_map",
     "read_pairs",
     "score",
+    "write_map",
 ]
 
-__version__ = "0.1.0"
+try:
+    __version__ = _dist_version("hope-rs")
+except PackageNotFoundError:  # a source tree on sys.path without installed metadata
+    __version__ = "0+unknown"

@@ -5,16 +5,23 @@ its descriptors into the on-disk :class:`~hope_rs.cache.ShapeCache` (a temporary
 is off), so every shape is precomputed once however many pairs it is in. *Pair* tasks load both
 shapes from there, rebuild the k-hop neighbourhoods (0.06 s at 5k vertices) and run
 :func:`hope_rs.match`. A pair starts as soon as its two shapes are ready. The parent process
-writes each map atomically; a rerun skips pairs whose map file exists; a shape that cannot be
-loaded fails only its own pairs.
+writes each map atomically as soon as its pair is done (also with one job: tasks then run one
+at a time, when their result is waited for); a rerun skips pairs whose map file exists and is
+whole (right length, indices in range), and redoes the others; a shape that cannot be loaded
+fails only its own pairs. Worker processes end with the batch, even when it is killed.
 """
 
 from __future__ import annotations
 
+import ctypes
 import os
+import shlex
+import signal
 import sys
 import tempfile
+import threading
 import time
+import warnings
 from collections import OrderedDict
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -23,7 +30,8 @@ from pathlib import Path
 import numpy as np
 
 from .cache import ShapeCache, cached_shape, descriptor_params, file_digest, mesh_digest
-from .mesh import Mesh
+from .map_io import check_writable_folder, read_map, text_map_is_complete, write_map
+from .mesh import Mesh, as_mesh
 from .shape import K_MAX, Shape
 from .spectral import applies_to_size
 
@@ -46,7 +54,8 @@ class PairResult:
     error : str or None
         Why the pair failed (e.g. the mesh could not be read).
     skipped : bool
-        The map file already existed, so the pair was not recomputed (``map`` is read from it).
+        A whole map file already existed, so the pair was not recomputed (``map`` is read from
+        it).
     path : Path or None
         The map file, when an output folder was given.
     timings : dict
@@ -70,12 +79,26 @@ class PairResult:
 # -- pair files ----------------------------------------------------------------------------------
 
 
-def read_pairs(path: str | os.PathLike, *, ext: str = "") -> list[tuple[Path, Path]]:
-    """Read a pairs file: one pair per line, two mesh paths separated by white space.
+def _pair_fields(line: str) -> list[str]:
+    """The fields of one pairs-file line: tab-separated when the line has a tab (paths may then
+    hold spaces), else shell-like words (quote paths with spaces); ``#`` starts a comment."""
+    if "\t" in line:
+        cut = (i for i, c in enumerate(line) if c == "#" and (i == 0 or line[i - 1].isspace()))
+        body = line[: next(cut, len(line))]
+        if "\t" in body.strip():
+            return [f.strip() for f in body.split("\t") if f.strip()]
+    return shlex.split(line, comments=True)
 
-    Relative paths are resolved against the file's folder; ``ext`` (e.g. ``".off"``) is appended
-    to names that do not already end with it, so the ``pairs.txt`` of the shared benchmark sets
-    (``tr_reg_002 tr_reg_007``) work as they are. Blank lines and ``#`` comments are ignored.
+
+def read_pairs(path: str | os.PathLike, *, ext: str = "") -> list[tuple[Path, Path]]:
+    """Read a pairs file: one pair per line, two mesh paths.
+
+    The two paths are separated by white space (quote a path holding spaces, as in a shell:
+    ``"my meshes/a.off" b.off``) or by a tab (then each field is taken as it is, spaces
+    included). Relative paths are resolved against the file's folder; ``ext`` (e.g. ``".off"``)
+    is appended to names that do not already end with it, so the ``pairs.txt`` of the shared
+    benchmark sets (``tr_reg_002 tr_reg_007``) work as they are. Blank lines and ``#`` comments
+    are ignored. A malformed line raises ValueError naming the file and line.
     """
     path = Path(path)
     if not path.is_file():
@@ -83,15 +106,22 @@ def read_pairs(path: str | os.PathLike, *, ext: str = "") -> list[tuple[Path, Pa
     if ext and not ext.startswith("."):
         ext = "." + ext
     folder = path.resolve().parent
+    try:
+        text = path.read_text()
+    except UnicodeDecodeError:
+        raise ValueError(f"{path} is not a text file of mesh paths") from None
     out = []
-    for no, line in enumerate(path.read_text().splitlines(), 1):
-        tokens = line.split("#", 1)[0].split()
+    for no, line in enumerate(text.splitlines(), 1):
+        try:
+            tokens = _pair_fields(line)
+        except ValueError as e:  # shlex: an unclosed quote
+            raise ValueError(f"{path}:{no}: {e}: {line.strip()!r}") from None
         if not tokens:
             continue
         if len(tokens) != 2:
             raise ValueError(
-                f"{path}:{no}: expected two mesh paths separated by white space, got "
-                f"{len(tokens)} field(s): {line.strip()!r}"
+                f"{path}:{no}: expected two mesh paths separated by white space or a tab, got "
+                f"{len(tokens)} field(s) (quote paths holding spaces): {line.strip()!r}"
             )
         pair = []
         for t in tokens:
@@ -139,14 +169,14 @@ def _spec(s) -> tuple:
             s.mesh.faces,
             {k: s.descriptors(k) for k in s._descriptors},
         )
-    if isinstance(s, Mesh):
-        return ("mesh", s.vertices, s.faces, {})
-    if isinstance(s, (tuple, list)) and len(s) == 2:
-        m = Mesh(*s)
-        return ("mesh", m.vertices, m.faces, {})
-    raise TypeError(
-        f"shapes must be mesh file paths, hope_rs.Mesh or hope_rs.Shape objects, got {type(s)}"
-    )
+    try:
+        m = as_mesh(s)
+    except TypeError:
+        raise TypeError(
+            "shapes must be mesh file paths, hope_rs.Mesh or hope_rs.Shape objects, (vertices, "
+            f"faces) pairs or objects with .vertices and .faces, got {type(s).__name__}"
+        ) from None
+    return ("mesh", m.vertices, m.faces, {})
 
 
 def _resolve_pairs(pairs, names: list[str]) -> list[tuple[int, int]]:
@@ -281,8 +311,18 @@ def pair_task(job: dict, a, b) -> dict:
 # -- backends: submit tasks, wait for any to finish -----------------------------------------------
 
 
+class _Task:
+    """A task of the serial backend, run when it is waited for."""
+
+    __slots__ = ("args", "fn")
+
+    def __init__(self, fn, args):
+        self.fn, self.args = fn, args
+
+
 class _Serial:
-    """Runs each task when submitted, in this process."""
+    """Runs tasks in this process, one per :meth:`wait` (pairs before preparations, so each map
+    is written as soon as possible)."""
 
     ships_data = False
 
@@ -290,21 +330,56 @@ class _Serial:
         self.threads = threads
 
     def submit(self, fn, *args):
-        return [fn(*args)]  # a fresh list: a unique handle holding the result
+        return _Task(fn, args)
 
     def wait(self, handles):
-        return [(h, h[0]) for h in handles[:1]]
+        h = next((h for h in handles if h.fn is pair_task), handles[0])
+        return [(h, h.fn(*h.args))]
 
-    def close(self):
+    def close(self, abort: bool = False):
         pass
 
 
-def _init_worker(threads: int) -> None:
+def die_with_parent(parent: int, poll: float = 1.0) -> None:
+    """End this process when process ``parent`` ends, however it ends (even SIGKILL).
+
+    On Linux the kernel sends SIGKILL at the parent's death (``prctl(PR_SET_PDEATHSIG)``);
+    everywhere a daemon thread also checks every ``poll`` seconds that the parent is still
+    this process's parent, and exits when it is not.
+    """
+    if sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # 1 = PR_SET_PDEATHSIG
+        except (OSError, AttributeError):
+            pass  # no libc symbol: the thread below still applies
+    if os.getppid() != parent:  # the parent died before the kernel watched it
+        os._exit(1)
+
+    def watch() -> None:
+        while True:
+            time.sleep(poll)
+            if os.getppid() != parent:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="hope-rs-parent-watch", daemon=True).start()
+
+
+def _one_line_warning(message, category, filename, lineno, line=None) -> str:
+    return f"hope-rs: warning: {message}\n"
+
+
+def _init_worker(threads: int, parent: int) -> None:
     limit_threads(threads)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the parent, which ends us
+    warnings.formatwarning = _one_line_warning
+    die_with_parent(parent)
 
 
 class _Pool:
-    """A pool of ``jobs`` spawned processes (not forked: a forked Rust thread pool would hang)."""
+    """A pool of ``jobs`` spawned processes (not forked: a forked Rust thread pool would hang).
+
+    Workers ignore Ctrl-C (the parent ends them) and die with the parent process."""
 
     ships_data = False
 
@@ -315,7 +390,7 @@ class _Pool:
         self.threads = threads
         self.ex = ProcessPoolExecutor(
             max_workers=jobs, mp_context=mp.get_context("spawn"),
-            initializer=_init_worker, initargs=(threads,),
+            initializer=_init_worker, initargs=(threads, os.getpid()),
         )  # fmt: skip
 
     def submit(self, fn, *args):
@@ -333,8 +408,13 @@ class _Pool:
                 out.append((h, {"error": f"worker process failed: {_error(e)}"}))
         return out
 
-    def close(self):
-        self.ex.shutdown(cancel_futures=True)
+    def close(self, abort: bool = False):
+        """Wait for the workers to finish; with ``abort`` (an error, Ctrl-C), kill them first
+        rather than wait for the pairs they are matching."""
+        if abort:
+            for proc in list((getattr(self.ex, "_processes", None) or {}).values()):
+                proc.kill()
+        self.ex.shutdown(wait=True, cancel_futures=True)
 
 
 def cpu_count() -> int:
@@ -403,9 +483,25 @@ class BatchProgress:
         self.stream.flush()
 
 
-def map_name(a: str, b: str) -> str:
+#: Map file formats of a batch and their suffixes.
+MAP_FORMATS = {"txt": ".txt", "npy": ".npy"}
+
+
+def map_name(a: str, b: str, map_format: str = "txt") -> str:
     """File name of the map of pair (a, b) in the output folder."""
-    return f"{a}__{b}.txt"
+    return f"{a}__{b}{MAP_FORMATS[map_format]}"
+
+
+def existing_map(path: Path, n_a: int, n_b: int) -> tuple[np.ndarray | None, str | None]:
+    """A map file left by an earlier run: ``(map, None)`` when it is whole (n_a indices in
+    [0, n_b), text ending with its newline), else ``(None, why it must be redone)``."""
+    try:
+        m = read_map(path, n_a, n_b)
+        if not text_map_is_complete(path):
+            return None, f"map {str(path)!r} ends inside its last line (cut short)"
+    except (ValueError, OSError) as e:
+        return None, str(e)
+    return m, None
 
 
 def imatch_many(
@@ -420,12 +516,12 @@ def imatch_many(
     k_max: int = K_MAX,
     progress=None,
     ray_options: dict | None = None,
+    map_format: str = "txt",
     **match_options,
 ) -> Iterator[PairResult]:
     """Like :func:`match_many`, but yields each :class:`PairResult` as soon as it is done
-    (finished pairs first, in no particular order)."""
-    from .cli import write_map_atomically
-
+    (finished pairs first, in no particular order). Closing the generator early (or an
+    exception, Ctrl-C) ends the workers at once; the maps already written stay."""
     if isinstance(shapes, dict):
         names, shapes = [str(k) for k in shapes], list(shapes.values())
     else:
@@ -435,13 +531,11 @@ def imatch_many(
         raise ValueError("no shapes given")
     if not isinstance(init, str) or init not in ("shot", "wks", "hks"):
         raise ValueError(f"init must be 'shot', 'wks' or 'hks' in a batch, got {init!r}")
+    if map_format not in MAP_FORMATS:
+        raise ValueError(f"map_format must be one of {sorted(MAP_FORMATS)}, got {map_format!r}")
     ij = _resolve_pairs(pairs, names)
     specs = [_spec(s) for s in shapes]
-    out = Path(out_dir) if out_dir is not None else None
-    if out is not None:
-        if out.exists() and not out.is_dir():
-            raise ValueError(f"output {str(out)!r} exists and is not a folder")
-        out.mkdir(parents=True, exist_ok=True)
+    out = check_writable_folder(out_dir, create=True) if out_dir is not None else None
     tmp = None
     if cache is True or cache is None:
         cache = ShapeCache()
@@ -453,75 +547,101 @@ def imatch_many(
     kinds = (init,)
     report = progress if callable(progress) else BatchProgress(len(ij), enabled=bool(progress))
 
+    # Each pair: (index, i, j, map path, whether an existing file is to be checked first).
     todo = []
     for n, (i, j) in enumerate(ij):
-        path = out / map_name(names[i], names[j]) if out is not None else None
-        if path is not None and path.exists():
-            r = PairResult(n, names[i], names[j], skipped=True, path=path)
-            r.map = np.loadtxt(path, dtype=np.int64, ndmin=1)
-            report(r)
-            yield r
-        else:
-            todo.append((n, i, j, path))
-    if not todo:
-        return
+        path = out / map_name(names[i], names[j], map_format) if out is not None else None
+        todo.append((n, i, j, path, path is not None and os.path.lexists(path)))
     ex = _make_backend(backend, jobs, ray_options)
+    finished = False
     try:
         basis = bool(match_options.get("spectral", True))
         job = {
             "cache_root": str(cache.root), "kinds": kinds, "k_max": k_max, "init": init,
             "options": match_options, "threads": getattr(ex, "threads", None), "basis": basis,
         }  # fmt: skip
-        needed = sorted({s for _, i, j, _ in todo for s in (i, j)})
-        handles = {}
-        for s in needed:
-            h = ex.submit(prepare_task, specs[s], str(cache.root), kinds, ex.ships_data, basis)
-            handles[_key(h)] = (h, "prepare", s)
+        handles: dict = {}  # handle -> ("prepare" | "size" | "pair", shape index or pair)
+        submitted: dict[int, str] = {}  # shape -> "prepare" or "size"
+
+        def prepare(s: int, full: bool) -> None:
+            if submitted.get(s) == "prepare" or (not full and s in submitted):
+                return
+            submitted[s] = "prepare" if full else "size"
+            # a size task only reads the mesh (its vertex count checks an existing map)
+            args = (kinds, ex.ships_data, basis) if full else ((), False, False)
+            handles[ex.submit(prepare_task, specs[s], str(cache.root), *args)] = (
+                "prepare" if full else "size", s,
+            )  # fmt: skip
+
+        for _, i, j, _, check in todo:
+            if not check:
+                prepare(i, True)
+                prepare(j, True)
+        for _, i, j, _, check in todo:
+            if check:
+                prepare(i, False)
+                prepare(j, False)
+        sizes: dict[int, int] = {}
         ready: dict[int, object] = {}
         failed: dict[int, str] = {}
-        waiting = list(todo)
+        waiting = todo
         while handles:
-            for h, value in ex.wait([h for h, _, _ in handles.values()]):
-                _, kind, what = handles.pop(_key(h))
-                if kind == "prepare":
+            for h, value in ex.wait(list(handles)):
+                kind, what = handles.pop(h)
+                if kind in ("prepare", "size"):
                     if "error" in value:
                         failed[what] = f"{names[what]}: {value['error']}"
                     else:
-                        # a cache digest, or (Ray) a reference to the shape's arrays
-                        ready[what] = value.get("token", value["digest"])
+                        sizes[what] = value["n_vertices"]
+                        if kind == "prepare":
+                            # a cache digest, or (Ray) a reference to the shape's arrays
+                            ready[what] = value.get("token", value["digest"])
                     still = []
                     for t in waiting:
-                        n, i, j, path = t
+                        n, i, j, path, check = t
                         if i in failed or j in failed:
                             r = PairResult(n, names[i], names[j], path=path)
                             r.error = failed.get(i) or failed.get(j)
                             report(r)
                             yield r
-                        elif i in ready and j in ready:
-                            h2 = ex.submit(pair_task, job, ready[i], ready[j])
-                            handles[_key(h2)] = (h2, "pair", t)
+                            continue
+                        if check:
+                            if i not in sizes or j not in sizes:
+                                still.append(t)
+                                continue
+                            m, why = existing_map(path, sizes[i], sizes[j])
+                            if why is None:
+                                r = PairResult(n, names[i], names[j], m, skipped=True, path=path)
+                                report(r)
+                                yield r
+                                continue
+                            warnings.warn(f"{why}; computing it again", RuntimeWarning)
+                            t = (n, i, j, path, False)
+                            prepare(i, True)
+                            prepare(j, True)
+                        if i in ready and j in ready:
+                            handles[ex.submit(pair_task, job, ready[i], ready[j])] = ("pair", t)
                         else:
                             still.append(t)
                     waiting = still
                 else:
-                    n, i, j, path = what
+                    n, i, j, path, _ = what
                     r = PairResult(n, names[i], names[j], path=path)
                     if "error" in value:
                         r.error = value["error"]
                     else:
                         r.map, r.timings = value["map"], value["timings"]
                         if path is not None:
-                            write_map_atomically(path, r.map)
+                            write_map(path, r.map)
                     report(r)
                     yield r
+        if waiting:  # every pair ends as a map, a skip or a failure: never dropped silently
+            raise RuntimeError(f"{len(waiting)} pair(s) of the batch were never run")
+        finished = True
     finally:
-        ex.close()
+        ex.close(abort=not finished)
         if tmp is not None:
             tmp.cleanup()
-
-
-def _key(h):
-    return id(h) if isinstance(h, list) else h
 
 
 def match_many(shapes, pairs=None, **kwargs) -> list[PairResult]:
@@ -536,7 +656,11 @@ def match_many(shapes, pairs=None, **kwargs) -> list[PairResult]:
         Indices into ``shapes`` or names; default every pair (i, j) with i < j.
     out_dir : path, keyword-only, optional
         Write each map to ``out_dir/<a>__<b>.txt`` (one B index per line) as soon as it is done,
-        atomically; pairs whose file exists are skipped (their map is read back).
+        atomically; pairs whose file exists and is whole (right length, indices in range) are
+        skipped (their map is read back), others are redone with a warning. The folder is
+        created, and checked to be writable, before any work.
+    map_format : {"txt", "npy"}
+        Format of the map files (:func:`hope_rs.write_map`).
     jobs : int, optional
         Local worker processes (default :func:`default_jobs`: one per two cores, each with
         cores / jobs Rust threads); 1 runs in this process.

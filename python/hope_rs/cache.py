@@ -16,6 +16,10 @@ descriptor parameters, the package version and a fingerprint of the compiled ext
 a mesh, changing a parameter or rebuilding the Rust core never returns stale data. Every file is
 written to a temporary name and renamed into place: readers see a whole entry or none, and
 concurrent writers of the same entry are harmless (they write identical bytes).
+
+Each entry also stores its own key (digest, kind, parameters, code) and a SHA-256 of its arrays,
+checked on every read: an entry damaged by something outside these writes (a full disk, a copy
+cut short, files swapped by hand) is recomputed and rewritten, with a warning naming the file.
 """
 
 from __future__ import annotations
@@ -23,17 +27,20 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import tempfile
+import warnings
 from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 
+from .map_io import atomic_write
 from .mesh import Mesh, load_mesh
 from .shape import K_MAX, Shape
 
-#: Bump when the layout or the meaning of an entry changes.
-FORMAT = 1
+#: Bump when the layout or the meaning of an entry changes (2: entries carry key and checksum).
+FORMAT = 2
+#: Names of the integrity fields stored next to an entry's arrays.
+_KEY, _SUM = "__key__", "__sha256__"
 #: Eigenpairs used for WKS/HKS (``descriptors.descriptors`` default).
 N_EIGEN = 100
 
@@ -98,17 +105,19 @@ def basis_params() -> dict:
     return {"k": K_END, "numbering": "morton", "solver": "coarse-seeded"}
 
 
+def _checksum(arrays: dict[str, np.ndarray]) -> str:
+    """SHA-256 of arrays: names, dtypes, shapes and bytes, in name order."""
+    h = hashlib.sha256()
+    for name in sorted(arrays):
+        arr = np.ascontiguousarray(arrays[name])
+        h.update(repr((name, arr.dtype.str, arr.shape)).encode())
+        h.update(arr.tobytes())
+    return h.hexdigest()
+
+
 def _atomic_save(path: Path, arrays: dict[str, np.ndarray]) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=".npz")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            np.savez(fh, **arrays)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    atomic_write(path, lambda fh: np.savez(fh, **arrays))
 
 
 class ShapeCache:
@@ -133,27 +142,49 @@ class ShapeCache:
     def __repr__(self) -> str:
         return f"ShapeCache({str(self.root)!r})"
 
-    def _path(self, digest: str, what: str, params: dict) -> Path:
-        key = json.dumps(
-            {"what": what, "params": params, "code": code_fingerprint(), "format": FORMAT},
-            sort_keys=True,
-        )
-        tag = hashlib.sha256(key.encode()).hexdigest()[:16]
-        return self.root / f"v{FORMAT}" / digest[:2] / digest / f"{what}-{tag}.npz"
+    def _key(self, digest: str, what: str, params: dict) -> tuple[Path, str]:
+        """The entry's file and the key stored inside it."""
+        common = {"what": what, "params": params, "code": code_fingerprint(), "format": FORMAT}
+        tag = hashlib.sha256(json.dumps(common, sort_keys=True).encode()).hexdigest()[:16]
+        key = json.dumps({"digest": digest, **common}, sort_keys=True)
+        return self.root / f"v{FORMAT}" / digest[:2] / digest / f"{what}-{tag}.npz", key
 
     def get(self, digest: str, what: str, params: dict) -> dict[str, np.ndarray] | None:
-        path = self._path(digest, what, params)
+        """The arrays of an entry, or None when it is absent or damaged (a damaged file is
+        removed, with a warning naming it, so that the caller recomputes and rewrites it)."""
+        path, key = self._key(digest, what, params)
         try:
             with np.load(path, allow_pickle=False) as z:
                 out = {k: z[k] for k in z.files}
-        except (OSError, ValueError, EOFError, KeyError):
-            return None  # absent, or damaged by something outside our atomic writes: recompute
+        except FileNotFoundError:
+            return None
+        except Exception as e:  # noqa: BLE001 - BadZipFile, zlib.error, ValueError (refused
+            # pickle, bad header), EOFError, OSError, KeyError...: all mean a damaged file
+            return self._damaged(path, f"unreadable: {type(e).__name__}")
+        stored_key, stored_sum = out.pop(_KEY, None), out.pop(_SUM, None)
+        if stored_key is None or stored_key.shape != () or str(stored_key) != key:
+            return self._damaged(path, "it holds another entry")
+        if stored_sum is None or stored_sum.shape != () or str(stored_sum) != _checksum(out):
+            return self._damaged(path, "checksum mismatch")
         self.hits += 1
         return out
 
+    def _damaged(self, path: Path, reason: str) -> None:
+        warnings.warn(
+            f"hope_rs cache entry {str(path)!r} is damaged ({reason}); recomputing it",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+        try:
+            path.unlink()
+        except OSError:
+            pass  # already replaced or removed by a concurrent writer
+
     def put(self, digest: str, what: str, params: dict, arrays: dict[str, np.ndarray]) -> None:
         self.misses += 1
-        _atomic_save(self._path(digest, what, params), arrays)
+        path, key = self._key(digest, what, params)
+        arrays = {k: np.asarray(v) for k, v in arrays.items()}
+        _atomic_save(path, {**arrays, _KEY: np.array(key), _SUM: np.array(_checksum(arrays))})
 
     # -- the three kinds of entries -------------------------------------------------------------
 

@@ -8,8 +8,13 @@ import argparse
 import json
 import os
 import sys
-import tempfile
 import time
+import traceback
+import warnings
+
+from . import __version__
+from .batch_cli import add_batch_parser, environment_help
+from .map_io import check_writable_folder, map_format, write_map
 
 
 class Progress:
@@ -42,21 +47,6 @@ class Progress:
             sys.stderr.write("\n")
 
 
-def write_map_atomically(path: str, mapping) -> None:
-    """One B index per line; the file appears whole or not at all."""
-    folder = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(dir=folder, prefix=".hope-rs-", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write("\n".join(map(str, mapping.tolist())))
-            fh.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def _summary(res) -> dict:
     return {
         "n_vertices": int(res.map.size),
@@ -82,8 +72,11 @@ def cmd_match(args) -> int:
     from .mesh import load_mesh
     from .refine import default_schedule
 
-    if args.output and os.path.isdir(args.output):
-        raise ValueError(f"output {args.output!r} is a folder; give a file name")
+    if args.output:  # before any work: a known suffix, a folder we can write to
+        if os.path.isdir(args.output):
+            raise ValueError(f"output {args.output!r} is a folder; give a file name")
+        map_format(args.output)
+        check_writable_folder(os.path.dirname(os.path.abspath(args.output)))
     a, b = load_mesh(args.a), load_mesh(args.b)
     if not args.multiscale and not args.quiet and min(a.n_vertices, b.n_vertices) >= HINT_VERTICES:
         print(
@@ -104,7 +97,7 @@ def cmd_match(args) -> int:
     finally:
         progress.close()
     if args.output:
-        write_map_atomically(args.output, res.map)
+        write_map(args.output, res.map)
     elif not args.json:
         sys.stdout.write("\n".join(map(str, res.map.tolist())) + "\n")
     if args.json:
@@ -122,12 +115,27 @@ def cmd_demo(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="hope-rs", description="Dense 3D shape matching with HOPE.")
+    p = argparse.ArgumentParser(
+        prog="hope-rs",
+        description="Dense 3D shape matching with HOPE.",
+        epilog=environment_help(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--version", action="version", version=f"hope-rs {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
-    m = sub.add_parser("match", help="match mesh A to mesh B; writes one B vertex index per line")
+    m = sub.add_parser(
+        "match",
+        help="match mesh A to mesh B; writes one B vertex index per line",
+        epilog=environment_help(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     m.add_argument("a", help="source mesh (OFF, OBJ, PLY, STL)")
     m.add_argument("b", help="target mesh")
-    m.add_argument("-o", "--output", help="map file (default: standard output)")
+    m.add_argument(
+        "-o", "--output",
+        help="map file: .txt or .csv (one B index per line) or .npy (NumPy int64); written "
+        "atomically (default: standard output)",
+    )  # fmt: skip
     m.add_argument("--init", default="shot", choices=["shot", "wks", "hks"], help="descriptors")
     m.add_argument("--k-max", type=int, default=8, help="largest hop radius (default 8)")
     m.add_argument(
@@ -154,7 +162,6 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--json", action="store_true", help="print the report as JSON")
     d.set_defaults(func=cmd_demo)
     from . import bench, show  # light imports: matplotlib, pyFM load only when run
-    from .batch_cli import add_batch_parser
 
     bench.add_parser(sub)
     show.add_parser(sub)
@@ -162,16 +169,48 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+#: Errors that are the input's or the user's, not the program's: exit status 2, one line.
+USAGE_ERRORS = (
+    ValueError, TypeError, FileNotFoundError, PermissionError, IsADirectoryError,
+    NotADirectoryError,
+)  # fmt: skip
+
+
+def _one_line_warning(message, category, filename, lineno, line=None) -> str:
+    return f"hope-rs: warning: {message}\n"
+
+
 def main(argv=None) -> int:
+    """Run the command line; returns the exit status (see ``hope-rs --help``)."""
     args = build_parser().parse_args(argv)
+    debug = os.environ.get("HOPE_RS_DEBUG", "") not in ("", "0")
+    formatwarning, warnings.formatwarning = warnings.formatwarning, _one_line_warning
     try:
         return args.func(args)
-    except (ValueError, TypeError, FileNotFoundError, PermissionError, IsADirectoryError) as e:
-        print(f"hope-rs: error: {e}", file=sys.stderr)
-        return 2
     except KeyboardInterrupt:
         print("hope-rs: interrupted", file=sys.stderr)
         return 130
+    except USAGE_ERRORS as e:
+        if debug:
+            traceback.print_exc()
+        print(f"hope-rs: error: {e}", file=sys.stderr)
+        return 2
+    except OSError as e:  # e.g. a full disk while writing: the run failed, not its input
+        if debug:
+            traceback.print_exc()
+        print(f"hope-rs: error: {e}", file=sys.stderr)
+        return 1
+    except Exception as e:  # noqa: BLE001 - a bug: one line and a hint, not a traceback
+        if debug:
+            traceback.print_exc()
+        print(
+            f"hope-rs: internal error: {type(e).__name__}: {e} (rerun with HOPE_RS_DEBUG=1 for "
+            "the traceback, and please report it)",
+            file=sys.stderr,
+        )
+        return 1
+    finally:
+        warnings.formatwarning = formatwarning
 
 
 if __name__ == "__main__":

@@ -24,7 +24,7 @@ import numpy as np
 
 from . import _core
 from ._validate import as_index_map
-from .mesh import Mesh, unique_edges
+from .mesh import Mesh, as_mesh, unique_edges
 from .shape import Shape
 
 #: Thresholds of the standard "% correspondences within geodesic error" curve.
@@ -50,9 +50,7 @@ def load_vts(path: str | os.PathLike) -> np.ndarray:
 
 def _mesh_and_shape(b) -> tuple[Mesh, Shape | None]:
     shape_b = b if isinstance(b, Shape) else None
-    mesh_b = b.mesh if shape_b is not None else b
-    if not isinstance(mesh_b, Mesh):
-        raise TypeError("b must be a hope_rs.Mesh or hope_rs.Shape")
+    mesh_b = b.mesh if shape_b is not None else as_mesh(b, "b")
     return mesh_b, shape_b
 
 
@@ -61,7 +59,9 @@ def _graph_distances(mesh: Mesh, shape: Shape | None, u: np.ndarray, v: np.ndarr
     the graph ``shape`` already holds (in its internal numbering) when there is one."""
     if shape is None:
         return _core.MeshGraph(mesh.vertices, mesh.faces, 0).pair_distances(u, v)
-    return shape.graph.pair_distances(shape.rank[u], shape.rank[v])
+    # The shape's graph is in its internal units, 4**scale_exponent times the mesh's (exact).
+    d = shape.graph.pair_distances(shape.rank[u], shape.rank[v])
+    return np.ldexp(d, -2 * shape.scale_exponent) if shape.scale_exponent else d
 
 
 def surface_distances(mesh: Mesh, sources, targets) -> np.ndarray:

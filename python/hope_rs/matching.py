@@ -12,7 +12,7 @@ from ._options import check_options
 from ._validate import as_index_map
 from .initial import shapes_initial_map
 from .lmd import MIN_CONSISTENT
-from .mesh import Mesh
+from .mesh import Mesh, as_mesh
 from .refine import MAX_PASSES, POLISH_K, TOP_K, Iteration, RefineResult
 from .shape import K_MAX, Shape
 from .shared_faces import applies as finish_applies
@@ -62,11 +62,7 @@ def _as_mesh(x, k_max: int, name: str) -> Shape | Mesh:
         if x.k_max < k_max:
             raise ValueError(f"{name} was built with k_max={x.k_max} < requested k_max={k_max}")
         return x
-    if isinstance(x, Mesh):
-        return x
-    if isinstance(x, (tuple, list)) and len(x) == 2:
-        return Mesh(*x)
-    raise TypeError(f"{name} must be a hope_rs.Shape, a hope_rs.Mesh or a (vertices, faces) pair")
+    return as_mesh(x, name)
 
 
 def _as_shape(x: Shape | Mesh, k_max: int) -> Shape:
@@ -110,9 +106,9 @@ def match(
     top_k : int
         Candidates kept per vertex in each overlap cost (at least 1).
     polish_k : int or None
-        Hop radius, in [1, k_max], of a final step in which each vertex takes its best-overlapping candidate;
-        ``None`` returns the one-to-one map of the last assignment instead (with
-        ``spectral=False``: the spectral pass is not one-to-one).
+        Hop radius, in [1, k_max], of a final step in which each vertex takes its
+        best-overlapping candidate; ``None`` returns the one-to-one map of the last assignment
+        instead (with ``spectral=False``: the spectral pass is not one-to-one).
     global_step : bool
         Start each pass by re-placing untrusted vertices by their geodesic distances to trusted
         ones (see :func:`hope_rs.refine.global_repair`); ``False`` is the paper's loop.

@@ -22,7 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mesh import Mesh
+from .mesh import Mesh, scale_exponent
+from .orientation import orient_faces
 
 #: Bits per axis of the Morton code (3 x 21 = 63 bits in one uint64).
 MORTON_BITS = 21
@@ -85,9 +86,25 @@ def canonical_faces(faces: np.ndarray, rank: np.ndarray) -> np.ndarray:
     return f[np.lexsort((f[:, 2], f[:, 1], f[:, 0]))]
 
 
-def canonical_mesh(mesh: Mesh) -> tuple[Mesh, np.ndarray, np.ndarray]:
+def canonical_mesh(mesh: Mesh, *, orient: bool = True) -> tuple[Mesh, np.ndarray, np.ndarray]:
     """``mesh`` renumbered by position: (the renumbered mesh, ``order``, ``rank``), where
-    internal vertex ``i`` is ``mesh``'s vertex ``order[i]`` and ``rank`` is the inverse."""
-    order = canonical_order(mesh.vertices)
+    internal vertex ``i`` is ``mesh``'s vertex ``order[i]`` and ``rank`` is the inverse.
+
+    The renumbered mesh is also scaled by ``4**scale_exponent(mesh.vertices)`` (exact; a no-op
+    for meshes of ordinary size, see :func:`hope_rs.mesh.scale_exponent`) and its faces are
+    oriented consistently and outward (:func:`hope_rs.orientation.orient_faces`; ``orient=False``
+    keeps them as given, for meshes derived from an oriented one), so that neither the size of
+    the coordinates nor the winding of the input's faces changes a result.
+    """
+    k = scale_exponent(mesh.vertices)
+    v = np.ldexp(mesh.vertices, 2 * k) if k else mesh.vertices
+    order = canonical_order(v)
     rank = inverse_permutation(order)
-    return Mesh(mesh.vertices[order], canonical_faces(mesh.faces, rank)), order, rank
+    v = v[order]
+    f = canonical_faces(mesh.faces, rank)
+    flip = orient_faces(v, f) if orient else np.zeros(f.shape[0], dtype=bool)
+    if flip.any():
+        f = f.copy()
+        f[flip] = f[flip][:, [0, 2, 1]]  # keeps the smallest vertex first
+        f = f[np.lexsort((f[:, 2], f[:, 1], f[:, 0]))]
+    return Mesh(v, f), order, rank

@@ -11,7 +11,7 @@ from .descriptors import (
     descriptors_as_numbered,
     spectral_basis_of,
 )
-from .mesh import Mesh, unique_edges
+from .mesh import as_mesh, scale_exponent, unique_edges
 from .numbering import canonical_mesh
 from .sites import shot_sites
 
@@ -30,19 +30,24 @@ class Shape:
     refinement works on, use the internal one: internal vertex ``i`` is input vertex
     ``order[i]``, and input vertex ``v`` is internal vertex ``rank[v]``.
 
+    The internal mesh's faces are oriented consistently and outward
+    (:mod:`hope_rs.orientation`), so a mesh whose faces wind the other way is matched like the
+    mesh itself, not like its mirror image; and its coordinates are the input's times
+    ``4**scale_exponent`` (:func:`hope_rs.mesh.scale_exponent`: 0 for meshes of ordinary size),
+    so that coordinates near the limits of double precision match like ordinary ones.
+
     Parameters
     ----------
-    mesh : Mesh or (vertices, faces)
+    mesh : Mesh, (vertices, faces), or an object with ``vertices`` and ``faces`` (trimesh)
     k_max : int, keyword-only
         Largest hop radius the refinement may use.
+    orient : bool, keyword-only
+        Orient the internal mesh's faces (:mod:`hope_rs.orientation`); ``False`` keeps them as
+        given (for meshes derived from an oriented one, such as the multiscale coarse copy).
     """
 
-    def __init__(self, mesh, *, k_max: int = K_MAX):
-        if not isinstance(mesh, Mesh):
-            if isinstance(mesh, (tuple, list)) and len(mesh) == 2:
-                mesh = Mesh(*mesh)
-            else:
-                raise TypeError("Shape needs a hope_rs.Mesh or a (vertices, faces) pair")
+    def __init__(self, mesh, *, k_max: int = K_MAX, orient: bool = True):
+        mesh = as_mesh(mesh)
         if (
             isinstance(k_max, bool)
             or not isinstance(k_max, (int, np.integer))
@@ -51,7 +56,9 @@ class Shape:
             raise ValueError(f"k_max must be an integer in [2, 64], got {k_max!r}")
         self.mesh = mesh
         self.k_max = int(k_max)
-        self.internal, self.order, self.rank = canonical_mesh(mesh)
+        self.internal, self.order, self.rank = canonical_mesh(mesh, orient=orient)
+        # The internal mesh's coordinates are the input's times 4**scale_exponent (exact).
+        self.scale_exponent = scale_exponent(mesh.vertices)
         # From the internal mesh, so that its float sums run in an order that does not depend
         # on the input's numbering either.
         self.scale = self.internal.scale
@@ -120,7 +127,9 @@ class Shape:
             from .multiscale import coarse_mesh
 
             c = coarse_mesh(self.internal)
-            self._coarse = None if c is None else (c, Shape(c.mesh, k_max=self.k_max))
+            # The coarse copy keeps the faces of this oriented mesh as they come: vertex
+            # clustering leaves non-manifold spots that a second orientation would flip.
+            self._coarse = None if c is None else (c, Shape(c.mesh, k_max=self.k_max, orient=False))
         return self._coarse
 
     def spectral_basis(self, k: int) -> tuple[np.ndarray, np.ndarray]:

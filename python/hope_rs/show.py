@@ -19,6 +19,7 @@ import os
 import numpy as np
 
 from ._validate import as_index_map
+from .map_io import read_map
 from .mesh import Mesh
 
 
@@ -136,28 +137,14 @@ def render_pair(
     plt.close(fig)
 
 
-def load_map(path, n_a: int, n_b: int) -> np.ndarray:
-    """Read a map file: one B vertex index (0-based) per line, as ``hope-rs match`` writes,
-    or a ``.npy`` array."""
-    path = os.fspath(path)
-    try:
-        f = np.load(path) if path.endswith(".npy") else np.loadtxt(path, dtype=np.int64, ndmin=1)
-    except (OSError, ValueError) as e:
-        raise ValueError(f"cannot read map {path!r} (one 0-based B index per line): {e}") from None
-    if f.ndim != 1 or f.size != n_a:
-        raise ValueError(
-            f"map {path!r} has {f.size} entries but A has {n_a} vertices; it must list one B "
-            "vertex per vertex of A (did you swap A and B?)"
-        )
-    return as_index_map(f, n_a, n_b, name=f"map {path!r}")
-
-
 def add_parser(sub) -> None:
     """Register ``hope-rs show``."""
     p = sub.add_parser("show", help="render a map as a colour transfer from A to B (PNG)")
     p.add_argument("a", help="source mesh")
     p.add_argument("b", help="target mesh")
-    p.add_argument("map", help="map file: one 0-based B index per line (hope-rs match output)")
+    p.add_argument(
+        "map", help="map file: one 0-based B index per line, or .npy (hope-rs match output)"
+    )
     p.add_argument("--png", required=True, help="output PNG file")
     p.add_argument("--title", help="figure title")
     p.add_argument(
@@ -167,11 +154,20 @@ def add_parser(sub) -> None:
     p.set_defaults(func=cmd_show)
 
 
+def require_matplotlib() -> None:
+    """ValueError with the install command when matplotlib cannot be imported."""
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        raise ValueError("hope-rs show needs matplotlib: pip install matplotlib") from None
+
+
 def cmd_show(args) -> int:
     from .mesh import load_mesh
 
+    require_matplotlib()
     a, b = load_mesh(args.a), load_mesh(args.b)
     render_pair(
-        a, b, load_map(args.map, a.n_vertices, b.n_vertices), args.png, title=args.title, up=args.up
+        a, b, read_map(args.map, a.n_vertices, b.n_vertices), args.png, title=args.title, up=args.up
     )
     return 0

@@ -1,0 +1,209 @@
+"""Map files: write them atomically, read them back with their length and range checked.
+
+A map file lists, for each vertex i of A, the vertex of B matched to it. Two formats, chosen by
+the file's suffix when writing:
+
+- ``.txt``, ``.csv`` or no suffix: text, one 0-based B index per line (what ``hope-rs match``
+  prints), ending with a newline;
+- ``.npy``: a NumPy int64 array (``np.save``).
+
+Reading recognises a NumPy file by its content, whatever its name. Files are written to a
+temporary name in the target folder and renamed into place, so a reader (or a rerun after a
+crash) sees a whole file or none; they get the usual permissions (0666 minus the umask).
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["MAP_SUFFIXES", "atomic_write", "check_writable_folder", "read_map", "write_map"]
+
+#: Map file suffixes and their format: "text" (one index per line) or "npy" (NumPy int64).
+MAP_SUFFIXES = {".txt": "text", ".csv": "text", "": "text", ".npy": "npy"}
+
+#: Prefix of the temporary files :func:`atomic_write` renames into place.
+TEMP_PREFIX = ".hope-rs-"
+
+_NPY_MAGIC = b"\x93NUMPY"
+
+
+def map_format(path: str | os.PathLike) -> str:
+    """The format ``write_map`` uses for ``path``: "text" or "npy"; ValueError for others."""
+    suffix = Path(path).suffix.lower()
+    if suffix not in MAP_SUFFIXES:
+        raise ValueError(
+            f"map file {os.fspath(path)!r}: unknown suffix {suffix!r}; use .txt or .csv (one "
+            "index per line) or .npy (NumPy)"
+        )
+    return MAP_SUFFIXES[suffix]
+
+
+def _umask() -> int:
+    """The process's umask, read without changing it where the system allows (Linux)."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)  # portable fallback: set and restore
+    os.umask(mask)
+    return mask
+
+
+def atomic_write(path: str | os.PathLike, write: Callable[[io.BufferedWriter], None]) -> None:
+    """Write a file through ``write(binary_file)`` so that it appears whole or not at all.
+
+    The data go to a temporary file in the same folder, are flushed to disk, get the mode a
+    plain ``open`` would give (0666 minus the umask; ``mkstemp`` makes 0600) and are renamed
+    over ``path``. On any error the temporary file is removed and ``path`` is left as it was.
+    """
+    path = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    fd, tmp = tempfile.mkstemp(dir=folder, prefix=TEMP_PREFIX, suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            write(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+            os.fchmod(fh.fileno(), 0o666 & ~_umask())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def check_writable_folder(folder: str | os.PathLike, *, create: bool = False) -> Path:
+    """Fail early, with a one-line ValueError naming ``folder``, unless files can be created in
+    it: a probe file is created and removed. With ``create``, a missing folder is made first."""
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise ValueError(f"output {str(folder)!r} exists and is not a folder")
+    if not folder.exists():
+        if not create:
+            raise ValueError(f"output folder {str(folder)!r} does not exist; create it first")
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise ValueError(
+                f"cannot create output folder {str(folder)!r}: {e.strerror or e}"
+            ) from None
+    try:
+        fd, probe = tempfile.mkstemp(dir=folder, prefix=TEMP_PREFIX, suffix=".probe")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as e:
+        raise ValueError(
+            f"cannot write to output folder {str(folder)!r}: {e.strerror or e}"
+        ) from None
+    return folder
+
+
+def write_map(path: str | os.PathLike, mapping) -> None:
+    """Write a map file atomically, in the format its suffix names.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        ``.txt``/``.csv``/no suffix: one 0-based B index per line; ``.npy``: NumPy int64.
+        Other suffixes raise ValueError (before anything is written).
+    mapping : (n_a,) array_like of int
+        ``mapping[i]`` is the vertex of B matched to vertex i of A.
+    """
+    fmt = map_format(path)
+    arr = np.asarray(mapping)
+    if arr.ndim != 1 or (arr.size and not np.issubdtype(arr.dtype, np.integer)):
+        raise ValueError(f"a map must be a 1-D integer array, got {arr.dtype} of shape {arr.shape}")
+    arr = arr.astype(np.int64, copy=False)
+    if fmt == "npy":
+        atomic_write(path, lambda fh: np.save(fh, arr, allow_pickle=False))
+    else:
+        text = "".join(f"{x}\n" for x in arr.tolist())
+        atomic_write(path, lambda fh: fh.write(text.encode("ascii")))
+
+
+def read_map(
+    path: str | os.PathLike, n: int | None = None, n_target: int | None = None
+) -> np.ndarray:
+    """Read a map file written by :func:`write_map` (or ``hope-rs match``), checked.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        A NumPy ``.npy`` file (recognised by its content) or text, one 0-based index per line.
+    n : int, optional
+        Expected length (vertices of A).
+    n_target : int, optional
+        Indices must lie in ``[0, n_target)`` (vertices of B).
+
+    Returns
+    -------
+    (n,) int64 ndarray
+
+    Raises
+    ------
+    FileNotFoundError
+        No such file.
+    ValueError
+        A one-line message naming the file: unreadable, not integers, wrong length or range.
+    """
+    name = os.fspath(path)
+    try:
+        data = Path(path).read_bytes()
+    except FileNotFoundError:
+        raise FileNotFoundError(f"no such map file: {name!r}") from None
+    except OSError as e:
+        raise ValueError(f"cannot read map {name!r}: {e.strerror or e}") from None
+    if data.startswith(_NPY_MAGIC):
+        try:
+            arr = np.load(io.BytesIO(data), allow_pickle=False)
+        except Exception as e:  # noqa: BLE001 - any failure to parse is a damaged file
+            raise ValueError(f"map {name!r} is a damaged NumPy file ({e})") from None
+        if not isinstance(arr, np.ndarray) or arr.ndim != 1:
+            raise ValueError(f"map {name!r} must hold a 1-D array, got shape {np.shape(arr)}")
+        if arr.size and not np.issubdtype(arr.dtype, np.integer):
+            raise ValueError(f"map {name!r} must hold integers, got dtype {arr.dtype}")
+        arr = arr.astype(np.int64)
+    else:
+        try:
+            tokens = data.decode("ascii").split()
+            arr = np.array([int(t) for t in tokens], dtype=np.int64)
+        except (UnicodeDecodeError, ValueError, OverflowError):
+            raise ValueError(
+                f"map {name!r} is not a map file (expected one 0-based integer index per line, "
+                "or a .npy array)"
+            ) from None
+    if n is not None and arr.size != n:
+        raise ValueError(
+            f"map {name!r} has {arr.size} entries but A has {n} vertices; it must list one B "
+            "vertex per vertex of A (did you swap A and B?)"
+        )
+    if arr.size and arr.min() < 0:
+        raise ValueError(f"map {name!r} holds a negative index ({arr.min()}); indices are 0-based")
+    if arr.size and n_target is not None and arr.max() >= n_target:
+        raise ValueError(
+            f"map {name!r} holds index {arr.max()} but B has {n_target} vertices (0-based "
+            "indices must be below the vertex count)"
+        )
+    return arr
+
+
+def text_map_is_complete(path: str | os.PathLike) -> bool:
+    """A text map ends with a newline (a file cut short inside its last number does not); NumPy
+    files check their own length."""
+    with open(path, "rb") as fh:
+        if fh.read(len(_NPY_MAGIC)) == _NPY_MAGIC:
+            return True
+        fh.seek(0, os.SEEK_END)
+        if fh.tell() == 0:
+            return False
+        fh.seek(-1, os.SEEK_END)
+        return fh.read(1) == b"\n"

@@ -1,0 +1,160 @@
+"""``hope-rs batch`` killed with SIGKILL: the maps written are whole, no worker outlives it, and
+a rerun finishes the rest. Each batch runs as a subprocess whose environment carries a tag, so
+every process it starts (pool workers, Ray's processes) can be found in /proc afterwards."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+import uuid
+from pathlib import Path
+
+import pytest
+from meshes import bumpy_sphere
+from test_mesh_and_cli import write_off
+
+import hope_rs
+from hope_rs.map_io import read_map
+
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc"),
+]
+
+N, SHAPES = 1000, 4
+TAG = "HOPE_RS_TEST_BATCH_TAG"
+
+
+@pytest.fixture(scope="module")
+def pairs_file(tmp_path_factory):
+    d = tmp_path_factory.mktemp("kill")
+    for s in range(SHAPES):
+        write_off(d / f"s{s}.off", *bumpy_sphere(N, 20 + s))
+    lines = [f"s{i} s{j}" for i in range(SHAPES) for j in range(i + 1, SHAPES)]
+    (d / "pairs.txt").write_text("\n".join(lines) + "\n")
+    return d / "pairs.txt", len(lines)
+
+
+def tagged(tag: str) -> list[str]:
+    """Processes whose environment carries ``tag``: the batch and everything it started."""
+    found = []
+    for p in Path("/proc").iterdir():
+        if not p.name.isdigit():
+            continue
+        try:
+            env = (p / "environ").read_bytes()
+            if f"{TAG}={tag}".encode() in env.split(b"\0"):
+                cmd = (p / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+                if (p / "stat").read_text().split(")")[-1].split()[0] != "Z":  # not a zombie
+                    found.append(f"{p.name} {cmd[:100]}")
+        except OSError:  # ended meanwhile, or not ours
+            continue
+    return found
+
+
+def batch_command(pairs, out, cache, jobs, extra=()):
+    return [sys.executable, "-m", "hope_rs.cli", "batch", str(pairs), "--ext", ".off",
+            "--out", str(out), "-j", str(jobs), "-q", "--cache", str(cache), *extra]  # fmt: skip
+
+
+def environment(tag=None):
+    package_root = str(Path(hope_rs.__file__).resolve().parents[1])
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([package_root, os.environ.get(
+        "PYTHONPATH", "")])}  # fmt: skip
+    if tag:
+        env[TAG] = tag
+    return env
+
+
+def kill_after_first_map(cmd, out: Path, tag: str, timeout: float = 600) -> list[Path]:
+    """Start ``cmd``, SIGKILL it as soon as a map file appears; the maps present after."""
+    proc = subprocess.Popen(
+        cmd, env=environment(tag), stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    t0 = time.monotonic()
+    try:
+        while not list(out.glob("*.txt")):
+            if proc.poll() is not None:
+                pytest.fail(f"the batch ended before writing a map: {proc.communicate()}")
+            if time.monotonic() - t0 > timeout:
+                pytest.fail("no map file appeared")
+            time.sleep(0.02)
+        workers = [w for w in tagged(tag) if not w.startswith(f"{proc.pid} ")]
+        os.kill(proc.pid, signal.SIGKILL)
+    finally:
+        proc.kill()
+        proc.communicate()
+    assert workers or "-j 1" in " ".join(cmd), "found none of the batch's workers to watch"
+    return sorted(out.glob("*.txt"))
+
+
+def assert_no_survivors(tag: str, grace: float) -> None:
+    t0 = time.monotonic()
+    while tagged(tag) and time.monotonic() - t0 < grace:
+        time.sleep(0.2)
+    assert tagged(tag) == [], "processes of the killed batch are still alive"
+
+
+def assert_whole(maps) -> None:
+    for m in maps:
+        assert read_map(m, N, N).shape == (N,)
+        assert m.read_bytes().endswith(b"\n")
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_sigkill_keeps_the_finished_maps_and_leaves_no_worker(pairs_file, tmp_path, jobs):
+    pairs, total = pairs_file
+    out, cache, tag = tmp_path / "out", tmp_path / "cache", uuid.uuid4().hex
+    cmd = batch_command(pairs, out, cache, jobs)
+    done = kill_after_first_map(cmd, out, tag)
+    assert 1 <= len(done) < total  # maps appear one by one, not all at the end
+    assert_whole(done)
+    assert_no_survivors(tag, grace=10)
+    rerun = subprocess.run(
+        cmd, check=False, env=environment(), capture_output=True, text=True, timeout=900
+    )
+    assert rerun.returncode == 0, rerun.stderr
+    k = len(done)
+    assert f"{total} pairs: {total - k} matched, {k} skipped, 0 failed" in rerun.stdout
+    assert_whole(sorted(out.glob("*.txt")))
+    assert len(list(out.glob("*.txt"))) == total
+
+
+def test_sigkill_of_a_ray_driver_leaves_no_ray_process(pairs_file, tmp_path):
+    pytest.importorskip("ray")
+    pairs, _ = pairs_file
+    out, tag = tmp_path / "out", uuid.uuid4().hex
+    cmd = batch_command(pairs, out, tmp_path / "cache", 1, ["--backend", "ray"])
+    cmd.remove("-j")
+    cmd.remove("1")
+    done = kill_after_first_map(cmd, out, tag)
+    assert_whole(done)
+    # Ray's fate sharing ends the instance it started; its agents poll for the lost raylet,
+    # slowly when the machine is busy.
+    assert_no_survivors(tag, grace=240)
+
+
+def test_ctrl_c_of_a_pool_batch_prints_the_summary_and_ends_its_workers(pairs_file, tmp_path):
+    pairs, total = pairs_file
+    out, tag = tmp_path / "out", uuid.uuid4().hex
+    cmd = batch_command(pairs, out, tmp_path / "cache", 2)
+    # A terminal's Ctrl-C sends SIGINT to the whole foreground process group.
+    proc = subprocess.Popen(
+        cmd, env=environment(tag), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        start_new_session=True,
+    )  # fmt: skip
+    try:
+        while not list(out.glob("*.txt")) and proc.poll() is None:
+            time.sleep(0.02)
+        os.killpg(proc.pid, signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=60)  # not after the running pairs finish
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, stderr
+    assert "Traceback" not in stderr and "rerun the same command" in stderr
+    done = sorted(out.glob("*.txt"))
+    assert f"{total} pairs: {len(done)} matched, 0 skipped, 0 failed" in stdout
+    assert f"{total - len(done)} not done (interrupted)" in stdout
+    assert_whole(done)
+    assert_no_survivors(tag, grace=5)

@@ -1,0 +1,176 @@
+"""The command line's exit statuses, one-line errors, early output checks and help texts."""
+
+import os
+import re
+import stat
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from meshes import bumpy_sphere
+from test_map_io import unwritable_folder
+from test_mesh_and_cli import write_off
+
+import hope_rs
+import hope_rs.cli
+import hope_rs.matching
+import hope_rs.mesh
+from hope_rs.batch_cli import ENVIRONMENT, EXIT_STATUS
+from hope_rs.cli import build_parser, main
+from hope_rs.map_io import read_map
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+N = 300
+
+
+@pytest.fixture(scope="module")
+def meshes(tmp_path_factory):
+    d = tmp_path_factory.mktemp("cli")
+    for s in range(2):
+        write_off(d / f"s{s}.off", *bumpy_sphere(N, s))
+    return str(d / "s0.off"), str(d / "s1.off")
+
+
+def one_line_error(err: str, status: str = "error") -> str:
+    assert "Traceback" not in err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"hope-rs: {status}:"), err
+    return lines[0]
+
+
+def print_help(*args) -> None:
+    with pytest.raises(SystemExit) as e:
+        build_parser().parse_args([*args, "--help"])
+    assert e.value.code == 0
+
+
+def test_help_documents_exit_statuses_and_the_environment(capsys):
+    for args in ([], ["batch"], ["match"]):
+        print_help(*args)
+        out = capsys.readouterr().out
+        for code in (0, 1, 2, 130):
+            assert re.search(rf"^\s+{code}\s+\S", out, re.MULTILINE), (args, code)
+        for name in ENVIRONMENT:
+            assert re.search(rf"^\s+{name}\s+\S", out, re.MULTILINE), (args, name)
+    assert set(EXIT_STATUS) == {0, 1, 2, 130}
+
+
+def test_every_environment_variable_the_readme_names_is_in_the_help():
+    text = README.read_text()
+    named = set(
+        re.findall(r"\b(HOPE_RS_[A-Z_]+|HOPE_NO_SIMD|RAYON_[A-Z_]+|XDG_CACHE_HOME)\b", text)
+    )
+    assert "HOPE_RS_CACHE" in named and "RAYON_NUM_THREADS" in named
+    assert named <= set(ENVIRONMENT), named - set(ENVIRONMENT)
+
+
+def test_output_checks_come_before_any_work(meshes, tmp_path, monkeypatch, capsys):
+    def no_loading(*args, **kwargs):
+        raise AssertionError("the meshes were loaded before the output was checked")
+
+    monkeypatch.setattr(hope_rs.mesh, "load_mesh", no_loading)
+    a, b = meshes
+    ro = unwritable_folder(tmp_path)
+    cases = [
+        (
+            tmp_path / "missing" / "map.txt",
+            f"output folder '{tmp_path / 'missing'}' does not exist",
+        ),
+        (Path(ro) / "map.txt", f"cannot write to output folder '{ro}'"),
+        (tmp_path / "map.npz", "unknown suffix '.npz'"),
+        (tmp_path, "is a folder"),
+    ]
+    for out, message in cases:
+        assert main(["match", a, b, "-o", str(out), "-q"]) == 2
+        line = one_line_error(capsys.readouterr().err)
+        assert message in line and ".hope-rs-" not in line
+
+
+def test_match_writes_npy_that_show_reads_and_usual_permissions(meshes, tmp_path, capsys):
+    pytest.importorskip("matplotlib")
+    a, b = meshes
+    want = hope_rs.match(hope_rs.load_mesh(a), hope_rs.load_mesh(b)).map
+    old = os.umask(0o027)
+    try:
+        for name in ("map.npy", "map.txt"):
+            assert main(["match", a, b, "-o", str(tmp_path / name), "-q"]) == 0
+            assert stat.S_IMODE((tmp_path / name).stat().st_mode) == 0o640
+    finally:
+        os.umask(old)
+    np.testing.assert_array_equal(np.load(tmp_path / "map.npy"), want)
+    np.testing.assert_array_equal(read_map(tmp_path / "map.txt", N, N), want)
+    png = tmp_path / "m.png"
+    assert main(["show", a, b, str(tmp_path / "map.npy"), "--png", str(png)]) == 0
+    assert png.read_bytes()[:4] == b"\x89PNG"
+    (tmp_path / "short.txt").write_text("1\n2\n")
+    assert main(["show", a, b, str(tmp_path / "short.txt"), "--png", str(png)]) == 2
+    assert "short.txt' has 2 entries but A has 300" in one_line_error(capsys.readouterr().err)
+
+
+def test_show_without_matplotlib_prints_the_install_hint(meshes, tmp_path):
+    a, b = meshes
+    (tmp_path / "m.txt").write_text("0\n" * N)
+    code = (
+        "import sys; sys.modules['matplotlib'] = None\n"
+        "from hope_rs.cli import main\n"
+        f"sys.exit(main(['show', {a!r}, {b!r}, {str(tmp_path / 'm.txt')!r}, "
+        f"'--png', {str(tmp_path / 'x.png')!r}]))"
+    )
+    package_root = str(Path(hope_rs.__file__).resolve().parents[1])
+    env = {**os.environ, "PYTHONPATH": package_root}
+    res = subprocess.run(
+        [sys.executable, "-c", code], check=False, env=env, capture_output=True, text=True
+    )
+    assert res.returncode == 2
+    assert res.stderr == "hope-rs: error: hope-rs show needs matplotlib: pip install matplotlib\n"
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_unexpected_errors_runtime_failures_and_ctrl_c(meshes, tmp_path, monkeypatch, capsys):
+    a, b = meshes
+
+    def boom(*args, **kwargs):
+        raise RuntimeError("boom")
+
+    monkeypatch.setattr(hope_rs.matching, "match", boom)
+    monkeypatch.delenv("HOPE_RS_DEBUG", raising=False)
+    assert main(["match", a, b, "-q"]) == 1
+    line = one_line_error(capsys.readouterr().err, "internal error")
+    assert "RuntimeError: boom" in line and "HOPE_RS_DEBUG=1" in line
+    monkeypatch.setenv("HOPE_RS_DEBUG", "1")
+    assert main(["match", a, b, "-q"]) == 1
+    err = capsys.readouterr().err
+    assert "Traceback" in err and "RuntimeError: boom" in err
+    monkeypatch.delenv("HOPE_RS_DEBUG")
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(hope_rs.matching, "match", interrupted)
+    assert main(["match", a, b, "-q"]) == 130
+    assert capsys.readouterr().err == "hope-rs: interrupted\n"
+    monkeypatch.undo()
+
+    def disk_full(path, mapping):
+        raise OSError(28, "No space left on device", str(path))
+
+    monkeypatch.setattr(hope_rs.cli, "write_map", disk_full)
+    assert main(["match", a, b, "-q", "-o", str(tmp_path / "m.txt")]) == 1
+    assert "No space left on device" in one_line_error(capsys.readouterr().err)
+
+
+def test_usage_errors_exit_2(meshes, tmp_path, capsys):
+    a, _ = meshes
+    with pytest.raises(SystemExit) as e:
+        main(["match", a])  # argparse: a missing argument
+    assert e.value.code == 2
+    capsys.readouterr()
+    pairs = tmp_path / "p.txt"
+    pairs.write_text(f"{a} {a} {a}\n")
+    assert main(["batch", str(pairs), "--out", str(tmp_path / "o")]) == 2
+    assert "p.txt:1: expected two mesh paths" in one_line_error(capsys.readouterr().err)
+    pairs.write_text(f"{a} {a}\n")
+    assert main(["batch", str(pairs), "--out", str(tmp_path / "o"), "-j", "0"]) == 2
+    assert "--jobs must be a positive integer" in one_line_error(capsys.readouterr().err)

@@ -1,0 +1,141 @@
+"""Map files: formats by suffix, atomic writes with the usual permissions, checked reads."""
+
+import os
+import stat
+
+import numpy as np
+import pytest
+
+import hope_rs
+from hope_rs.map_io import atomic_write, check_writable_folder, read_map, write_map
+
+MAP = np.array([3, 0, 2, 2, 1], dtype=np.int64)
+
+
+def unwritable_folder(tmp_path):
+    """A folder this process cannot create files in (root ignores permission bits; /sys
+    refuses new files even to root)."""
+    if os.geteuid() != 0:
+        d = tmp_path / "ro"
+        d.mkdir()
+        d.chmod(0o555)
+        return d
+    if os.path.isdir("/sys") and _refuses("/sys"):
+        return "/sys"
+    pytest.skip("no folder this process cannot write to")
+
+
+def _refuses(folder) -> bool:
+    try:
+        check_writable_folder(folder)
+    except ValueError:
+        return True
+    return False
+
+
+@pytest.mark.parametrize("name", ["m.txt", "m.csv", "m", "m.npy", "M.NPY"])
+def test_every_written_format_reads_back(tmp_path, name):
+    path = tmp_path / name
+    write_map(path, MAP)
+    got = read_map(path, n=5, n_target=4)
+    assert got.dtype == np.int64
+    np.testing.assert_array_equal(got, MAP)
+    if name.lower().endswith(".npy"):  # a real NumPy file, not text under a .npy name
+        np.testing.assert_array_equal(np.load(path), MAP)
+        assert np.load(path).dtype == np.int64
+    else:
+        assert path.read_text() == "3\n0\n2\n2\n1\n"
+    assert hope_rs.read_map is read_map and hope_rs.write_map is write_map
+
+
+def test_unknown_suffix_and_bad_arrays_write_nothing(tmp_path):
+    with pytest.raises(ValueError, match=r"m\.npz'.*unknown suffix '\.npz'.*\.npy"):
+        write_map(tmp_path / "m.npz", MAP)
+    with pytest.raises(ValueError, match="1-D integer array"):
+        write_map(tmp_path / "m.txt", MAP.astype(float))
+    with pytest.raises(ValueError, match="1-D integer array"):
+        write_map(tmp_path / "m.txt", MAP.reshape(1, -1))
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_text_map_named_npy_is_still_read(tmp_path):
+    path = tmp_path / "old.npy"  # what `hope-rs match -o x.npy` used to write
+    path.write_text("3\n0\n2\n2\n1\n")
+    np.testing.assert_array_equal(read_map(path, 5, 4), MAP)
+
+
+@pytest.mark.parametrize(
+    "content, match",
+    [
+        (b"", "has 0 entries but A has 5"),
+        (b"3\n0\n2\n", "has 3 entries but A has 5"),
+        (b"\x00\xff\x10garbage", "is not a map file"),
+        (b"3\n0\nx\n2\n1\n", "is not a map file"),
+        (b"3\n0\n2.5\n2\n1\n", "is not a map file"),
+        (b"3\n0\n2\n2\n4\n", "holds index 4 but B has 4 vertices"),
+        (b"3\n0\n-2\n2\n1\n", "negative index"),
+    ],
+)
+def test_bad_text_maps_get_one_line_errors_naming_the_file(tmp_path, content, match):
+    path = tmp_path / "bad.txt"
+    path.write_bytes(content)
+    with pytest.raises(ValueError, match=match) as err:
+        read_map(path, n=5, n_target=4)
+    assert str(path) in str(err.value) and "\n" not in str(err.value)
+
+
+def test_bad_npy_maps(tmp_path):
+    path = tmp_path / "m.npy"
+    np.save(path, MAP)
+    path.write_bytes(path.read_bytes()[:-8])  # cut short
+    with pytest.raises(ValueError, match="damaged NumPy file"):
+        read_map(path, 5)
+    np.save(path, MAP.astype(float))
+    with pytest.raises(ValueError, match="must hold integers"):
+        read_map(path, 5)
+    np.save(path, MAP.reshape(5, 1))
+    with pytest.raises(ValueError, match="1-D array"):
+        read_map(path, 5)
+    np.save(path, np.array([object()] * 5), allow_pickle=True)
+    with pytest.raises(ValueError, match="damaged NumPy file"):  # pickles are refused
+        read_map(path, 5)
+    with pytest.raises(FileNotFoundError, match="no such map file"):
+        read_map(tmp_path / "missing.txt")
+
+
+@pytest.mark.parametrize("mask", [0o022, 0o077, 0o002])
+def test_files_get_the_usual_permissions(tmp_path, mask):
+    old = os.umask(mask)
+    try:
+        for name in ("m.txt", "m.npy"):
+            write_map(tmp_path / name, MAP)
+            assert stat.S_IMODE((tmp_path / name).stat().st_mode) == 0o666 & ~mask
+    finally:
+        os.umask(old)
+
+
+def test_a_failed_write_leaves_the_old_file_and_no_temporary(tmp_path):
+    path = tmp_path / "m.txt"
+    write_map(path, MAP)
+
+    def half_then_fail(fh):
+        fh.write(b"9\n9\n")
+        raise OSError("disk full")
+
+    with pytest.raises(OSError, match="disk full"):
+        atomic_write(path, half_then_fail)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.txt"]
+    np.testing.assert_array_equal(read_map(path, 5, 4), MAP)
+
+
+def test_check_writable_folder(tmp_path):
+    with pytest.raises(ValueError, match=r"output folder '.*missing' does not exist"):
+        check_writable_folder(tmp_path / "missing")
+    assert check_writable_folder(tmp_path / "new" / "sub", create=True).is_dir()
+    (tmp_path / "file").write_text("")
+    with pytest.raises(ValueError, match="exists and is not a folder"):
+        check_writable_folder(tmp_path / "file", create=True)
+    ro = unwritable_folder(tmp_path)
+    with pytest.raises(ValueError, match=f"cannot write to output folder '{ro}'"):
+        check_writable_folder(ro)
+    assert list((tmp_path / "new" / "sub").iterdir()) == []  # the probe is removed
