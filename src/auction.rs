@@ -2052,7 +2052,8 @@ mod tests {
         bad(vec![0, 2], vec![1, 1], vec![1, 2], 1, 2); // duplicate
         bad(vec![0, 3], vec![2, 0, 2], vec![1, 2, 3], 1, 3); // unsorted duplicate
         bad(vec![0, 1], vec![0], vec![1], usize::MAX, 2); // absurd n_rows
-                                                          // Columns far beyond the entries, with a hint: nothing is sized by the column count.
+
+        // Columns far beyond the entries, with a hint: nothing is sized by the column count.
         for nc in [usize::MAX, usize::MAX / 64, 1 << 40] {
             let c = Csr {
                 n_rows: 2,
