@@ -42,6 +42,7 @@ WHEEL_REQUIRED = (
     "hope_rs/_core.pyi",
     "hope_rs/py.typed",
     "hope_rs/data/faust_012_018.npz",
+    "hope_rs/data/faust_r_000_001.npz",
 )
 
 

@@ -1,5 +1,6 @@
 """Background work of ``match`` (eigenbases, early ZoomOut) ends on every exit path."""
 
+import io
 import os
 import select
 import signal
@@ -15,7 +16,7 @@ import scipy.sparse.linalg as sla
 from threadpoolctl import threadpool_info
 
 import hope_rs
-from hope_rs import spectral
+from hope_rs import matching, spectral
 from hope_rs._cancel import Cancelled
 from hope_rs.demo import demo_pair
 from hope_rs.descriptors import (
@@ -24,6 +25,7 @@ from hope_rs.descriptors import (
     single_threaded_blas,
 )
 from hope_rs.numbering import canonical_mesh
+from hope_rs.progress import ProgressBar
 
 PYTHON_DIR = Path(hope_rs.__file__).resolve().parents[1]
 
@@ -61,6 +63,19 @@ def test_a_raising_callback_leaves_no_thread_running(pair, exc):
     assert seen == [["hope_rs-eigenbases"]], "the scenario needs the solve still running"
     assert ours() == []
     assert blas_threads() == blas  # threadpoolctl's limits restored too
+
+
+def test_a_raising_callback_ends_the_progress_line(pair, monkeypatch):
+    stream = io.StringIO()
+    monkeypatch.setattr(matching, "ProgressBar", lambda: ProgressBar(stream, live=True))
+
+    def callback(it):
+        raise Stop("stop here")
+
+    with pytest.raises(Stop):
+        hope_rs.match(*pair, init=np.arange(pair[0].n_vertices), callback=callback, progress=True)
+    assert stream.getvalue().startswith("\rhope_rs") and stream.getvalue().endswith("\n")
+    assert ours() == []
 
 
 def test_an_error_after_early_zoomout_started_stops_it(pair, monkeypatch):
@@ -147,7 +162,7 @@ def test_ctrl_c_in_the_cli_exits_130_at_once(pair, tmp_path):
         return bool(chunk)
 
     try:
-        while b"refining pass" not in err:  # refinement has started
+        while b"hope_rs refine" not in err:  # refinement has started
             assert read(120), err.decode(errors="replace")
         t0 = time.monotonic()
         p.send_signal(signal.SIGINT)
@@ -180,7 +195,7 @@ def test_a_settled_map_does_not_wait_for_the_bases(pair, monkeypatch):
     monkeypatch.setattr(spectral, "BasisPrefetch", Recorded)
     a, b = (hope_rs.Shape(m) for m in pair)
     res = hope_rs.match(a, b, init=np.arange(a.n_vertices))
-    assert res.hope_map is None and "spectral" not in res.timings  # settled: no pass after
+    assert res.stage("spectral").ran is False  # settled: no spectral pass follows
     np.testing.assert_array_equal(res.map, np.arange(a.n_vertices))
     assert len(made) == 1 and made[0].stop.is_set()
     assert ours() == []

@@ -118,12 +118,3 @@ def test_cli_errors_exit_2_and_write_nothing(tmp_path, capsys):
         err = capsys.readouterr().err
         assert err.startswith("hope-rs: error:") and "Traceback" not in err
     assert list(tmp_path.iterdir()) == [bad]
-
-
-def test_demo_reports_accuracy():
-    from hope_rs.demo import run_demo
-
-    report = run_demo(verbose=False)
-    assert report["hope"]["exact"] >= 0.95
-    assert report["hope"]["mean"] <= report["initial_map"]["mean"]
-    assert report["final"]["exact"] >= 0.95

@@ -74,6 +74,8 @@ BAD = [
     ({"multiscale": 1}, TypeError, r"multiscale must be True or False"),
     ({"global_step": None}, TypeError, r"global_step must be True or False"),
     ({"shared_faces": [True]}, TypeError, r"shared_faces must be True or False"),
+    ({"progress": "yes"}, TypeError, r"progress must be None, True, False or callable.*got str"),
+    ({"progress": 1}, TypeError, r"progress must be None, True, False or callable.*got int"),
 ]
 
 
@@ -92,6 +94,9 @@ def test_good_options_pass_the_checks(pair, no_shapes):
         {"schedule": (8, 4, 1), "max_passes": 1, "min_consistent": 0, "k_max": 8},
         {"min_consistent": np.float32(1.0), "spectral": np.bool_(False), "callback": print},
         {"init": np.arange(N, dtype=np.int32), "k_max": 2, "polish_k": 2},
+        {"progress": True},
+        {"progress": False, "callback": None},
+        {"progress": lambda event: None},
     ]:
         with pytest.raises(AssertionError, match="built a Shape"):
             hope_rs.match(*pair, **options)

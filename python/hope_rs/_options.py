@@ -34,6 +34,7 @@ def check_options(
     spectral,
     shared_faces,
     callback,
+    progress=None,
 ) -> None:
     """Raise ``TypeError`` (wrong kind of value) or ``ValueError`` (out of range) for the first
     bad option of :func:`hope_rs.match`; the values themselves are left as given. An ``init``
@@ -67,6 +68,11 @@ def check_options(
         raise TypeError(
             "callback must be None or callable (it is called with each refinement Iteration), "
             f"got {type(callback).__name__}"
+        )
+    if not (progress is None or isinstance(progress, (bool, np.bool_)) or callable(progress)):
+        raise TypeError(
+            "progress must be None, True, False or callable (it is called with each "
+            f"ProgressEvent), got {type(progress).__name__}"
         )
 
 

@@ -302,14 +302,37 @@ def _render_extremes(name, shown, method, ups, out: Path) -> None:
         )  # fmt: skip
 
 
+def methods_help() -> str:
+    """The method list of ``hope-rs bench --help``: one line per entry of
+    :data:`hope_rs.methods.METHODS`, ablations marked."""
+    width = max(map(len, METHODS)) + 2
+    lines = [
+        f"  {name:<{width}}{'ablation: ' if name in ABLATIONS else ''}{what}"
+        for name, (what, _) in METHODS.items()
+    ]
+    return "methods (--methods, comma-separated, or 'all'):\n" + "\n".join(lines)
+
+
+def methods_markdown() -> str:
+    """The same list as a Markdown table (for the README), from the same registry."""
+    rows = [
+        f"| `{name}` | {'ablation: ' if name in ABLATIONS else ''}{what} |"
+        for name, (what, _) in METHODS.items()
+    ]
+    return "| method | what |\n|---|---|\n" + "\n".join(rows) + "\n"
+
+
 def add_parser(sub) -> None:
     """Register ``hope-rs bench``."""
+    import argparse
+
     p = sub.add_parser(
         "bench",
         help="score and time methods on every pair of a folder of data sets",
         description="Runs every method on every pair and writes SET.csv, SET.md, SET_curves.png, "
-        "SET_best/worst.png and summary.md. Methods: "
-        + "; ".join(f"{k}: {v[0]}" for k, v in METHODS.items()),
+        "SET_best/worst.png and summary.md.",
+        epilog=methods_help(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("data_dir", help="a data-set folder, or a folder of data-set folders")
     p.add_argument("--out", required=True, help="results folder (created)")

@@ -6,45 +6,15 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import os
 import sys
-import time
 import traceback
 import warnings
 
 from . import __version__
 from .batch_cli import add_batch_parser, environment_help
 from .map_io import check_writable_folder, map_format, write_map
-
-
-class Progress:
-    """A one-line progress report on stderr, rewritten after every refinement step.
-
-    The number of passes depends on convergence, so it shows steps done, the current pass's
-    position in the k schedule and the elapsed time rather than a fixed-length bar.
-    """
-
-    def __init__(self, steps_per_pass: int, *, enabled: bool):
-        self.per_pass, self.done, self.enabled = steps_per_pass, 0, enabled
-        self.t0 = time.perf_counter()
-
-    def step(self, it) -> None:
-        self.done += 1
-        if not self.enabled:
-            return
-        n_pass, in_pass = divmod(self.done - 1, self.per_pass)
-        width = 16
-        fill = int(width * (in_pass + 1) / self.per_pass)
-        sys.stderr.write(
-            f"\rrefining pass {n_pass + 1} [{'#' * fill}{'.' * (width - fill)}] k={it.k} "
-            f"witnesses {100 * it.witness_fraction:4.1f}% changed {it.changed:6d} "
-            f"{time.perf_counter() - self.t0:6.1f}s"
-        )
-        sys.stderr.flush()
-
-    def close(self) -> None:
-        if self.enabled and self.done:
-            sys.stderr.write("\n")
 
 
 def _summary(res) -> dict:
@@ -56,10 +26,13 @@ def _summary(res) -> dict:
                 "witness_fraction": h.witness_fraction,
                 "changed": h.changed,
                 "seconds": h.seconds,
+                "pass": h.n_pass,
+                "polish": h.polish,
             }
             for h in res.history
         ],
         "timings": res.timings,
+        "stages": [vars(s) for s in res.stages],
     }
 
 
@@ -70,7 +43,7 @@ HINT_VERTICES = 100_000
 def cmd_match(args) -> int:
     from .matching import match
     from .mesh import load_mesh
-    from .refine import default_schedule
+    from .progress import ProgressBar
 
     if args.output:  # before any work: a known suffix, a folder we can write to
         if os.path.isdir(args.output):
@@ -84,18 +57,20 @@ def cmd_match(args) -> int:
             "error (see the README)",
             file=sys.stderr,
         )
-    # One global repair step (k = 0) starts every pass.
-    progress = Progress(
-        len(default_schedule(args.k_max)) + 1, enabled=not args.quiet and sys.stderr.isatty()
-    )
+    # The bar on a terminal; with -v the log says the same, one line per stage.
+    bar = ProgressBar()
+    show_bar = bar.live and not args.quiet and not args.verbose
     try:
         res = match(
             a, b, init=args.init, k_max=args.k_max, multiscale=args.multiscale,
             spectral=not args.no_spectral, shared_faces=not args.no_shared_faces,
-            callback=progress.step,
+            progress=bar if show_bar else None,
         )  # fmt: skip
     finally:
-        progress.close()
+        bar.close()
+    coarse = next((s for s in res.stages if s.name == "coarse"), None)
+    if coarse is not None and not coarse.ran and not args.quiet and not args.verbose:
+        print(f"hope-rs: note: --multiscale: {coarse.reason}", file=sys.stderr)
     if args.output:
         write_map(args.output, res.map)
     elif not args.json:
@@ -123,6 +98,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--version", action="version", version=f"hope-rs {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
+    p.add_argument(
+        "-v", "--verbose", action="count", default=0,
+        help="log each stage with its time and why a stage was skipped (-vv: every step) on stderr",
+    )  # fmt: skip
     m = sub.add_parser(
         "match",
         help="match mesh A to mesh B; writes one B vertex index per line",
@@ -155,6 +134,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     m.add_argument("--json", action="store_true", help="print timings and a summary as JSON")
     m.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    m.add_argument(
+        "-v", "--verbose", action="count", default=argparse.SUPPRESS,
+        help="as hope-rs -v: log each stage (-vv: every step) instead of the bar",
+    )  # fmt: skip
     m.set_defaults(func=cmd_match)
     d = sub.add_parser(
         "demo", help="match the bundled FAUST pair and score it against ground truth"
@@ -185,6 +168,7 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     debug = os.environ.get("HOPE_RS_DEBUG", "") not in ("", "0")
     formatwarning, warnings.formatwarning = warnings.formatwarning, _one_line_warning
+    handler = _log_to_stderr(args.verbose)
     try:
         return args.func(args)
     except KeyboardInterrupt:
@@ -211,6 +195,24 @@ def main(argv=None) -> int:
         return 1
     finally:
         warnings.formatwarning = formatwarning
+        if handler is not None:
+            logger = logging.getLogger("hope_rs")
+            logger.removeHandler(handler)
+            logger.setLevel(handler.previous_level)
+
+
+def _log_to_stderr(verbose: int) -> logging.Handler | None:
+    """With -v, the package logger's INFO lines (one per stage) on stderr; -vv adds DEBUG
+    (one per refinement step). Returns the handler, to remove when the command ends."""
+    if not verbose:
+        return None
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("hope-rs: %(message)s"))
+    logger = logging.getLogger("hope_rs")
+    handler.previous_level = logger.level
+    logger.setLevel(logging.INFO if verbose == 1 else logging.DEBUG)
+    logger.addHandler(handler)
+    return handler
 
 
 if __name__ == "__main__":

@@ -14,9 +14,10 @@ flattering any of them.
     initial map as HOPE: the map is converted to a 20 x 20 functional map and zoomed out in
     steps of 5 to 100 eigenfunctions (pyFM's usual settings, area-normalised meshes).
 Ablations
-    ``hope-nolmd`` (every vertex a witness), ``hope-fixedk`` (k = 8 in every step instead of
-    8 → 1), ``hope-k4`` / ``hope-k12`` (k_max; default 8), ``hope-rand25/50/75`` (HOPE from the
-    SHOT map with 25/50/75% of its entries replaced by random vertices of B).
+    ``hope-nospectral`` (HOPE's own map, no spectral pass), ``hope-nolmd`` (every vertex a
+    witness), ``hope-fixedk`` (k = 8 in every step instead of 8 → 1), ``hope-k4`` /
+    ``hope-k12`` (k_max; default 8), ``hope-rand25/50/75`` (HOPE from the SHOT map with
+    25/50/75% of its entries replaced by random vertices of B).
 """
 
 from __future__ import annotations

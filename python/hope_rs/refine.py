@@ -92,6 +92,10 @@ class Iteration:
     witness_fraction: float
     changed: int
     seconds: float
+    #: The 0-based pass the step belongs to (the polish: the last pass that ran).
+    n_pass: int = 0
+    #: The final polishing step (see ``polish_k``), not a step of a pass.
+    polish: bool = False
 
 
 @dataclass
@@ -195,7 +199,7 @@ def refine(
             changed = int(np.count_nonzero(f_new != f))
             changed_in_pass += changed
             f = f_new
-            history.append(Iteration(0, float(w.mean()), changed, time.perf_counter() - t0))
+            history.append(Iteration(0, float(w.mean()), changed, time.perf_counter() - t0, n_pass))
             if callback is not None:
                 callback(history[-1])
         for step, k in enumerate(schedule):
@@ -206,7 +210,7 @@ def refine(
             changed = int(np.count_nonzero(f_new != f))
             changed_in_pass += changed
             f = f_new
-            history.append(Iteration(k, float(w.mean()), changed, time.perf_counter() - t0))
+            history.append(Iteration(k, float(w.mean()), changed, time.perf_counter() - t0, n_pass))
             if callback is not None:
                 callback(history[-1])
             if on_last_pass is not None and n_pass == last_pass and step == 0:
@@ -222,7 +226,12 @@ def refine(
         f_new = best_overlap(a, b, k, f, w)
         history.append(
             Iteration(
-                k, float(w.mean()), int(np.count_nonzero(f_new != f)), time.perf_counter() - t0
+                k,
+                float(w.mean()),
+                int(np.count_nonzero(f_new != f)),
+                time.perf_counter() - t0,
+                history[-1].n_pass if history else 0,
+                polish=True,
             )
         )
         settled = settled and history[-1].changed == 0
