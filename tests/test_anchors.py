@@ -146,6 +146,7 @@ def test_refine_undoes_swapped_ends():
     assert np.mean(g == np.arange(a.n_vertices)) > 0.99
 
 
+@pytest.mark.slow
 def test_swapped_hands_of_tosca_david_are_repaired(monkeypatch):
     """TOSCA remeshed david0 -> david1: the hands, which touch in david1, end up swapped
     unless the swapped-region step moves them back (HOPE's map, measured 0.113 -> 0.026)."""

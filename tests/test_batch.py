@@ -79,6 +79,7 @@ def test_a_bad_mesh_fails_its_pairs_only(folder, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s0__s1.txt", "s1__s2.txt"]
 
 
+@pytest.mark.slow
 def test_objects_names_and_a_process_pool_give_the_same_maps(tmp_path):
     meshes = {f"m{s}": hope_rs.Mesh(*bumpy_sphere(250, 10 + s)) for s in range(3)}
     shape0 = hope_rs.Shape(meshes["m0"])
@@ -143,6 +144,7 @@ def test_cli_batch_exit_codes(folder, tmp_path, capsys):
     assert "is not a folder" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_ray_backend_matches_the_local_run_pair_for_pair(folder, tmp_path):
     ray = pytest.importorskip("ray")
     pairs = read_pairs(folder / "m" / "with_bad.txt", ext=".off")
@@ -162,6 +164,7 @@ def test_ray_backend_matches_the_local_run_pair_for_pair(folder, tmp_path):
             np.testing.assert_array_equal(a.map, b.map)
 
 
+@pytest.mark.slow
 def test_the_spectral_basis_is_cached_once_per_shape_and_reused(folder, tmp_path, monkeypatch):
     import hope_rs.batch as batch_module
     import hope_rs.descriptors

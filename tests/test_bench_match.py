@@ -3,6 +3,7 @@
 import importlib.util
 from pathlib import Path
 
+import pytest
 from conftest import data_path
 
 from hope_rs.datasets import pairs_of
@@ -16,6 +17,7 @@ def load_bench_match():
     return module
 
 
+@pytest.mark.slow
 def test_renumbered_pair_scores_like_the_original():
     bench = load_bench_match()
     pair = next(p for p in pairs_of(data_path("faust_reg")) if p.name.endswith("018"))

@@ -122,6 +122,7 @@ def test_grow_across_faces_rejects_bad_input():
         _core.grow_across_faces(f + 5, p, f, p, np.array([0, 1, -1, -1]), 0.5)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("a, b", [("cat0", "cat6"), ("cat6", "cat0")])
 def test_the_tosca_cat_is_matched_above_95_percent_exact(a, b):
     # The goal on its one TOSCA pair (the ground truth is the identity). Measured

@@ -70,6 +70,7 @@ def test_a_right_map_whose_distances_a_pose_bends_is_kept():
     assert np.mean(res.map == np.arange(a.n_vertices)) == 1.0
 
 
+@pytest.mark.slow
 def test_relabelling_both_shapes_relabels_the_map(faust_pair):
     a, b = faust_pair
     rng = np.random.default_rng(11)

@@ -67,6 +67,7 @@ def test_lift_carries_a_similarity_to_the_exact_vertices(faust_pair):
     assert np.mean(shifted == truth) < 0.1
 
 
+@pytest.mark.slow
 def test_multiscale_match_refines_a_lifted_coarse_match(faust_pair, coarser):
     a, b = faust_pair
     sa, sb = hope_rs.Shape(a), hope_rs.Shape(b)
@@ -86,6 +87,7 @@ def test_multiscale_match_refines_a_lifted_coarse_match(faust_pair, coarser):
     assert e < 0.03
 
 
+@pytest.mark.slow
 def test_multiscale_match_does_not_depend_on_the_numbering(faust_pair, coarser):
     a, b = faust_pair
     rng = np.random.default_rng(2)
@@ -109,6 +111,7 @@ def test_multiscale_takes_an_initial_map(faust_pair, coarser):
         hope_rs.match(a, b, multiscale=True, init="sift")
 
 
+@pytest.mark.slow
 def test_unless_both_shapes_coarsen_match_takes_the_default_path(faust_pair, coarser):
     a, b = faust_pair
     sparse = hope_rs.Mesh(*bumpy_sphere(1500, seed=1))
@@ -123,6 +126,7 @@ def test_unless_both_shapes_coarsen_match_takes_the_default_path(faust_pair, coa
         M.coarse_start(hope_rs.Shape(sparse), hope_rs.Shape(a), "shot")
 
 
+@pytest.mark.slow
 def test_cli_multiscale_flag(tmp_path, capsys, faust_pair, coarser, monkeypatch):
     import hope_rs.cli
 
@@ -141,6 +145,7 @@ def test_cli_multiscale_flag(tmp_path, capsys, faust_pair, coarser, monkeypatch)
     assert "hint" not in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_batch_multiscale_flag_gives_the_maps_of_match(tmp_path, capsys, faust_pair, coarser):
     a, b = data_path("faust_reg", "tr_reg_012.off"), data_path("faust_reg", "tr_reg_018.off")
     pairs = tmp_path / "pairs.txt"

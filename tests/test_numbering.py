@@ -107,6 +107,7 @@ def test_match_does_not_depend_on_how_the_meshes_are_numbered(init):
     check_same_map(a, b, 1, init=init, max_passes=2)
 
 
+@pytest.mark.slow
 def test_a_real_pair_gives_the_same_map_whatever_its_numbering():
     # FAUST remeshed: different triangulations and vertex counts, as in the benchmark.
     a = hope_rs.load_mesh(data_path("faust_r", "tr_reg_000.off"))
