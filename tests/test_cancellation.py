@@ -134,6 +134,15 @@ def write_off(path: Path, mesh) -> None:
         np.savetxt(fh, np.column_stack([np.full(len(mesh.faces), 3), mesh.faces]), fmt="%d")
 
 
+CLI_REPORTING_THREADS = """
+import atexit, sys, threading
+names = lambda: sorted(t.name for t in threading.enumerate() if t.name.startswith("hope_rs-"))
+atexit.register(lambda: print("threads at exit:", names(), file=sys.stderr))
+from hope_rs.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
 def test_ctrl_c_in_the_cli_exits_130_at_once(pair, tmp_path):
     import pty
 
@@ -143,7 +152,8 @@ def test_ctrl_c_in_the_cli_exits_130_at_once(pair, tmp_path):
     env = dict(os.environ, PYTHONPATH=str(PYTHON_DIR))
     # The progress line is written only to a terminal: give the child one for stderr.
     master, slave = pty.openpty()
-    cmd = [sys.executable, "-m", "hope_rs.cli", "match", "a.off", "b.off", "-o", str(out)]
+    # `hope-rs match`, reporting at interpreter exit which of its threads are still alive.
+    cmd = [sys.executable, "-c", CLI_REPORTING_THREADS, "match", "a.off", "b.off", "-o", str(out)]
     p = subprocess.Popen(
         cmd, cwd=tmp_path, stderr=slave, stdout=subprocess.DEVNULL, env=env
     )  # fmt: skip
@@ -162,7 +172,7 @@ def test_ctrl_c_in_the_cli_exits_130_at_once(pair, tmp_path):
         return bool(chunk)
 
     try:
-        while b"hope_rs refine" not in err:  # refinement has started
+        while b"witnesses" not in err:  # a refinement step has run
             assert read(120), err.decode(errors="replace")
         t0 = time.monotonic()
         p.send_signal(signal.SIGINT)
@@ -177,6 +187,7 @@ def test_ctrl_c_in_the_cli_exits_130_at_once(pair, tmp_path):
     text = err.decode(errors="replace")
     assert rc == 130, text
     assert "interrupted" in text
+    assert "threads at exit: []" in text, text
     assert "Exception ignored" not in text and "Traceback" not in text, text
     assert not out.exists()
     # Generous: the point is that no solve runs on to its end (a full match takes seconds).
