@@ -279,13 +279,23 @@ fn is_full_matching<T: Sync>(cost: &CsrView<T>, h: &[i64]) -> bool {
     if !stored {
         return false;
     }
-    let mut used = vec![false; cost.n_cols];
-    let mut count = 0usize;
-    for &c in h.iter().filter(|&&c| c >= 0) {
-        if std::mem::replace(&mut used[c as usize], true) {
+    let mut cols: Vec<i64> = h.iter().copied().filter(|&c| c >= 0).collect();
+    let count = cols.len();
+    // A flag per column when there are about as many columns as rows; otherwise (n_cols is
+    // the caller's number and may dwarf the entries, see `compact_columns`) sorted columns.
+    if cost.n_cols <= 2 * h.len() + 1024 {
+        let mut used = vec![false; cost.n_cols];
+        if cols
+            .iter()
+            .any(|&c| std::mem::replace(&mut used[c as usize], true))
+        {
             return false;
         }
-        count += 1;
+    } else {
+        cols.par_sort_unstable();
+        if cols.windows(2).any(|w| w[0] == w[1]) {
+            return false;
+        }
     }
     count == cost.n_rows.min(cost.n_cols)
 }
@@ -2042,6 +2052,22 @@ mod tests {
         bad(vec![0, 2], vec![1, 1], vec![1, 2], 1, 2); // duplicate
         bad(vec![0, 3], vec![2, 0, 2], vec![1, 2, 3], 1, 3); // unsorted duplicate
         bad(vec![0, 1], vec![0], vec![1], usize::MAX, 2); // absurd n_rows
+
+        // Columns far beyond the entries, with a hint: nothing is sized by the column count.
+        for nc in [usize::MAX, usize::MAX / 64, 1 << 40] {
+            let c = Csr {
+                n_rows: 2,
+                n_cols: nc,
+                indptr: vec![0, 2, 3],
+                indices: vec![0, 7, 7],
+                data: vec![5i64, 1, 1],
+            };
+            for hint in [[0i64, 7], [7, 0], [7, 7]] {
+                let r =
+                    auction_assignment_int_hinted(&c.view(), true, DEFAULT_FLOOR_DIV, Some(&hint));
+                assert_eq!(r, Ok(vec![0, 7]), "n_cols {nc}, hint {hint:?}");
+            }
+        }
         let c = Csr {
             n_rows: 1,
             n_cols: 3,

@@ -59,11 +59,12 @@ impl<'a, T> CsrView<'a, T> {
     /// Checks the structural invariants every kernel relies on; `what` names the matrix in messages.
     /// `need_data`: the matrix must carry one value per stored entry.
     pub fn validate(&self, what: &str, need_data: bool) -> Result<()> {
-        if self.indptr.len() != self.n_rows + 1 {
+        // Checked: n_rows is the caller's number, and usize::MAX + 1 must not wrap to a match.
+        if self.indptr.len().checked_sub(1) != Some(self.n_rows) {
             return invalid(format!(
-                "{what}: indptr has length {}, expected n_rows + 1 = {}",
+                "{what}: indptr has length {}, expected n_rows + 1 (n_rows = {})",
                 self.indptr.len(),
-                self.n_rows + 1
+                self.n_rows
             ));
         }
         if self.indptr[0] != 0 || self.indptr[self.n_rows] != self.indices.len() {
@@ -97,5 +98,25 @@ impl<'a, T> CsrView<'a, T> {
             ));
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_absurd_row_count_is_an_error() {
+        let indptr = [0usize];
+        for n_rows in [usize::MAX, 1] {
+            let v = CsrView::<()> {
+                n_rows,
+                n_cols: 1,
+                indptr: &indptr,
+                indices: &[],
+                data: &[],
+            };
+            assert!(v.validate("m", false).is_err());
+        }
     }
 }

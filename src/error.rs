@@ -13,6 +13,10 @@ pub enum CoreError {
     /// A sparse cost stores one entry twice: becomes `DuplicateEntries`, a `ValueError` on which
     /// the Python wrapper sums the duplicates (scipy's convention) and solves again.
     Duplicate { row: usize, col: u32 },
+    /// An allocation sized by the input that the machine cannot hold (more than its physical
+    /// memory, or refused by the allocator): becomes `MemoryError`. `bytes` is `None` when the
+    /// size overflows `usize`.
+    OutOfMemory { what: String, bytes: Option<usize> },
 }
 
 impl fmt::Display for CoreError {
@@ -30,6 +34,16 @@ impl fmt::Display for CoreError {
                 f,
                 "cost: row {row} stores column {col} more than once; call sum_duplicates() first"
             ),
+            CoreError::OutOfMemory { what, bytes } => {
+                let size = match bytes {
+                    Some(b) => format!("{:.1} GiB", *b as f64 / (1u64 << 30) as f64),
+                    None => "more than the address space".to_string(),
+                };
+                write!(
+                    f,
+                    "not enough memory for {what} ({size}); check the sizes passed in"
+                )
+            }
         }
     }
 }
@@ -40,4 +54,11 @@ pub type Result<T> = std::result::Result<T, CoreError>;
 
 pub(crate) fn invalid<T>(msg: impl Into<String>) -> Result<T> {
     Err(CoreError::InvalidInput(msg.into()))
+}
+
+pub(crate) fn out_of_memory<T>(what: &str, bytes: Option<usize>) -> Result<T> {
+    Err(CoreError::OutOfMemory {
+        what: what.to_string(),
+        bytes,
+    })
 }

@@ -1,6 +1,7 @@
 //! Shortest paths on a mesh's edge graph, searched locally (each search stops early).
 use crate::csr::CsrView;
 use crate::error::{invalid, Result};
+use crate::memory::try_filled_vec;
 use rayon::prelude::*;
 use std::borrow::Cow;
 use std::cmp::Reverse;
@@ -254,7 +255,8 @@ pub fn distance_fields(g: &EdgeGraph, sources: &[u32]) -> Result<Vec<f64>> {
     if let Some(&s) = sources.iter().find(|&&s| s as usize >= n) {
         return invalid(format!("source {s} out of range for {n} vertices"));
     }
-    let mut out = vec![f64::INFINITY; sources.len() * n];
+    let size = sources.len().saturating_mul(n);
+    let mut out = try_filled_vec(size, f64::INFINITY, "the distance fields")?;
     if n == 0 {
         return Ok(out);
     }

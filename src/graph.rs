@@ -1,13 +1,29 @@
 //! Mesh faces → undirected vertex adjacency in CSR form (sorted, no self-loops, no duplicates).
 use crate::csr::Csr;
 use crate::error::{invalid, Result};
+use crate::memory::{check_budget, try_filled_vec};
 use rayon::prelude::*;
+
+/// Most vertices a graph may have: column indices reach Python as scipy's int32.
+pub const MAX_VERTICES: usize = i32::MAX as usize;
+/// Bytes per vertex this module and a k-hop pattern on top of it need at least (three counting
+/// arrays, a row vector, and the output's index pointer and self entry), for the up-front
+/// memory check.
+const BYTES_PER_VERTEX: usize = 3 * 8 + 24 + 8 + 4 + 1;
 
 /// Adjacency of the edge graph of a triangle mesh with `n_vertices` vertices.
 ///
 /// Vertices referenced by no face become isolated rows; degenerate faces (repeated indices)
 /// contribute only their distinct edges.
 pub fn adjacency_from_faces(faces: &[[u32; 3]], n_vertices: usize) -> Result<Csr<()>> {
+    if n_vertices > MAX_VERTICES {
+        return invalid(format!(
+            "n_vertices = {n_vertices} is too large: at most {MAX_VERTICES} vertices are \
+             supported (scipy's int32 indices)"
+        ));
+    }
+    let what = format!("the edge graph of {n_vertices} vertices");
+    check_budget(n_vertices.checked_mul(BYTES_PER_VERTEX), &what)?;
     if let Some((i, f)) = faces
         .iter()
         .enumerate()
@@ -18,7 +34,7 @@ pub fn adjacency_from_faces(faces: &[[u32; 3]], n_vertices: usize) -> Result<Csr
         ));
     }
     // Counting sort by source vertex keeps this O(m) and allocation-light on big meshes.
-    let mut degree = vec![0usize; n_vertices + 1];
+    let mut degree = try_filled_vec(n_vertices + 1, 0usize, &what)?;
     for f in faces {
         for e in 0..3 {
             let (a, b) = (f[e], f[(e + 1) % 3]);
@@ -28,7 +44,7 @@ pub fn adjacency_from_faces(faces: &[[u32; 3]], n_vertices: usize) -> Result<Csr
             }
         }
     }
-    let mut start = vec![0usize; n_vertices + 1];
+    let mut start = try_filled_vec(n_vertices + 1, 0usize, &what)?;
     for v in 0..n_vertices {
         start[v + 1] = start[v] + degree[v];
     }
@@ -92,5 +108,18 @@ mod tests {
         let a = adjacency_from_faces(&[[0, 0, 1]], 2).unwrap();
         assert_eq!(a.indices, vec![1, 0]);
         assert!(adjacency_from_faces(&[[0, 1, 7]], 3).is_err());
+    }
+
+    #[test]
+    fn absurd_vertex_counts_are_errors_not_aborts() {
+        use crate::error::CoreError;
+        let e = adjacency_from_faces(&[[0, 1, 2]], 1_000_000_000_000).unwrap_err();
+        assert!(matches!(e, CoreError::InvalidInput(ref m) if m.contains("too large")));
+        // Within the index range but beyond the machine's memory: refused up front.
+        let n = MAX_VERTICES;
+        if n * BYTES_PER_VERTEX > crate::memory::physical_memory() {
+            let e = adjacency_from_faces(&[[0, 1, 2]], n).unwrap_err();
+            assert!(matches!(e, CoreError::OutOfMemory { .. }), "{e:?}");
+        }
     }
 }

@@ -5,6 +5,7 @@
 use crate::csr::Csr;
 use crate::csr::CsrView;
 use crate::error::{invalid, Result};
+use crate::memory::{bytes_of, check_budget, try_with_capacity};
 use rayon::prelude::*;
 
 /// All k-hop neighbourhoods for k = 0..=k_max of one graph.
@@ -31,6 +32,9 @@ impl HopBalls {
             return invalid(format!("k must be at most 255, got {k_max}"));
         }
         let n = adj.n_rows;
+        // Sized by the hop radius the caller passed: checked before any search runs.
+        let n_ends = n.checked_mul(k_max + 1);
+        check_budget(n_ends.and_then(bytes_of::<u32>), "the hop balls' sizes")?;
         let chunks: Vec<(Vec<u32>, Vec<u32>, Vec<usize>)> = (0..n.div_ceil(ROWS_PER_TASK))
             .into_par_iter()
             .map(|c| {
@@ -66,8 +70,8 @@ impl HopBalls {
             })
             .collect();
         let total: usize = chunks.iter().map(|c| c.0.len()).sum();
-        let mut order = Vec::with_capacity(total);
-        let mut ends = Vec::with_capacity(n * (k_max + 1));
+        let mut order = try_with_capacity(total, "the hop balls")?;
+        let mut ends = try_with_capacity(n_ends.unwrap_or(usize::MAX), "the hop balls' sizes")?;
         let mut indptr = Vec::with_capacity(n + 1);
         indptr.push(0);
         for (o, e, lens) in chunks {
@@ -195,7 +199,7 @@ pub fn khop_csr(adj: &CsrView<()>, k: usize) -> Result<Csr<()>> {
             indptr.push(indptr.last().unwrap() + l);
         }
     }
-    let mut indices = Vec::with_capacity(*indptr.last().unwrap());
+    let mut indices = try_with_capacity(*indptr.last().unwrap(), "the k-hop neighbourhoods")?;
     for (cols, _) in chunks {
         indices.extend_from_slice(&cols);
     }

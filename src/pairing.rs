@@ -1,5 +1,6 @@
 //! Greedy pairing from a ranked list of candidate pairs.
 use crate::error::{invalid, Result};
+use crate::memory::try_filled_vec;
 
 /// Walks `(rows[i], cols[i])` in the given order (best first) and keeps each pair whose column is
 /// still unused and whose row has capacity left (row r takes at most `capacity[r]` columns).
@@ -24,7 +25,7 @@ pub fn greedy_pairs(
         ));
     }
     let mut left = capacity.to_vec();
-    let mut col_done = vec![false; n_cols];
+    let mut col_done = try_filled_vec(n_cols, false, "the columns' flags")?;
     let (mut out_r, mut out_c) = (Vec::new(), Vec::new());
     for (&r, &c) in rows.iter().zip(cols) {
         if left[r as usize] > 0 && !col_done[c as usize] {
@@ -53,5 +54,14 @@ mod tests {
         assert!(greedy_pairs(&[0], &[3], &[1], 3).is_err());
         assert!(greedy_pairs(&[1], &[0], &[1], 3).is_err());
         assert!(greedy_pairs(&[0, 1], &[0], &[1, 1], 2).is_err());
+    }
+
+    #[test]
+    fn an_absurd_column_count_is_an_error_not_an_abort() {
+        let e = greedy_pairs(&[], &[], &[], usize::MAX / 2).unwrap_err();
+        assert!(
+            matches!(e, crate::error::CoreError::OutOfMemory { .. }),
+            "{e:?}"
+        );
     }
 }

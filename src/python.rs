@@ -7,7 +7,7 @@ use crate::geodesic::{distance_fields, pair_distances, EdgeGraph};
 use crate::graph::adjacency_from_faces;
 use crate::khop::{khop_csr, HopBalls};
 use crate::lmd::{lmd_table_cutoff, local_map_distortion, LocalDistances, RingDistances};
-use crate::memory::zeroed_vec;
+use crate::memory::{try_filled_vec, zeroed_vec};
 use crate::overlap::{overlap_rows, BallsAt, OverlapOptions, OverlapRows};
 use crate::shot::{shot_descriptors, shot_descriptors_at};
 use crate::step::{best_overlap, overlap_assignment};
@@ -15,7 +15,7 @@ use numpy::{
     IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2,
     PyReadonlyArray3,
 };
-use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::exceptions::{PyMemoryError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use rayon::prelude::*;
 use std::borrow::Cow;
@@ -29,21 +29,30 @@ pyo3::create_exception!(
     "A sparse cost stores one entry twice."
 );
 
+/// The one place where core errors become Python exceptions.
 fn to_py_err(e: CoreError) -> PyErr {
     match e {
         CoreError::Duplicate { .. } => DuplicateEntries::new_err(e.to_string()),
-        _ => PyValueError::new_err(e.to_string()),
+        CoreError::OutOfMemory { .. } => PyMemoryError::new_err(e.to_string()),
+        CoreError::InvalidInput(_) | CoreError::Infeasible { .. } => {
+            PyValueError::new_err(e.to_string())
+        }
     }
 }
 
 /// Runs `work` without the GIL; a panic becomes a RuntimeError instead of reaching the user raw.
+/// A Ctrl-C that arrived meanwhile is raised as soon as it returns, before its result is
+/// handed to NumPy.
 fn detached<T: Send>(
     py: Python<'_>,
     work: impl FnOnce() -> crate::error::Result<T> + Send,
 ) -> PyResult<T> {
-    py.detach(|| catch_unwind(AssertUnwindSafe(work)))
+    let out = py
+        .detach(|| catch_unwind(AssertUnwindSafe(work)))
         .map_err(|_| PyRuntimeError::new_err("internal error in hope_rs (please report it)"))?
-        .map_err(to_py_err)
+        .map_err(to_py_err);
+    py.check_signals()?;
+    out
 }
 
 fn faces_vec(faces: &PyReadonlyArray2<'_, i64>) -> PyResult<Vec<[u32; 3]>> {
@@ -180,15 +189,15 @@ fn csr_out<T: numpy::Element>(py: Python<'_>, m: Csr<T>) -> PyCsr<'_, T> {
 }
 
 /// A pattern with every stored entry set to 1, as scipy expects of a boolean-like matrix.
-fn ones(p: Csr<()>) -> Csr<u8> {
-    let nnz = p.nnz();
-    Csr {
+fn ones(p: Csr<()>) -> crate::error::Result<Csr<u8>> {
+    let data = try_filled_vec(p.nnz(), 1u8, "the pattern's values")?;
+    Ok(Csr {
         n_rows: p.n_rows,
         n_cols: p.n_cols,
         indptr: p.indptr,
         indices: p.indices,
-        data: vec![1u8; nnz],
-    }
+        data,
+    })
 }
 
 /// Owned pattern built from (indptr, indices) arrays.
@@ -299,7 +308,7 @@ impl MeshGraph {
                 self.balls.k_max
             )));
         }
-        let m = detached(py, || Ok(ones(self.balls.to_csr(k))))?;
+        let m = detached(py, || ones(self.balls.to_csr(k)))?;
         Ok(csr_out(py, m))
     }
 
@@ -346,7 +355,7 @@ fn khop_neighbourhoods<'py>(
     let faces = faces_vec(&faces)?;
     let m = detached(py, || {
         let adj = adjacency_from_faces(&faces, n_vertices)?;
-        Ok(ones(khop_csr(&adj.view(), k)?))
+        ones(khop_csr(&adj.view(), k)?)
     })?;
     Ok(csr_out(py, m))
 }

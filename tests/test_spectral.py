@@ -191,7 +191,7 @@ class _NoPrefetch:
     """Stands in for BasisPrefetch: the bases are then solved after the refinement."""
 
     def __init__(self, a, b):
-        pass
+        self.stop = threading.Event()
 
     def start(self):
         return self
@@ -206,11 +206,11 @@ def _basis_solves_fail_off_the_main_thread(monkeypatch) -> list[int]:
     solve = hope_rs.Shape.solve_spectral_basis
     off_main = []
 
-    def fails_off_the_main_thread(self, k):
+    def fails_off_the_main_thread(self, k, *, stop=None):
         if threading.current_thread() is not threading.main_thread():
             off_main.append(k)
             raise RuntimeError("ARPACK error -9999")
-        return solve(self, k)
+        return solve(self, k, stop=stop)
 
     monkeypatch.setattr(hope_rs.Shape, "solve_spectral_basis", fails_off_the_main_thread)
     return off_main
@@ -292,7 +292,7 @@ def test_the_basis_falls_back_to_arpack_when_the_coarse_route_fails(monkeypatch)
 
     mesh = hope_rs.Shape(hope_rs.Mesh(*bumpy_sphere(15000, 3))).internal
 
-    def collapse(*args):
+    def collapse(*args, **kwargs):
         raise RuntimeError("the coarse-seeded eigenbasis collapsed")
 
     monkeypatch.setattr(DS, "laplacian_basis_from_coarse", collapse)

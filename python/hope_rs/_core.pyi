@@ -1,4 +1,10 @@
-"""Type stubs of the private native module (see src/python.rs)."""
+"""Type stubs of the private native module (see src/python.rs).
+
+Every function raises ValueError on malformed input and MemoryError when a size it is given
+(a vertex count, a column count, an output's size) needs more than the machine's physical
+memory, instead of aborting; a KeyboardInterrupt that arrives during a kernel is raised as soon
+as the kernel returns.
+"""
 
 import numpy as np
 import numpy.typing as npt
@@ -24,7 +30,10 @@ class MeshGraph:
     def distance_fields(self, sources: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]: ...
     def mean_edge_length(self) -> float: ...
 
-def khop_neighbourhoods(faces: npt.NDArray[np.int64], k: int, n_vertices: int) -> _Csr: ...
+def khop_neighbourhoods(faces: npt.NDArray[np.int64], k: int, n_vertices: int) -> _Csr:
+    """k-hop pattern of the mesh graph; ``n_vertices`` at least the largest face index + 1 and
+    at most 2**31 - 1."""
+
 def overlap_cost_csr(
     a_indptr: npt.NDArray[np.int64],
     a_indices: npt.NDArray[np.int32],

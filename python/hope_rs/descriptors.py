@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 from ._blas import single_threaded_blas
+from ._cancel import check
 from .mesh import Mesh
 from .numbering import canonical_mesh, canonical_order, inverse_permutation
 
@@ -94,10 +97,13 @@ def _unit_area_laplacian(mesh: Mesh):
     return robust_laplacian.mesh_laplacian(mesh.vertices / mesh.scale, mesh.faces)
 
 
-def laplacian_basis_as_numbered(mesh: Mesh, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def laplacian_basis_as_numbered(
+    mesh: Mesh, k: int, *, stop: threading.Event | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`laplacian_eigenpairs` in ``mesh``'s own numbering, plus the lumped mass of each
     vertex ``(n,)`` (of the mesh scaled to unit area), the weights of the inner product in
-    which the eigenvectors are orthonormal."""
+    which the eigenvectors are orthonormal. ``stop``: when set, the solve raises
+    :class:`~hope_rs._cancel.Cancelled` at its next step."""
     import scipy.sparse.linalg as sla
 
     k = int(min(k, mesh.n_vertices - 2))
@@ -107,9 +113,29 @@ def laplacian_basis_as_numbered(mesh: Mesh, k: int) -> tuple[np.ndarray, np.ndar
     # A fixed start vector: ARPACK's own is random.
     v0 = np.random.default_rng(0).random(mesh.n_vertices)
     # Shift-invert about a small negative value: L is singular (constants), L + eps*M is not.
-    evals, evecs = sla.eigsh(L, k=k, M=M, sigma=-1e-8, which="LM", v0=v0)
+    sigma = -1e-8
+    op_inv = _shift_invert(L, M, sigma, stop)
+    evals, evecs = sla.eigsh(L, k=k, M=M, sigma=sigma, which="LM", v0=v0, OPinv=op_inv)
     by_value = np.argsort(evals)
     return np.maximum(evals[by_value], 0.0), evecs[:, by_value], np.asarray(M.diagonal())
+
+
+def _shift_invert(L, M, sigma: float, stop: threading.Event | None):
+    """``x -> (L - sigma M)^-1 x`` as ARPACK's shift-invert operator: the LU factorisation
+    ``eigsh`` builds itself for sparse symmetric input (same matrix, same bits), with a check of
+    ``stop`` before every solve, which is what makes the eigensolve cancellable."""
+    import scipy.sparse.linalg as sla
+
+    op = L - sigma * M
+    # CSR of a real symmetric matrix transposes to CSC for free, as eigsh does.
+    op = op.T if op.format == "csr" and not np.iscomplexobj(op.data) else op.tocsc()
+    lu = sla.splu(op)
+
+    def solve(x):
+        check(stop)
+        return lu.solve(np.asarray(x).astype(op.dtype))
+
+    return sla.LinearOperator(op.shape, matvec=solve, dtype=op.dtype)
 
 
 #: Coarse eigenpairs beyond the ``k`` asked for in :func:`laplacian_basis_from_coarse`: the
@@ -127,7 +153,7 @@ COARSE_SHIFT = 0.05
 
 
 def laplacian_basis_from_coarse(
-    mesh: Mesh, owner: np.ndarray, coarse: Mesh, k: int
+    mesh: Mesh, owner: np.ndarray, coarse: Mesh, k: int, *, stop: threading.Event | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`laplacian_basis_as_numbered` approximated from a coarse copy of ``mesh``
     (``owner[i]``: the vertex of ``coarse`` that fine vertex ``i`` belongs to).
@@ -139,7 +165,8 @@ def laplacian_basis_from_coarse(
     the TOSCA cat (28k vertices): 3.2 s instead of 5-6 s for ARPACK on the fine mesh, the first
     20, 60 and 120 exact eigenvectors lie in the approximate ones' span to 4 decimals,
     eigenvalues within 1.6%, and the default match gave the same accuracy (42.4% exact / 0.0146
-    against 42.6% / 0.0145). Raises ``RuntimeError`` when the subspace collapses.
+    against 42.6% / 0.0145). Raises ``RuntimeError`` when the subspace collapses. ``stop``: see
+    :func:`laplacian_basis_as_numbered`.
     """
     import scipy.sparse.linalg as sla
 
@@ -147,12 +174,14 @@ def laplacian_basis_from_coarse(
     p = int(min(k + COARSE_EXTRA, coarse.n_vertices - 2))
     if p < k:
         raise RuntimeError(f"the coarse copy ({coarse.n_vertices} vertices) is too small for {k}")
-    evals_c, evecs_c, _ = laplacian_basis_as_numbered(coarse, p)
+    evals_c, evecs_c, _ = laplacian_basis_as_numbered(coarse, p, stop=stop)
     L, M = _unit_area_laplacian(mesh)
     shift = COARSE_SHIFT * max(float(evals_c[-1]), 1e-8)
+    check(stop)
     lu = sla.splu((L + shift * M).tocsc())
     v = evecs_c[owner]
     for _ in range(COARSE_ITERATIONS):
+        check(stop)
         v = lu.solve(np.asfortranarray(M @ v))
         # Rayleigh–Ritz, robust to a nearly dependent block: orthonormalise through the
         # eigenvectors of the mass Gram matrix, dropping directions it cannot resolve.
@@ -168,7 +197,9 @@ def laplacian_basis_from_coarse(
     return np.maximum(w[:k], 0.0), v[:, :k], np.asarray(M.diagonal())
 
 
-def spectral_basis_of(mesh: Mesh, k: int, *, coarse=False) -> tuple:
+def spectral_basis_of(
+    mesh: Mesh, k: int, *, coarse=False, stop: threading.Event | None = None
+) -> tuple:
     """The spectral pass's eigenpairs ``(evals, evecs, mass)`` of ``mesh``: from its coarse
     copy when the mesh is dense enough to have one (:func:`laplacian_basis_from_coarse`),
     otherwise, or should that fail, by ARPACK on the mesh itself
@@ -179,22 +210,23 @@ def spectral_basis_of(mesh: Mesh, k: int, *, coarse=False) -> tuple:
     Solved on one BLAS thread, so that the bits do not depend on who asks: :func:`hope_rs.match`
     solves in a background thread while HOPE refines (see
     :class:`~hope_rs.spectral.BasisPrefetch`), the batch cache ahead of the pairs. (Alone, one
-    thread is slower: 0.68 s against 0.48 s for a 5k shape.)"""
+    thread is slower: 0.68 s against 0.48 s for a 5k shape.) ``stop``: when set, the solve
+    raises :class:`~hope_rs._cancel.Cancelled` at its next step."""
     with single_threaded_blas():
-        return _spectral_basis_of(mesh, k, coarse)
+        return _spectral_basis_of(mesh, k, coarse, stop)
 
 
-def _spectral_basis_of(mesh: Mesh, k: int, coarse) -> tuple:
+def _spectral_basis_of(mesh: Mesh, k: int, coarse, stop: threading.Event | None = None) -> tuple:
     if coarse is False:
         from .multiscale import coarse_mesh
 
         coarse = coarse_mesh(mesh)
     if coarse is not None:
         try:
-            return laplacian_basis_from_coarse(mesh, coarse.owner, coarse.mesh, k)
+            return laplacian_basis_from_coarse(mesh, coarse.owner, coarse.mesh, k, stop=stop)
         except (RuntimeError, np.linalg.LinAlgError):
             pass
-    return laplacian_basis_as_numbered(mesh, k)
+    return laplacian_basis_as_numbered(mesh, k, stop=stop)
 
 
 def hks(evals: np.ndarray, evecs: np.ndarray, n_scales: int = 100) -> np.ndarray:

@@ -19,13 +19,21 @@ def khop_neighbourhoods(faces, k: int, *, n_vertices: int | None = None) -> sp.c
     k : int
         Hop radius, ``0 <= k <= 255``.
     n_vertices : int, optional
-        Number of vertices; defaults to ``faces.max() + 1``. Vertices in no face are isolated.
+        Number of vertices, from ``faces.max() + 1`` (the default) to ``2**31 - 1``. Vertices
+        in no face are isolated.
 
     Returns
     -------
     scipy.sparse.csr_matrix
         ``(n, n)`` uint8 pattern; row ``v`` holds every vertex within ``k`` edges of ``v``
         (``v`` included), column indices sorted.
+
+    Raises
+    ------
+    ValueError
+        On malformed faces or a vertex count out of that range.
+    MemoryError
+        When the pattern of ``n_vertices`` vertices cannot fit in the machine's memory.
     """
     k = _as_count(k, "k", upper=255)
     faces = as_faces(faces, n_vertices)

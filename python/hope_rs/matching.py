@@ -10,11 +10,11 @@ import numpy as np
 
 from . import shared_faces as _faces_module
 from . import spectral as _spectral_module
+from ._options import check_options
 from ._validate import as_index_map
-from .descriptors import check_kind
 from .initial import shapes_initial_map
 from .lmd import MIN_CONSISTENT
-from .mesh import as_mesh
+from .mesh import Mesh, as_mesh
 from .progress import ProgressBar, StageInfo, StageLog, step_detail
 from .refine import MAX_PASSES, POLISH_K, TOP_K, Iteration, RefineResult, default_schedule
 from .shape import K_MAX, Shape
@@ -105,12 +105,17 @@ class MatchResult:
         return np.array(self.map, dtype=np.int64)
 
 
-def _as_shape(x, k_max: int, name: str) -> Shape:
+def _as_mesh(x, k_max: int, name: str) -> Shape | Mesh:
+    """``x`` as a Shape or Mesh, checked: the cheap part of :func:`_as_shape`."""
     if isinstance(x, Shape):
         if x.k_max < k_max:
             raise ValueError(f"{name} was built with k_max={x.k_max} < requested k_max={k_max}")
         return x
-    return Shape(as_mesh(x, name), k_max=k_max)
+    return as_mesh(x, name)
+
+
+def _as_shape(x: Shape | Mesh, k_max: int) -> Shape:
+    return x if isinstance(x, Shape) else Shape(x, k_max=k_max)
 
 
 def match(
@@ -140,20 +145,20 @@ def match(
     init : {"shot", "wks", "hks"} or (n_a,) array_like of int, keyword-only
         Descriptors for the initial map, or an initial map itself (``init[i]`` a vertex of B).
     k_max : int
-        Largest hop radius.
+        Largest hop radius, in [2, 64].
     schedule : list of int, optional
-        Hop radii of one refinement pass; default k_max → 1.
+        Hop radii of one refinement pass, each in [1, k_max]; default k_max → 1.
     max_passes : int
-        Passes of the schedule at most; refinement stops earlier once a pass changes almost
-        nothing.
+        Passes of the schedule at most (at least 1); refinement stops earlier once a pass
+        changes almost nothing.
     min_consistent : float
-        Witness rule (see :data:`hope_rs.lmd.MIN_CONSISTENT`).
+        Witness rule, in [0, 1] (see :data:`hope_rs.lmd.MIN_CONSISTENT`).
     top_k : int
-        Candidates kept per vertex in each overlap cost.
+        Candidates kept per vertex in each overlap cost (at least 1).
     polish_k : int or None
-        Hop radius of a final step in which each vertex takes its best-overlapping candidate;
-        ``None`` returns the one-to-one map of the last assignment instead (with
-        ``spectral=False``: the spectral pass is not one-to-one).
+        Hop radius, in [1, k_max], of a final step in which each vertex takes its
+        best-overlapping candidate; ``None`` returns the one-to-one map of the last assignment
+        instead (with ``spectral=False``: the spectral pass is not one-to-one).
     global_step : bool
         Start each pass by re-placing untrusted vertices by their geodesic distances to trusted
         ones (see :func:`hope_rs.refine.global_repair`); ``False`` is the paper's loop.
@@ -193,7 +198,8 @@ def match(
         :data:`~hope_rs.shared_faces.MAX_VERTICES` vertices.
     callback : callable, optional
         Called with each :class:`~hope_rs.refine.Iteration` as it finishes (of the coarse
-        match too, with ``multiscale``); the polish step has ``polish=True``.
+        match too, with ``multiscale``); the polish step has ``polish=True``. An exception it
+        raises ends the match and propagates.
     progress : bool or callable, optional
         ``True`` draws the progress of every stage on stderr (one rewritten line on a terminal
         or in a notebook, one line per stage elsewhere; :class:`~hope_rs.progress.ProgressBar`).
@@ -205,81 +211,101 @@ def match(
     Returns
     -------
     MatchResult
+
+    Raises
+    ------
+    TypeError, ValueError
+        For a bad option or input, before any expensive work (one line: what is allowed, what
+        was given). Whatever the exit (an error, a raising ``callback``, Ctrl-C), the
+        background threads of the spectral pass have stopped when ``match`` returns or raises.
     """
     t0 = time.perf_counter()
+    # Every option, then the inputs, before any expensive work.
+    check_options(
+        init=init, k_max=k_max, schedule=schedule, max_passes=max_passes,
+        min_consistent=min_consistent, top_k=top_k, polish_k=polish_k, global_step=global_step,
+        multiscale=multiscale, spectral=spectral, shared_faces=shared_faces, callback=callback,
+        progress=progress,
+    )  # fmt: skip
+    ma, mb = _as_mesh(a, k_max, "a"), _as_mesh(b, k_max, "b")
+    if not isinstance(init, str):
+        init = as_index_map(init, ma.n_vertices, mb.n_vertices, name="init")
     timings: dict[str, float] = {}
-    sa, sb = _as_shape(a, k_max, "a"), _as_shape(b, k_max, "b")
+    sa, sb = _as_shape(ma, k_max), _as_shape(mb, k_max)
     timings["shapes"] = time.perf_counter() - t0
     bar = ProgressBar() if progress is True else None
     log = StageLog(bar or progress or None, t0)
     log.ran("shapes", timings["shapes"], f"A {sa.n_vertices} vertices, B {sb.n_vertices}")
-    if isinstance(init, str):
-        check_kind(init)
-    else:
-        init = sa.map_in(sb, as_index_map(init, sa.n_vertices, sb.n_vertices, name="init"))
-    options = {
-        "schedule": schedule, "max_passes": max_passes, "min_consistent": min_consistent,
-        "top_k": top_k, "polish_k": polish_k, "global_step": global_step, "callback": callback,
-    }  # fmt: skip
-    coarse = None
-    t = time.perf_counter()
-    # Both shapes or neither: a coarse copy matched against a fine shape of another density
-    # did worse than the default path (FAUST 27k -> 6.9k: 0.070 against 0.048).
-    sparse = _too_sparse_to_coarsen(sa, sb) if multiscale else None
-    if multiscale and sparse is not None:
-        log.skipped("coarse", f"multiscale not applied: {sparse}")
-    if multiscale and sparse is None:
-        from .multiscale import coarse_start, fine_passes
+    if not isinstance(init, str):
+        init = sa.map_in(sb, init)
+    # The bar's line ends on every exit (an error or Ctrl-C included).
+    try:
+        options = {
+            "schedule": schedule, "max_passes": max_passes, "min_consistent": min_consistent,
+            "top_k": top_k, "polish_k": polish_k, "global_step": global_step, "callback": callback,
+        }  # fmt: skip
+        coarse = None
+        t = time.perf_counter()
+        # Both shapes or neither: a coarse copy matched against a fine shape of another density
+        # did worse than the default path (FAUST 27k -> 6.9k: 0.070 against 0.048).
+        sparse = _too_sparse_to_coarsen(sa, sb) if multiscale else None
+        if multiscale and sparse is not None:
+            log.skipped("coarse", f"multiscale not applied: {sparse}")
+        if multiscale and sparse is None:
+            from .multiscale import coarse_start, fine_passes
 
-        # The spectral pass runs once, at the finest level it affords: on the TOSCA cat
-        # (28k) a pass on the coarse copies as well left 9.3% exact / 0.0214 in 27.4 s, against
-        # 27.2% / 0.0182 in 22.8 s with the fine pass only; on FAUST subdivided to 110k, where
-        # the fine shapes are too large for it, the coarse pass took 0.0131 to 0.0116 (with a 20 → 100 basis).
-        coarse_spectral = spectral and not applies(sa, sb)
-        log.start("coarse", detail="matching coarse copies of both shapes")
-        relay = log.relay("coarse")
-        coarse, f0 = coarse_start(
-            sa, sb, init, k_max=k_max, spectral=coarse_spectral, progress=relay, **options
+            # The spectral pass runs once, at the finest level it affords: on the TOSCA cat
+            # (28k) a pass on the coarse copies as well left 9.3% exact / 0.0214 in 27.4 s, against
+            # 27.2% / 0.0182 in 22.8 s with the fine pass only; on FAUST subdivided to 110k, where
+            # the fine shapes are too large for it, the coarse pass took 0.0131 to 0.0116 (with a 20 → 100 basis).
+            coarse_spectral = spectral and not applies(sa, sb)
+            log.start("coarse", detail="matching coarse copies of both shapes")
+            relay = log.relay("coarse")
+            coarse, f0 = coarse_start(
+                sa, sb, init, k_max=k_max, spectral=coarse_spectral, progress=relay, **options
+            )
+            timings["coarse"] = time.perf_counter() - t
+            n_ca, n_cb = sa.coarse_level()[1].n_vertices, sb.coarse_level()[1].n_vertices
+            log.ran(
+                "coarse", relay.last - t, f"coarse copies of {n_ca} and {n_cb} vertices matched"
+            )
+            log.ran("lift", time.perf_counter() - relay.last, "coarse map carried to every vertex")
+            options["max_passes"] = min(max_passes, fine_passes(sa.n_vertices, sb.n_vertices))
+            for stage in ("descriptors", "init"):
+                log.skipped(stage, "multiscale: the lifted coarse map is the start")
+        elif isinstance(init, str):
+            t = log.start("descriptors", detail=init.upper())
+            # In the shapes' internal numbering, like everything up to the result.
+            da, db = sa.internal_descriptors(init), sb.internal_descriptors(init)
+            timings["descriptors"] = time.perf_counter() - t
+            log.ran("descriptors", timings["descriptors"], init.upper())
+            t = log.start("init", detail=f"nearest {init.upper()} descriptors, one to one")
+            f0 = shapes_initial_map(sa, sb, da, db, init)
+            timings["init"] = time.perf_counter() - t
+            log.ran("init", timings["init"], f"nearest {init.upper()} descriptors, one to one")
+        else:
+            f0 = init
+            for stage in ("descriptors", "init"):
+                log.skipped(stage, "an initial map was given (init=...)")
+        f, res = refine_spectral_finish(
+            sa, sb, f0, spectral=spectral, shared_faces=shared_faces, timings=timings,
+            stage_log=log, **options,
+        )  # fmt: skip
+        hope_map = sa.map_out(sb, res.map).astype(np.int64)
+        timings["total"] = time.perf_counter() - t0
+        f_out, f0_out = sa.map_out(sb, f), sa.map_out(sb, f0)
+        return MatchResult(
+            f_out.astype(np.int64),
+            f0_out.astype(np.int64),
+            res.history,
+            timings,
+            coarse,
+            hope_map,
+            log.stages,
         )
-        timings["coarse"] = time.perf_counter() - t
-        n_ca, n_cb = sa.coarse_level()[1].n_vertices, sb.coarse_level()[1].n_vertices
-        log.ran("coarse", relay.last - t, f"coarse copies of {n_ca} and {n_cb} vertices matched")
-        log.ran("lift", time.perf_counter() - relay.last, "coarse map carried to every vertex")
-        options["max_passes"] = min(max_passes, fine_passes(sa.n_vertices, sb.n_vertices))
-        for stage in ("descriptors", "init"):
-            log.skipped(stage, "multiscale: the lifted coarse map is the start")
-    elif isinstance(init, str):
-        t = log.start("descriptors", detail=init.upper())
-        # In the shapes' internal numbering, like everything up to the result.
-        da, db = sa.internal_descriptors(init), sb.internal_descriptors(init)
-        timings["descriptors"] = time.perf_counter() - t
-        log.ran("descriptors", timings["descriptors"], init.upper())
-        t = log.start("init", detail=f"nearest {init.upper()} descriptors, one to one")
-        f0 = shapes_initial_map(sa, sb, da, db, init)
-        timings["init"] = time.perf_counter() - t
-        log.ran("init", timings["init"], f"nearest {init.upper()} descriptors, one to one")
-    else:
-        f0 = init
-        for stage in ("descriptors", "init"):
-            log.skipped(stage, "an initial map was given (init=...)")
-    f, res = refine_spectral_finish(
-        sa, sb, f0, spectral=spectral, shared_faces=shared_faces, timings=timings,
-        stage_log=log, **options,
-    )  # fmt: skip
-    hope_map = sa.map_out(sb, res.map).astype(np.int64)
-    timings["total"] = time.perf_counter() - t0
-    f_out, f0_out = sa.map_out(sb, f), sa.map_out(sb, f0)
-    if bar is not None:
-        bar.close()
-    return MatchResult(
-        f_out.astype(np.int64),
-        f0_out.astype(np.int64),
-        res.history,
-        timings,
-        coarse,
-        hope_map,
-        log.stages,
-    )
+    finally:
+        if bar is not None:
+            bar.close()
 
 
 def _too_sparse_to_coarsen(sa: Shape, sb: Shape) -> str | None:

@@ -148,11 +148,13 @@ class Shape:
         have = 0 if self._basis is None else self._basis[0].shape[1]
         return have >= min(k, self.n_vertices - 2)
 
-    def solve_spectral_basis(self, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`spectral_basis`'s ``(evecs, mass)`` solved afresh, without storing them."""
+    def solve_spectral_basis(self, k: int, *, stop=None) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`spectral_basis`'s ``(evecs, mass)`` solved afresh, without storing them.
+        ``stop``: a :class:`threading.Event`; once set, the solve raises
+        :class:`~hope_rs._cancel.Cancelled` at its next step."""
         # The multiscale coarse copy, when built already, seeds the basis.
         coarse = self._coarse if self._coarse in (False, None) else self._coarse[0]
-        _, evecs, mass = spectral_basis_of(self.internal, k, coarse=coarse)
+        _, evecs, mass = spectral_basis_of(self.internal, k, coarse=coarse, stop=stop)
         return evecs, mass
 
     def set_spectral_basis(self, evecs: np.ndarray, mass: np.ndarray) -> None:

@@ -283,13 +283,15 @@ class BasisPrefetch:
     the solve runs would change its last bits. (Every route to a basis solves on one BLAS
     thread, so the bases are the same bits whichever way they were computed.) A failure in
     the thread is not raised: the basis is then left unset, and :func:`spectral_refine` solves
-    again and reports it as usual.
+    again and reports it as usual. :meth:`cancel` stops the solve at its next step (every
+    solve of the eigensolver checks :attr:`stop`).
     """
 
     def __init__(self, a: Shape, b: Shape, k: int = K_END):
         self.shapes = [s for s in dict.fromkeys((a, b)) if not s.has_spectral_basis(k)]
         self.k = k
         self.solved: list[tuple[Shape, tuple[np.ndarray, np.ndarray]]] = []
+        self.stop = threading.Event()
         self.thread = threading.Thread(target=self._run, name="hope_rs-eigenbases", daemon=True)
 
     def start(self) -> BasisPrefetch:
@@ -305,16 +307,27 @@ class BasisPrefetch:
                 pass
         for s in self.shapes:
             try:
-                self.solved.append((s, s.solve_spectral_basis(self.k)))
+                self.solved.append((s, s.solve_spectral_basis(self.k, stop=self.stop)))
             except Exception:  # noqa: BLE001 - the caller solves again and reports it
-                return
+                return  # Cancelled, or a failure the spectral pass meets again
+
+    def cancel(self) -> None:
+        """Tells the thread to stop at the eigensolver's next step (a few milliseconds at 5k
+        vertices) and waits for it; bases solved before stay in :attr:`solved`."""
+        self.stop.set()
+        _join(self.thread)
 
     def finish(self) -> None:
         """Waits for the thread and stores the bases it solved in their shapes."""
-        if self.shapes:
-            self.thread.join()
+        _join(self.thread)
         for s, (evecs, mass) in self.solved:
             s.set_spectral_basis(evecs, mass)
+
+
+def _join(thread: threading.Thread | None) -> None:
+    """Waits for ``thread`` if it was started."""
+    if thread is not None and thread.ident is not None:
+        thread.join()
 
 
 def _pass_zoomout(
@@ -354,6 +367,8 @@ class EarlyZoomOut:
 
     def _run(self, f: np.ndarray) -> None:
         self.prefetch.finish()
+        if self.stop.is_set():
+            return
         if not (self.a.has_spectral_basis(K_END) and self.b.has_spectral_basis(K_END)):
             return
         try:
@@ -366,8 +381,7 @@ class EarlyZoomOut:
         (its result is then None)."""
         if cancel:
             self.stop.set()
-        if self.thread is not None:
-            self.thread.join()
+        _join(self.thread)
         if cancel:
             self.result = None
 
@@ -378,20 +392,31 @@ def refine_while_solving_bases(
     """:func:`hope_rs.refine.refine` of ``f0``, with both shapes' eigenbases for
     :func:`spectral_refine` solved meanwhile (:class:`BasisPrefetch`) and ZoomOut started during
     the last pass (:class:`EarlyZoomOut`, its map in the result's ``early_zoomout``) when
-    ``spectral`` and the pass applies to these shapes; the refinement's result."""
+    ``spectral`` and the pass applies to these shapes; the refinement's result.
+
+    Both threads have ended when this returns or raises: on an error, Ctrl-C or a raising
+    ``callback``, and when the map settled (no spectral pass follows), they are told to stop
+    first (within one solver step or basis size); bases solved by then stay in the shapes."""
     if not (spectral and applies(a, b)):
         return refine(a, b, f0, **options)
     # One BLAS thread from before the solves start to after they end (see BasisPrefetch).
     with single_threaded_blas():
-        prefetch = BasisPrefetch(a, b).start()
+        prefetch = BasisPrefetch(a, b)
         early = EarlyZoomOut(a, b, prefetch)
         res = None
         try:
+            prefetch.start()
             res = refine(a, b, f0, on_last_pass=early.start, **options)
         finally:
-            # A settled map skips the spectral pass (see hope_rs.match), as does an error.
+            # A settled map skips the spectral pass (see hope_rs.match), as does an error: no
+            # need to wait for either thread's work then.
+            if res is None or res.settled:
+                # Both flags before any wait, so that a second Ctrl-C during the joins below
+                # still leaves the threads stopping.
+                early.stop.set()
+                prefetch.stop.set()
             early.join(cancel=res is None or res.settled)
-        prefetch.finish()
+            prefetch.finish()
     res.early_zoomout = early.result
     return res
 

@@ -1,0 +1,212 @@
+"""Background work of ``match`` (eigenbases, early ZoomOut) ends on every exit path."""
+
+import io
+import os
+import select
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.sparse.linalg as sla
+from threadpoolctl import threadpool_info
+
+import hope_rs
+from hope_rs import matching, spectral
+from hope_rs._cancel import Cancelled
+from hope_rs.demo import demo_pair
+from hope_rs.descriptors import (
+    _unit_area_laplacian,
+    laplacian_basis_as_numbered,
+    single_threaded_blas,
+)
+from hope_rs.numbering import canonical_mesh
+from hope_rs.progress import ProgressBar
+
+PYTHON_DIR = Path(hope_rs.__file__).resolve().parents[1]
+
+
+def ours() -> list[str]:
+    return [t.name for t in threading.enumerate() if t.name.startswith("hope_rs-")]
+
+
+def blas_threads() -> list[int]:
+    return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+
+@pytest.fixture(scope="module")
+def pair():
+    return demo_pair()
+
+
+class Stop(Exception):
+    pass
+
+
+@pytest.mark.parametrize("exc", [Stop, KeyboardInterrupt])
+def test_a_raising_callback_leaves_no_thread_running(pair, exc):
+    a, b = (hope_rs.Shape(m) for m in pair)  # fresh shapes: no eigenbasis cached
+    seen = []
+
+    def callback(it):
+        seen.append(ours())
+        raise exc("stop here")
+
+    blas = blas_threads()
+    # The identity start makes the first step quick: the eigensolves are still running then.
+    with pytest.raises(exc, match="stop here"):
+        hope_rs.match(a, b, init=np.arange(a.n_vertices), callback=callback)
+    assert seen == [["hope_rs-eigenbases"]], "the scenario needs the solve still running"
+    assert ours() == []
+    assert blas_threads() == blas  # threadpoolctl's limits restored too
+
+
+def test_a_raising_callback_ends_the_progress_line(pair, monkeypatch):
+    stream = io.StringIO()
+    monkeypatch.setattr(matching, "ProgressBar", lambda: ProgressBar(stream, live=True))
+
+    def callback(it):
+        raise Stop("stop here")
+
+    with pytest.raises(Stop):
+        hope_rs.match(*pair, init=np.arange(pair[0].n_vertices), callback=callback, progress=True)
+    assert stream.getvalue().startswith("\rhope_rs") and stream.getvalue().endswith("\n")
+    assert ours() == []
+
+
+def test_an_error_after_early_zoomout_started_stops_it(pair, monkeypatch):
+    a, b = (hope_rs.Shape(m) for m in pair)
+    # ZoomOut starts after the first step of the last pass; with one pass, that is the first.
+    monkeypatch.setattr(spectral, "EARLY_FROM_PASS", 0)
+    seen = []
+
+    def callback(it):
+        seen.append(ours())
+        if len(seen) == 3:  # the global repair, k = 8 (then ZoomOut starts), k = 7
+            raise Stop("late")
+
+    with pytest.raises(Stop):
+        spectral.refine_while_solving_bases(
+            a, b, a.map_in(b, np.arange(a.n_vertices)), max_passes=1, callback=callback
+        )
+    assert "hope_rs-zoomout" in seen[-1]
+    assert ours() == []
+
+
+def test_cancel_stops_the_eigensolve(pair):
+    a, b = (hope_rs.Shape(m) for m in pair)
+    p = spectral.BasisPrefetch(a, b).start()
+    p.cancel()  # before the solver's first step: nothing is solved
+    assert not p.thread.is_alive()
+    assert p.solved == []
+    p.finish()
+    assert not a.has_spectral_basis(spectral.K_END)
+
+
+def test_stop_event_raises_cancelled_in_the_solver(pair):
+    mesh = canonical_mesh(pair[0])[0]
+    stop = threading.Event()
+    stop.set()
+    with pytest.raises(Cancelled):
+        laplacian_basis_as_numbered(mesh, 20, stop=stop)
+
+
+def test_cancellable_eigensolve_is_bit_identical_to_eigsh(pair):
+    mesh = canonical_mesh(pair[0])[0]
+    with single_threaded_blas():
+        evals, evecs, _ = laplacian_basis_as_numbered(mesh, 30, stop=threading.Event())
+        L, M = _unit_area_laplacian(mesh)
+        v0 = np.random.default_rng(0).random(mesh.n_vertices)
+        e, v = sla.eigsh(L, k=30, M=M, sigma=-1e-8, which="LM", v0=v0)
+    order = np.argsort(e)
+    np.testing.assert_array_equal(evecs, v[:, order])
+    np.testing.assert_array_equal(evals, np.maximum(e[order], 0.0))
+
+
+def write_off(path: Path, mesh) -> None:
+    with open(path, "w") as fh:
+        fh.write(f"OFF\n{mesh.n_vertices} {len(mesh.faces)} 0\n")
+        np.savetxt(fh, mesh.vertices, fmt="%.9g")
+        np.savetxt(fh, np.column_stack([np.full(len(mesh.faces), 3), mesh.faces]), fmt="%d")
+
+
+CLI_REPORTING_THREADS = """
+import atexit, sys, threading
+names = lambda: sorted(t.name for t in threading.enumerate() if t.name.startswith("hope_rs-"))
+atexit.register(lambda: print("threads at exit:", names(), file=sys.stderr))
+from hope_rs.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_ctrl_c_in_the_cli_exits_130_at_once(pair, tmp_path):
+    import pty
+
+    for name, mesh in zip("ab", pair):
+        write_off(tmp_path / f"{name}.off", mesh)
+    out = tmp_path / "map.txt"
+    env = dict(os.environ, PYTHONPATH=str(PYTHON_DIR))
+    # The progress line is written only to a terminal: give the child one for stderr.
+    master, slave = pty.openpty()
+    # `hope-rs match`, reporting at interpreter exit which of its threads are still alive.
+    cmd = [sys.executable, "-c", CLI_REPORTING_THREADS, "match", "a.off", "b.off", "-o", str(out)]
+    p = subprocess.Popen(
+        cmd, cwd=tmp_path, stderr=slave, stdout=subprocess.DEVNULL, env=env
+    )  # fmt: skip
+    os.close(slave)
+    err = b""
+
+    def read(timeout: float) -> bool:
+        nonlocal err
+        if not select.select([master], [], [], timeout)[0]:
+            return False
+        try:
+            chunk = os.read(master, 4096)
+        except OSError:  # the child closed the terminal
+            return False
+        err += chunk
+        return bool(chunk)
+
+    try:
+        while b"witnesses" not in err:  # a refinement step has run
+            assert read(120), err.decode(errors="replace")
+        t0 = time.monotonic()
+        p.send_signal(signal.SIGINT)
+        while read(60):
+            pass
+        rc = p.wait(timeout=60)
+        elapsed = time.monotonic() - t0
+    finally:
+        if p.poll() is None:
+            p.kill()
+        os.close(master)
+    text = err.decode(errors="replace")
+    assert rc == 130, text
+    assert "interrupted" in text
+    assert "threads at exit: []" in text, text
+    assert "Exception ignored" not in text and "Traceback" not in text, text
+    assert not out.exists()
+    # Generous: the point is that no solve runs on to its end (a full match takes seconds).
+    assert elapsed < 20, elapsed
+
+
+def test_a_settled_map_does_not_wait_for_the_bases(pair, monkeypatch):
+    """No spectral pass follows a settled map, so its eigensolves are stopped, not awaited."""
+    made = []
+
+    class Recorded(spectral.BasisPrefetch):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            made.append(self)
+
+    monkeypatch.setattr(spectral, "BasisPrefetch", Recorded)
+    a, b = (hope_rs.Shape(m) for m in pair)
+    res = hope_rs.match(a, b, init=np.arange(a.n_vertices))
+    assert res.stage("spectral").ran is False  # settled: no spectral pass follows
+    np.testing.assert_array_equal(res.map, np.arange(a.n_vertices))
+    assert len(made) == 1 and made[0].stop.is_set()
+    assert ours() == []

@@ -1,0 +1,130 @@
+"""``match`` rejects bad options up front, with one line saying what is allowed."""
+
+import math
+
+import numpy as np
+import pytest
+
+import hope_rs
+from hope_rs import cli, matching
+from hope_rs.demo import demo_pair
+
+
+@pytest.fixture(scope="module")
+def pair():
+    return demo_pair()
+
+
+@pytest.fixture
+def no_shapes(monkeypatch):
+    """Fails the test if ``match`` starts building shapes (the expensive part)."""
+
+    def forbidden(*args, **kwargs):
+        raise AssertionError("match built a Shape before checking its options")
+
+    monkeypatch.setattr(matching.Shape, "__init__", forbidden)
+
+
+N = 6890  # vertices of each bundled mesh
+
+BAD = [
+    # (options, exception, message)
+    ({"top_k": -1}, ValueError, r"top_k must be an integer in \[1, 2147483647\].*got -1"),
+    ({"top_k": 0}, ValueError, r"top_k must be an integer in \[1, .*got 0"),
+    ({"top_k": 2**40}, ValueError, r"top_k must be an integer in \[1, 2147483647\]"),
+    ({"top_k": 4.0}, TypeError, r"top_k must be an integer .*got float"),
+    ({"top_k": True}, TypeError, r"top_k must be an integer .*not a bool"),
+    ({"polish_k": -1}, ValueError, r"polish_k must be None or an integer in \[1, k_max=8\]"),
+    ({"polish_k": 0}, ValueError, r"polish_k must be None or an integer in \[1, k_max=8\]"),
+    ({"polish_k": 9}, ValueError, r"polish_k must be None or an integer in \[1, k_max=8\]"),
+    ({"polish_k": False}, TypeError, r"polish_k .*not a bool"),
+    ({"schedule": "8"}, TypeError, r"schedule must be a non-empty list .*got the string '8'"),
+    ({"schedule": [8, 0]}, ValueError, r"hop radii in \[1, k_max=8\], got the entry 0"),
+    ({"schedule": [9]}, ValueError, r"hop radii in \[1, k_max=8\], got the entry 9"),
+    ({"schedule": [3, 2.5]}, TypeError, r"got the entry 2.5"),
+    ({"schedule": [True]}, TypeError, r"got the entry True"),
+    ({"schedule": []}, ValueError, r"schedule must be a non-empty list .*got an empty one"),
+    ({"schedule": 8}, TypeError, r"schedule must be a non-empty list .*got int"),
+    ({"schedule": [4], "k_max": 3}, ValueError, r"in \[1, k_max=3\], got the entry 4"),
+    ({"max_passes": 0}, ValueError, r"max_passes must be an integer >= 1, got 0"),
+    ({"max_passes": -2}, ValueError, r"max_passes must be an integer >= 1, got -2"),
+    ({"max_passes": 2.0}, TypeError, r"max_passes must be an integer >= 1, got float"),
+    ({"max_passes": True}, TypeError, r"max_passes .*not a bool"),
+    ({"min_consistent": math.nan}, ValueError, r"min_consistent must be a number in \[0, 1\]"),
+    ({"min_consistent": -0.1}, ValueError, r"min_consistent must be a number in \[0, 1\]"),
+    ({"min_consistent": 1.5}, ValueError, r"min_consistent must be a number in \[0, 1\]"),
+    ({"min_consistent": "0.5"}, TypeError, r"min_consistent must be a number in \[0, 1\]"),
+    ({"min_consistent": True}, TypeError, r"min_consistent must be a number in \[0, 1\]"),
+    ({"k_max": 0}, ValueError, r"k_max must be an integer in \[2, 64\].*got 0"),
+    ({"k_max": 1}, ValueError, r"k_max must be an integer in \[2, 64\].*got 1"),
+    ({"k_max": 99}, ValueError, r"k_max must be an integer in \[2, 64\].*got 99"),
+    ({"k_max": True}, TypeError, r"k_max .*not a bool"),
+    ({"k_max": 8.0}, TypeError, r"k_max must be an integer .*got float"),
+    ({"init": "sift"}, ValueError, r"unknown descriptor 'sift'; choose 'shot', 'wks' or 'hks'"),
+    ({"init": None}, TypeError, r"init must be one of 'shot', 'wks', 'hks' or an \(n_a,\)"),
+    ({"init": 3}, TypeError, r"init must be one of .*got int"),
+    ({"init": np.arange(5)}, ValueError, rf"init must be a 1-D array of length {N}"),
+    ({"init": np.zeros((N, 2), int)}, ValueError, rf"init must be a 1-D array of length {N}"),
+    ({"init": np.full(N, N)}, ValueError, rf"init must hold values in \[0, {N}\)"),
+    ({"init": np.full(N, -1)}, ValueError, rf"init must hold values in \[0, {N}\)"),
+    ({"init": np.zeros(N)}, TypeError, r"init must be an integer array"),
+    ({"callback": 3}, TypeError, r"callback must be None or callable .*got int"),
+    ({"callback": "print"}, TypeError, r"callback must be None or callable .*got str"),
+    ({"spectral": "no"}, TypeError, r"spectral must be True or False, got 'no'"),
+    ({"multiscale": 1}, TypeError, r"multiscale must be True or False"),
+    ({"global_step": None}, TypeError, r"global_step must be True or False"),
+    ({"shared_faces": [True]}, TypeError, r"shared_faces must be True or False"),
+    ({"progress": "yes"}, TypeError, r"progress must be None, True, False or callable.*got str"),
+    ({"progress": 1}, TypeError, r"progress must be None, True, False or callable.*got int"),
+]
+
+
+@pytest.mark.parametrize(("options", "exc", "message"), BAD)
+def test_bad_option_is_rejected_before_any_work(pair, no_shapes, options, exc, message):
+    with pytest.raises(exc, match=message) as info:
+        hope_rs.match(*pair, **options)
+    assert "\n" not in str(info.value)
+
+
+def test_good_options_pass_the_checks(pair, no_shapes):
+    """Values of every accepted kind get past the checks (to the first Shape)."""
+    for options in [
+        {},
+        {"top_k": np.int64(5), "polish_k": None, "schedule": np.array([2, 1])},
+        {"schedule": (8, 4, 1), "max_passes": 1, "min_consistent": 0, "k_max": 8},
+        {"min_consistent": np.float32(1.0), "spectral": np.bool_(False), "callback": print},
+        {"init": np.arange(N, dtype=np.int32), "k_max": 2, "polish_k": 2},
+        {"progress": True},
+        {"progress": False, "callback": None},
+        {"progress": lambda event: None},
+    ]:
+        with pytest.raises(AssertionError, match="built a Shape"):
+            hope_rs.match(*pair, **options)
+
+
+def test_a_prebuilt_shape_with_a_smaller_k_max_is_rejected(pair):
+    a = hope_rs.Shape(pair[0], k_max=3)
+    with pytest.raises(ValueError, match="built with k_max=3 < requested k_max=8"):
+        hope_rs.match(a, pair[1])
+
+
+def write_off(path, mesh) -> None:
+    with open(path, "w") as fh:
+        fh.write(f"OFF\n{mesh.n_vertices} {len(mesh.faces)} 0\n")
+        np.savetxt(fh, mesh.vertices, fmt="%.9g")
+        np.savetxt(fh, np.column_stack([np.full(len(mesh.faces), 3), mesh.faces]), fmt="%d")
+
+
+@pytest.mark.parametrize("k_max", ["0", "99", "-3"])
+def test_cli_rejects_k_max_with_one_line(pair, tmp_path, capsys, k_max):
+    write_off(tmp_path / "a.off", pair[0])
+    write_off(tmp_path / "b.off", pair[1])
+    out = tmp_path / "map.txt"
+    argv = ["match", str(tmp_path / "a.off"), str(tmp_path / "b.off"), "-o", str(out)]
+    assert cli.main([*argv, "--k-max", k_max, "-q"]) == 2
+    err = capsys.readouterr().err
+    assert (
+        err
+        == f"hope-rs: error: k_max must be an integer in [2, 64] (LMD reads 2-rings), got {k_max}\n"
+    )
+    assert not out.exists()
