@@ -37,9 +37,13 @@ def test_handles_are_the_vertices_whose_faces_all_map_onto_faces_one_to_one():
     g = f.copy()
     g[u] = v  # two vertices on one image: neither is a handle
     assert not SF.face_handles(s, s, g)[[u, v]].any()
-    # The mirror image of the identity (every face reversed) has no handle.
-    mirror = hope_rs.Shape(hope_rs.Mesh(s.mesh.vertices, s.mesh.faces[:, ::-1]))
-    assert not SF.face_handles(s, mirror, f).any()
+    # The identity onto the mirror image (a reflection turns every face of a map around) has
+    # no handle; reversing the faces alone is not a mirror, since shapes orient them outward.
+    mirror = hope_rs.Shape(hope_rs.Mesh(s.mesh.vertices * [-1.0, 1.0, 1.0], s.mesh.faces))
+    to_mirror = mirror.rank[s.order]
+    assert not SF.face_handles(s, mirror, to_mirror).any()
+    rewound = hope_rs.Shape(hope_rs.Mesh(s.mesh.vertices, s.mesh.faces[:, ::-1]))
+    assert SF.face_handles(s, rewound, f).all()
 
 
 def test_arap_puts_a_rigidly_moved_mesh_back_from_a_third_of_its_vertices():
