@@ -19,8 +19,6 @@ chosen one bends them, as ZoomOut does between a partial shape and a whole one.
 
 from __future__ import annotations
 
-import os
-import sys
 import threading
 import warnings
 
@@ -275,8 +273,9 @@ class BasisPrefetch:
     HOPE's auction runs on one core, and the eigensolves release the GIL, so the solves fill
     the idle core: on a 5k FAUST remeshed pair the match took 3.10 s against 3.55 s (mean of
     six alternating runs; the refinement itself slowed by about 0.45 s, the spectral stage
-    went from 1.5 s to 0.5 s). The thread runs at the lowest CPU priority (Linux), so that the
-    refinement's own parallel work keeps both cores when it has any.
+    went from 1.5 s to 0.5 s). The thread keeps the caller's CPU priority: the caller waits for
+    its bases, so a lowered priority starves both on a busy machine (see
+    ``docs/decisions.md#spectral``).
 
     Use it inside :func:`~hope_rs._blas.single_threaded_blas`, entered before :meth:`start`
     and left after :meth:`finish`: BLAS thread limits are global, and a limit restored while
@@ -300,11 +299,6 @@ class BasisPrefetch:
         return self
 
     def _run(self) -> None:
-        if sys.platform.startswith("linux"):
-            try:  # on Linux a thread is a task, with its own nice value
-                os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 19)
-            except OSError:
-                pass
         for s in self.shapes:
             try:
                 self.solved.append((s, s.solve_spectral_basis(self.k, stop=self.stop)))
