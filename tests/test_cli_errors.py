@@ -145,6 +145,15 @@ def test_unexpected_errors_runtime_failures_and_ctrl_c(meshes, tmp_path, monkeyp
     assert "Traceback" in err and "RuntimeError: boom" in err
     monkeypatch.delenv("HOPE_RS_DEBUG")
 
+    def too_large(*args, **kwargs):
+        raise MemoryError("the k-hop balls need 1.2 TiB")
+
+    monkeypatch.setattr(hope_rs.matching, "match", too_large)
+    assert main(["match", a, b, "-q"]) == 1
+    assert (
+        capsys.readouterr().err == "hope-rs: error: out of memory: the k-hop balls need 1.2 TiB\n"
+    )
+
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 

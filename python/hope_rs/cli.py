@@ -174,6 +174,11 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("hope-rs: interrupted", file=sys.stderr)
         return 130
+    except MemoryError as e:  # a run too large for this machine: not the input's fault
+        if debug:
+            traceback.print_exc()
+        print(f"hope-rs: error: out of memory: {e}", file=sys.stderr)
+        return 1
     except USAGE_ERRORS as e:
         if debug:
             traceback.print_exc()
