@@ -13,6 +13,7 @@ from test_map_io import unwritable_folder
 from test_mesh_and_cli import write_off
 
 import hope_rs
+import hope_rs.batch
 import hope_rs.matching
 from hope_rs.batch import imatch_many, map_name, read_pairs
 from hope_rs.cache import ShapeCache, cached_shape
@@ -57,7 +58,7 @@ def count_matches(monkeypatch):
         calls.append(1)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(hope_rs.matching, "match", counting)
+    monkeypatch.setattr(hope_rs.batch, "match", counting)
     return calls
 
 
@@ -87,7 +88,7 @@ def test_ctrl_c_prints_the_summary_keeps_the_maps_and_a_rerun_finishes(
             raise KeyboardInterrupt
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(hope_rs.matching, "match", interrupted_second)
+    monkeypatch.setattr(hope_rs.batch, "match", interrupted_second)
     out = tmp_path / "out"
     args = ["batch", str(folder / "pairs.txt"), "--ext", ".off", "--out", str(out), "-j", "1",
             "-q", "--cache", str(tmp_path / "c")]  # fmt: skip
@@ -98,7 +99,7 @@ def test_ctrl_c_prints_the_summary_keeps_the_maps_and_a_rerun_finishes(
     files = list(out.iterdir())
     assert len(files) == 1  # the finished map, whole; no temporary file
     np.testing.assert_array_equal(read_map(files[0], N, N), reference[files[0].name])
-    monkeypatch.setattr(hope_rs.matching, "match", real)
+    monkeypatch.setattr(hope_rs.batch, "match", real)
     assert main(args) == 0
     assert "3 pairs: 2 matched, 1 skipped, 0 failed" in capsys.readouterr().out
     for name, m in reference.items():

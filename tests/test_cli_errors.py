@@ -134,7 +134,7 @@ def test_unexpected_errors_runtime_failures_and_ctrl_c(meshes, tmp_path, monkeyp
     def boom(*args, **kwargs):
         raise RuntimeError("boom")
 
-    monkeypatch.setattr(hope_rs.matching, "match", boom)
+    monkeypatch.setattr(hope_rs.cli, "match", boom)
     monkeypatch.delenv("HOPE_RS_DEBUG", raising=False)
     assert main(["match", a, b, "-q"]) == 1
     line = one_line_error(capsys.readouterr().err, "internal error")
@@ -148,7 +148,7 @@ def test_unexpected_errors_runtime_failures_and_ctrl_c(meshes, tmp_path, monkeyp
     def too_large(*args, **kwargs):
         raise MemoryError("the k-hop balls need 1.2 TiB")
 
-    monkeypatch.setattr(hope_rs.matching, "match", too_large)
+    monkeypatch.setattr(hope_rs.cli, "match", too_large)
     assert main(["match", a, b, "-q"]) == 1
     assert (
         capsys.readouterr().err == "hope-rs: error: out of memory: the k-hop balls need 1.2 TiB\n"
@@ -157,7 +157,7 @@ def test_unexpected_errors_runtime_failures_and_ctrl_c(meshes, tmp_path, monkeyp
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(hope_rs.matching, "match", interrupted)
+    monkeypatch.setattr(hope_rs.cli, "match", interrupted)
     assert main(["match", a, b, "-q"]) == 130
     assert capsys.readouterr().err == "hope-rs: interrupted\n"
     monkeypatch.undo()

@@ -125,10 +125,17 @@ def test_a_terminal_gets_one_rewritten_line(spheres):
     assert any(f.startswith("hope_rs spectral") for f in frames)
 
 
-def test_progress_true_draws_on_stderr(spheres, capsys):
-    hope_rs.match(*spheres, max_passes=1, progress=True)
+@pytest.mark.parametrize("flag", [True, np.True_])
+def test_progress_true_draws_on_stderr(spheres, capsys, flag):
+    hope_rs.match(*spheres, max_passes=1, progress=flag)
     err = capsys.readouterr().err
     assert err.count("\n") == len(DEFAULT_STAGES) and "hope_rs: refine:" in err
+
+
+@pytest.mark.parametrize("flag", [False, np.False_])
+def test_progress_false_draws_nothing(spheres, capsys, flag):
+    hope_rs.match(*spheres, max_passes=1, progress=flag)
+    assert capsys.readouterr().err == ""
 
 
 def test_hope_map_is_always_hopes_own_map(faust_pair):

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import hope_rs
+import hope_rs.batch
 from hope_rs import cli, matching
 from hope_rs.demo import demo_pair
 
@@ -127,4 +128,35 @@ def test_cli_rejects_k_max_with_one_line(pair, tmp_path, capsys, k_max):
         err
         == f"hope-rs: error: k_max must be an integer in [2, 64] (LMD reads 2-rings), got {k_max}\n"
     )
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("options", "exc", "message"),
+    [
+        ({"max_passes": 0}, ValueError, "max_passes must be an integer >= 1"),
+        ({"k_max": 1}, ValueError, "k_max must be an integer in"),
+        ({"bogus": 1}, TypeError, "not an option of hope_rs.match: .*'bogus'"),
+    ],
+)
+def test_a_batch_checks_match_options_before_any_work(
+    pair, tmp_path, monkeypatch, options, exc, message
+):
+    def forbidden(*args, **kwargs):
+        raise AssertionError("the batch prepared a shape before checking the match options")
+
+    monkeypatch.setattr(hope_rs.batch, "prepare_task", forbidden)
+    with pytest.raises(exc, match=message):
+        hope_rs.match_many(list(pair), out_dir=tmp_path / "maps", jobs=1, cache=False, **options)
+    assert not (tmp_path / "maps").exists()
+
+
+def test_batch_cli_rejects_k_max_with_one_line(pair, tmp_path, capsys):
+    write_off(tmp_path / "a.off", pair[0])
+    write_off(tmp_path / "b.off", pair[1])
+    (tmp_path / "pairs.txt").write_text("a.off b.off\n")
+    out = tmp_path / "maps"
+    assert cli.main(["batch", str(tmp_path / "pairs.txt"), "--out", str(out), "--k-max", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err == "hope-rs: error: k_max must be an integer in [2, 64] (LMD reads 2-rings), got 1\n"
     assert not out.exists()

@@ -31,6 +31,7 @@ import numpy as np
 
 from .cache import ShapeCache, cached_shape, descriptor_params, file_digest, mesh_digest
 from .map_io import check_writable_folder, read_map, text_map_is_complete, write_map
+from .matching import check_match_options, match
 from .mesh import Mesh, as_mesh
 from .shape import K_MAX, Shape
 from .spectral import applies_to_size
@@ -293,8 +294,6 @@ def _shape(token, cache_root: str | None, kinds: tuple, k_max: int, basis: bool 
 
 def pair_task(job: dict, a, b) -> dict:
     """Match one pair; ``a``/``b`` are cache digests or dicts of arrays."""
-    from .matching import match
-
     limit_threads(job.get("threads"))
     try:
         t0 = time.perf_counter()
@@ -365,14 +364,15 @@ def die_with_parent(parent: int, poll: float = 1.0) -> None:
     threading.Thread(target=watch, name="hope-rs-parent-watch", daemon=True).start()
 
 
-def _one_line_warning(message, category, filename, lineno, line=None) -> str:
+def one_line_warning(message, category, filename, lineno, line=None) -> str:
+    """``warnings.formatwarning`` for the command line and its workers: one line, no source."""
     return f"hope-rs: warning: {message}\n"
 
 
 def _init_worker(threads: int, parent: int) -> None:
     limit_threads(threads)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the parent, which ends us
-    warnings.formatwarning = _one_line_warning
+    warnings.formatwarning = one_line_warning
     die_with_parent(parent)
 
 
@@ -431,10 +431,18 @@ def default_jobs() -> int:
     return max(1, cpu_count() // 2)
 
 
-def _make_backend(backend: str, jobs: int | None, ray_options: dict | None):
+def _check_backend(backend: str, jobs: int | None) -> int:
+    """The number of local jobs, after checking both settings (before any work)."""
     jobs = default_jobs() if jobs is None else jobs
     if isinstance(jobs, bool) or not isinstance(jobs, (int, np.integer)) or jobs < 1:
         raise ValueError(f"jobs must be a positive integer, got {jobs!r}")
+    if backend not in ("local", "ray"):
+        raise ValueError(f"unknown backend {backend!r}; choose 'local' or 'ray'")
+    return int(jobs)
+
+
+def _make_backend(backend: str, jobs: int | None, ray_options: dict | None):
+    jobs = _check_backend(backend, jobs)
     threads = max(1, cpu_count() // jobs)
     if backend == "local":
         return _Serial(None) if jobs == 1 else _Pool(int(jobs), threads)
@@ -533,6 +541,8 @@ def imatch_many(
         raise ValueError(f"init must be 'shot', 'wks' or 'hks' in a batch, got {init!r}")
     if map_format not in MAP_FORMATS:
         raise ValueError(f"map_format must be one of {sorted(MAP_FORMATS)}, got {map_format!r}")
+    check_match_options(init=init, k_max=k_max, **match_options)
+    _check_backend(backend, jobs)
     ij = _resolve_pairs(pairs, names)
     specs = [_spec(s) for s in shapes]
     out = check_writable_folder(out_dir, create=True) if out_dir is not None else None
@@ -552,7 +562,12 @@ def imatch_many(
     for n, (i, j) in enumerate(ij):
         path = out / map_name(names[i], names[j], map_format) if out is not None else None
         todo.append((n, i, j, path, path is not None and os.path.lexists(path)))
-    ex = _make_backend(backend, jobs, ray_options)
+    try:
+        ex = _make_backend(backend, jobs, ray_options)
+    except BaseException:  # e.g. Ray missing or unreachable: no temporary cache left behind
+        if tmp is not None:
+            tmp.cleanup()
+        raise
     finished = False
     try:
         basis = bool(match_options.get("spectral", True))

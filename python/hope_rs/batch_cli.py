@@ -7,6 +7,8 @@ import sys
 import textwrap
 import time
 
+from .batch import imatch_many, read_pairs
+
 __all__ = ["ENVIRONMENT", "EXIT_STATUS", "add_batch_parser", "cmd_batch", "environment_help"]
 
 #: Environment variables the command line reads, with what they do (the one list the help
@@ -54,7 +56,7 @@ def add_batch_parser(sub) -> None:
         description=textwrap.fill(
             "Match every pair listed in PAIRS_FILE (one pair per line: two mesh paths, relative "
             "ones resolved against the file's folder; quote paths holding spaces or separate "
-            "the two with a tab). Each map is written atomically to OUT/<a>__<b>.txt as soon as "
+            "the two with a tab). Each map is written atomically to OUT/<a>__<b>.txt (or .npy) as soon as "
             "it is done; a rerun (e.g. after Ctrl-C or a crash) skips pairs whose map file is "
             "whole and redoes the others. Exit status 1 when some pair failed (the others still "
             "finish).",
@@ -95,7 +97,6 @@ def add_batch_parser(sub) -> None:
 
 
 def cmd_batch(args) -> int:
-    from .batch import imatch_many, read_pairs
 
     if args.no_cache and args.cache:
         raise ValueError("give either --cache DIR or --no-cache, not both")

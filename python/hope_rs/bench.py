@@ -24,7 +24,9 @@ import numpy as np
 
 from .datasets import Pair, datasets_in, pairs_of
 from .evaluate import error_curve, geodesic_errors, score, smoothness
+from .mesh import load_mesh
 from .methods import ABLATIONS, DEFAULT_METHODS, METHODS, PairContext, check_methods, run_method
+from .show import render_pair
 
 FIELDS = [
     "dataset", "pair", "method", "n_a", "n_b", "n_scored", "exact", "mean", "mean_x100", "auc",
@@ -236,7 +238,6 @@ def run_bench(
     up : str
         Up axis of the renders: "auto", "x", "y", "z", or per set as "SET=AXIS,...".
     """
-    from .mesh import load_mesh
 
     methods = check_methods(methods)
     folders = _select(datasets_in(data_dir), sets, data_dir)
@@ -290,8 +291,6 @@ def run_bench(
 
 
 def _render_extremes(name, shown, method, ups, out: Path) -> None:
-    from .mesh import load_mesh
-    from .show import render_pair
 
     shown = sorted(shown, key=lambda s: s[0])
     for tag, (mean, pair, f) in (("best", shown[0]), ("worst", shown[-1])):

@@ -158,6 +158,8 @@ class ShapeCache:
                 out = {k: z[k] for k in z.files}
         except FileNotFoundError:
             return None
+        except MemoryError:
+            raise  # says nothing about the entry: keep it
         except Exception as e:  # noqa: BLE001 - BadZipFile, zlib.error, ValueError (refused
             # pickle, bad header), EOFError, OSError, KeyError...: all mean a damaged file
             return self._damaged(path, f"unreadable: {type(e).__name__}")

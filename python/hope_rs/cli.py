@@ -12,9 +12,14 @@ import sys
 import traceback
 import warnings
 
-from . import __version__
+from . import __version__, bench, show
+from .batch import one_line_warning
 from .batch_cli import add_batch_parser, environment_help
+from .demo import run_demo
 from .map_io import check_writable_folder, map_format, write_map
+from .matching import check_match_options, match
+from .mesh import load_mesh
+from .progress import ProgressBar
 
 
 def _summary(res) -> dict:
@@ -41,10 +46,11 @@ HINT_VERTICES = 100_000
 
 
 def cmd_match(args) -> int:
-    from .matching import match
-    from .mesh import load_mesh
-    from .progress import ProgressBar
-
+    options = {
+        "init": args.init, "k_max": args.k_max, "multiscale": args.multiscale,
+        "spectral": not args.no_spectral, "shared_faces": not args.no_shared_faces,
+    }  # fmt: skip
+    check_match_options(**options)  # before any work, like the output below
     if args.output:  # before any work: a known suffix, a folder we can write to
         if os.path.isdir(args.output):
             raise ValueError(f"output {args.output!r} is a folder; give a file name")
@@ -61,11 +67,7 @@ def cmd_match(args) -> int:
     bar = ProgressBar()
     show_bar = bar.live and not args.quiet and not args.verbose
     try:
-        res = match(
-            a, b, init=args.init, k_max=args.k_max, multiscale=args.multiscale,
-            spectral=not args.no_spectral, shared_faces=not args.no_shared_faces,
-            progress=bar if show_bar else None,
-        )  # fmt: skip
+        res = match(a, b, progress=bar if show_bar else None, **options)
     finally:
         bar.close()
     coarse = next((s for s in res.stages if s.name == "coarse"), None)
@@ -81,7 +83,6 @@ def cmd_match(args) -> int:
 
 
 def cmd_demo(args) -> int:
-    from .demo import run_demo
 
     report = run_demo(verbose=not args.json)
     if args.json:
@@ -144,7 +145,6 @@ def build_parser() -> argparse.ArgumentParser:
     )
     d.add_argument("--json", action="store_true", help="print the report as JSON")
     d.set_defaults(func=cmd_demo)
-    from . import bench, show  # light imports: matplotlib, pyFM load only when run
 
     bench.add_parser(sub)
     show.add_parser(sub)
@@ -159,15 +159,11 @@ USAGE_ERRORS = (
 )  # fmt: skip
 
 
-def _one_line_warning(message, category, filename, lineno, line=None) -> str:
-    return f"hope-rs: warning: {message}\n"
-
-
 def main(argv=None) -> int:
     """Run the command line; returns the exit status (see ``hope-rs --help``)."""
     args = build_parser().parse_args(argv)
     debug = os.environ.get("HOPE_RS_DEBUG", "") not in ("", "0")
-    formatwarning, warnings.formatwarning = warnings.formatwarning, _one_line_warning
+    formatwarning, warnings.formatwarning = warnings.formatwarning, one_line_warning
     handler = _log_to_stderr(args.verbose)
     try:
         return args.func(args)

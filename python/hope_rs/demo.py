@@ -17,6 +17,8 @@ from importlib import resources
 
 import numpy as np
 
+from .evaluate import geodesic_errors, score
+from .matching import match
 from .mesh import Mesh
 
 __all__ = ["DEMO_PAIRS", "demo_pair", "demo_truth", "run_demo"]
@@ -75,8 +77,6 @@ def demo_truth(name: str = "faust_012_018") -> tuple[np.ndarray, np.ndarray]:
 def score_pair(name: str) -> dict:
     """Match a bundled pair and score the initial map, HOPE's own map and the final map
     against its ground truth (edge-graph geodesic error / sqrt(area of B))."""
-    from .evaluate import geodesic_errors, score
-    from .matching import match
 
     a, b = demo_pair(name)
     ai, bi = demo_truth(name)

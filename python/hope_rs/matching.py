@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 import time
 from dataclasses import dataclass, field
 from functools import partial
@@ -233,8 +234,11 @@ def match(
     timings: dict[str, float] = {}
     sa, sb = _as_shape(ma, k_max), _as_shape(mb, k_max)
     timings["shapes"] = time.perf_counter() - t0
-    bar = ProgressBar() if progress is True else None
-    log = StageLog(bar or progress or None, t0)
+    if isinstance(progress, (bool, np.bool_)):  # True: the bar; False: nothing
+        bar, progress = (ProgressBar() if progress else None), None
+    else:
+        bar = None
+    log = StageLog(bar or progress, t0)
     log.ran("shapes", timings["shapes"], f"A {sa.n_vertices} vertices, B {sb.n_vertices}")
     if not isinstance(init, str):
         init = sa.map_in(sb, init)
@@ -454,3 +458,20 @@ class _RefineSteps:
         if self.polish is None:
             self.log.ran("refine", seconds, self._summary(), self.done, self.total)
             self.log.skipped("polish", "turned off (polish_k=None)")
+
+
+#: :func:`match`'s parameters, as defined here (tests may replace the module's ``match``).
+_MATCH_SIGNATURE = inspect.signature(match)
+
+
+def check_match_options(**options) -> None:
+    """Check keyword options meant for :func:`match` (as a batch or the CLI passes them on)
+    before any work: unknown names raise ``TypeError``, bad values what :func:`match` would
+    raise, in one line."""
+    try:
+        bound = _MATCH_SIGNATURE.bind(None, None, **options)
+    except TypeError as e:
+        raise TypeError(f"not an option of hope_rs.match: {e}") from None
+    bound.apply_defaults()
+    given = {k: v for k, v in bound.arguments.items() if k not in ("a", "b")}
+    check_options(**given)

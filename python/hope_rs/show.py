@@ -19,13 +19,13 @@ axis (FAUST: y up, TOSCA: z up), which ``up="auto"`` finds from where the shape 
 from __future__ import annotations
 
 import os
-import tempfile
 
 import numpy as np
 
 from ._validate import as_index_map
-from .map_io import read_map
-from .mesh import Mesh
+from .evaluate import geodesic_errors, load_vts
+from .map_io import atomic_write, check_writable_folder, read_map
+from .mesh import Mesh, load_mesh
 
 __all__ = [
     "detect_up",
@@ -220,7 +220,7 @@ def render_pair(
     if title:
         fig.suptitle(title, fontsize=15)
     fig.tight_layout()
-    _save_atomically(path, lambda tmp: fig.savefig(tmp, format="png"))
+    atomic_write(path, lambda fh: fig.savefig(fh, format="png"))
     plt.close(fig)
 
 
@@ -247,28 +247,9 @@ def write_ply_pair(a: Mesh, b: Mesh, mapping, path, *, up: str = "auto") -> tupl
         ).astype(np.uint8)
         tm = trimesh.Trimesh(mesh.vertices, mesh.faces, vertex_colors=rgba, process=False)
         target = f"{stem}_{tag}.ply"
-        _save_atomically(target, lambda tmp, tm=tm: tm.export(tmp, file_type="ply"))
+        atomic_write(target, lambda fh, tm=tm: tm.export(file_obj=fh, file_type="ply"))
         out.append(target)
     return out[0], out[1]
-
-
-def _save_atomically(path, write) -> None:
-    """``write(tmp)`` into a temporary file next to ``path``, then rename it to ``path``."""
-    path = os.fspath(path)
-    folder = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(dir=folder, prefix=".hope-rs-", suffix=".tmp")
-    os.close(fd)
-    try:
-        write(tmp)
-        # mkstemp makes the file private (0600); give it the permissions of a new file.
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 def _parse_size(text: str) -> tuple[int, int]:
@@ -325,8 +306,6 @@ def require_matplotlib() -> None:
 
 
 def _truth(spec: list[str], n_a: int, n_b: int) -> tuple[np.ndarray, np.ndarray]:
-    from .evaluate import load_vts
-
     if spec == ["identity"]:
         if n_a != n_b:
             raise ValueError(f"--truth identity needs equal vertex counts, got {n_a} and {n_b}")
@@ -347,8 +326,6 @@ def vertex_errors(a: Mesh, b: Mesh, mapping, a_idx, b_idx) -> np.ndarray:
     largest error counts)."""
     from scipy.spatial import cKDTree
 
-    from .evaluate import geodesic_errors
-
     e = geodesic_errors(b, mapping, a_idx=a_idx, b_idx=b_idx)
     out = np.full(a.n_vertices, -1.0)
     np.maximum.at(out, a_idx, e)
@@ -360,22 +337,27 @@ def vertex_errors(a: Mesh, b: Mesh, mapping, a_idx, b_idx) -> np.ndarray:
 
 
 def cmd_show(args) -> int:
-    from .mesh import load_mesh
-
     if not args.png and not args.ply:
         raise ValueError("give --png FILE and/or --ply FILE: there is nothing to write")
     size = _parse_size(args.size)
-    color_by = args.color_by or ("error" if args.truth else "position")
+    color_by = args.color_by or (
+        "error" if args.truth else "confidence" if args.confidence else "position"
+    )
     if color_by == "error" and not args.truth:
         raise ValueError("--color-by error needs --truth ('identity' or A.vts B.vts)")
     if color_by == "confidence" and not args.confidence:
         raise ValueError("--color-by confidence needs --confidence FILE.npy")
     if args.png:
         require_matplotlib()
+    for out in (args.png, args.ply):  # before any work
+        if out:
+            check_writable_folder(os.path.dirname(os.path.abspath(out)))
     a, b = load_mesh(args.a), load_mesh(args.b)
     f = read_map(args.map, a.n_vertices, b.n_vertices)
     values, label, top, cmap = None, "", None, "inferno_r"
-    if color_by == "error":
+    if not args.png:  # the PLY pair carries the colour transfer only
+        pass
+    elif color_by == "error":
         ai, bi = _truth(args.truth, a.n_vertices, b.n_vertices)
         values = vertex_errors(a, b, f, ai, bi)
         label = "geodesic error / sqrt(area of B)"
