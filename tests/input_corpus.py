@@ -129,6 +129,7 @@ BAD = {
     "ply_binary_junk": ("ply", b"\x00\xff" * 100, "not a PLY"),
     "ply_no_end_header": ("ply", b"ply\nformat ascii 1.0\nelement vertex 3\n", "not a PLY"),
     "ply_unknown_format": ("ply", ply_ascii(TET_V, TET_F).replace(b"ascii", b"utf8"), "unknown PLY format"),
+    "ply_float_face_indices": ("ply", ply_ascii(TET_V, TET_F).replace(b"list uchar int", b"list uchar float"), "face indices must be integers"),
     "ply_bad_property": ("ply", ply_ascii(TET_V, TET_F).replace(b"property float z", b"property quux z"), "unexpected PLY header line"),
     "ply_ascii_huge_count": ("ply", ply_ascii(TET_V, TET_F, vertex_count=10**12), "shorter"),
     "ply_binary_huge_count": ("ply", ply_binary(TET_V, TET_F, vertex_count=10**12), "shorter"),

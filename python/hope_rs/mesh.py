@@ -567,6 +567,8 @@ def _read_ply(data: bytes) -> tuple[np.ndarray, np.ndarray]:
             t[0] == "property" and elements and len(t) == 5 and t[1] == "list"
             and t[2] in _PLY_TYPES and t[3] in _PLY_TYPES and _PLY_TYPES[t[2]][0] in "iu"
         ):  # fmt: skip
+            if t[4] in ("vertex_indices", "vertex_index") and _PLY_TYPES[t[3]][0] not in "iu":
+                raise _LineError(no, f"face indices must be integers, not {t[3]}")
             elements[-1][2].append((t[4], _PLY_TYPES[t[2]], _PLY_TYPES[t[3]]))
         else:
             raise _LineError(no, f"unexpected PLY header line {_show(t)}")

@@ -306,8 +306,8 @@ class BasisPrefetch:
                 return  # Cancelled, or a failure the spectral pass meets again
 
     def cancel(self) -> None:
-        """Tells the thread to stop at the eigensolver's next step (a few milliseconds at 5k
-        vertices) and waits for it; bases solved before stay in :attr:`solved`."""
+        """Tells the thread to stop at the eigensolver's next step (one shift-invert solve)
+        and waits for it; bases solved before stay in :attr:`solved`."""
         self.stop.set()
         _join(self.thread)
 
