@@ -166,37 +166,29 @@ def match(
     multiscale : bool
         For large meshes: match coarse copies of the shapes first (with the options above),
         lift that map to the fine vertices and refine it for
-        :func:`~hope_rs.multiscale.fine_passes` passes (see :mod:`hope_rs.multiscale`). About
-        three times faster on 100k-vertex meshes, with a larger error (FAUST subdivided to
-        110k: 37 s instead of 123 s, mean geodesic error 0.0112 instead of 0.0088). Unless
-        both shapes are dense enough to halve (see
+        :func:`~hope_rs.multiscale.fine_passes` passes (see :mod:`hope_rs.multiscale`).
+        Faster, with a larger error than the default path (see docs/decisions.md#multiscale).
+        Unless both shapes are dense enough to halve (see
         :func:`~hope_rs.multiscale.coarse_mesh`), this is the default path.
     spectral : bool
         After HOPE, run ZoomOut from its map and keep, region by region, whichever of the two
-        maps distorts A's 2-rings less (see :mod:`hope_rs.spectral`). On differently
-        triangulated shapes this lowers HOPE's error (63 remeshed FAUST/TOSCA pairs: mean
-        geodesic error 0.042 → 0.024), on identically triangulated ones HOPE's exact map stays.
-        It costs two Laplace–Beltrami eigenbases (about 0.7 s each at 5k vertices, 4 s at 28k)
-        and is skipped when a shape has more than
-        :data:`~hope_rs.spectral.MAX_VERTICES` vertices, and when HOPE's map has settled (its
-        last pass and the polish moved no vertex and LMD trusts every vertex; see
-        :attr:`hope_rs.refine.RefineResult.settled`): 5 of the 6 faust_reg pairs of the
-        bench and TOSCA remeshed wolf, whose maps are exact, and no other remeshed pair; there
-        the pass never changed the map and took 0.3-0.6 s. With ``shared_faces`` it is also
-        skipped when HOPE's map sends every face of A onto a face of B one to one.
+        maps distorts A's 2-rings less (see :mod:`hope_rs.spectral`): lowers the error on
+        differently triangulated shapes and keeps HOPE's map on identically triangulated ones.
+        Costs two Laplace–Beltrami eigenbases; skipped above
+        :data:`~hope_rs.spectral.MAX_VERTICES` vertices, when HOPE's map has settled (see
+        :attr:`hope_rs.refine.RefineResult.settled`) and, with ``shared_faces``, when HOPE's
+        map sends every face of A onto a face of B one to one. See docs/decisions.md#spectral.
     shared_faces : bool
         Last, on shapes that share most of their triangulation (at least
         :data:`~hope_rs.shared_faces.MIN_HANDLES` of A's vertices have all their faces mapped
         onto faces of B), run the finishing rounds of :mod:`hope_rs.shared_faces`: deform A as
         rigidly as possible onto the images of those vertices, move the others to the nearest
         vertex of B and repair with HOPE steps; then rebuild the map outward from its trusted
-        patches (:mod:`hope_rs.growth`). The refinement hands over after the pass
-        in which such vertices reach that share (from its second pass on). On the TOSCA cat
-        (28k vertices, 85% of its faces shared) 41.7% → 98.0% exact and a mean geodesic error
-        of 0.0139 → 0.0003, in 1–3 s more; on FAUST 012 without its legs against 018
-        93.1% → 100% exact. Shapes remeshed independently never qualify (at most 8.6% on 45
-        FAUST pairs), and the map is the same as with ``False``. Skipped above
-        :data:`~hope_rs.shared_faces.MAX_VERTICES` vertices.
+        patches (:mod:`hope_rs.growth`). The refinement hands over after the pass in which
+        such vertices reach that share (from its second pass on). Skipped above
+        :data:`~hope_rs.shared_faces.MAX_VERTICES` vertices. Independently remeshed shapes
+        never qualify, and their map is the same as with ``False``. See
+        docs/decisions.md#shared-faces.
     callback : callable, optional
         Called with each :class:`~hope_rs.refine.Iteration` as it finishes (of the coarse
         match too, with ``multiscale``); the polish step has ``polish=True``. An exception it
@@ -250,18 +242,16 @@ def match(
         }  # fmt: skip
         coarse = None
         t = time.perf_counter()
-        # Both shapes or neither: a coarse copy matched against a fine shape of another density
-        # did worse than the default path (FAUST 27k -> 6.9k: 0.070 against 0.048).
+        # Both shapes or neither: a coarse copy matched against a sparser shape did worse than
+        # the default path (docs/decisions.md#multiscale).
         sparse = _too_sparse_to_coarsen(sa, sb) if multiscale else None
         if multiscale and sparse is not None:
             log.skipped("coarse", f"multiscale not applied: {sparse}")
         if multiscale and sparse is None:
             from .multiscale import coarse_start, fine_passes
 
-            # The spectral pass runs once, at the finest level it affords: on the TOSCA cat
-            # (28k) a pass on the coarse copies as well left 9.3% exact / 0.0214 in 27.4 s, against
-            # 27.2% / 0.0182 in 22.8 s with the fine pass only; on FAUST subdivided to 110k, where
-            # the fine shapes are too large for it, the coarse pass took 0.0131 to 0.0116 (with a 20 → 100 basis).
+            # The spectral pass runs once, at the finest level it affords
+            # (docs/decisions.md#spectral).
             coarse_spectral = spectral and not applies(sa, sb)
             log.start("coarse", detail="matching coarse copies of both shapes")
             relay = log.relay("coarse")

@@ -15,61 +15,42 @@ from .shape import Shape
 
 #: Candidates kept per row of the overlap cost (plus the current match).
 TOP_K = 48
-#: First auction epsilon at least (value range) / this: these costs crowd some vertices far
-#: down their candidate lists, and a coarse start solved them 3.3x faster than the solver's
-#: general-purpose default (see ``auction_assignment_int_with`` in src/auction.rs).
+#: First auction epsilon at least (value range) / this: top-k overlap costs push some vertices
+#: far down their rows, and a coarse first phase solves them faster than the solver's
+#: general-purpose default (``auction_assignment_int_with`` in src/auction.rs;
+#: docs/decisions.md#auction).
 AUCTION_FLOOR_DIV = 16
 
 
 def default_schedule(k_max: int) -> list[int]:
     """One pass: k going k_max → 1. Coarse neighbourhoods first fix large errors, fine ones then
-    sharpen (on FAUST, going 1 → k_max instead reached 73% exact against 96%)."""
+    sharpen (docs/decisions.md#schedule)."""
     return list(range(k_max, 0, -1))
 
 
 #: At most this many passes of the schedule. Pairs whose vertices keep trading places run to the
-#: limit, so it sets their time. Measured against 6 (the limit until then): 63 remeshed pairs
-#: 0.01944 -> 0.01945 mean geodesic error (paired difference +0.00001 +- 0.00004; 18 pairs ran
-#: more than 4 passes), 2.50 -> 2.38 s per pair and 3.75 -> 2.96 s for the slowest; faust_reg 11
-#: of 12 directed pairs 100% exact either way (018 -> 019 85.1% both); the cat 0 -> 6 42.4% /
-#: 0.0146 -> 40.7% / 0.0149 in 25.6 -> 19.2 s, 6 -> 0 37.9% / 0.0162 -> 37.5% / 0.0158 in
-#: 22.2 -> 19.3 s. A limit of 5 changed nothing on the 63 pairs either (0.01943). A limit of 3,
-#: measured after anchors.FLAGGED_MIN_SHIFT: 0.01885 -> 0.01951 (tosca_r 0.0205 -> 0.0225), the
-#: cat 0 -> 6 41.7% -> 39.0% and 6 -> 0 47.8% -> 40.2% exact.
+#: limit, so it sets their time; more passes did not pay (docs/decisions.md#stopping).
 MAX_PASSES = 4
 #: Stop after a pass that changed fewer than this fraction of the vertices.
 CONVERGED_FRACTION = 0.01
-#: With the global step, also stop when a pass shrank the fraction of vertices LMD distrusts by
-#: less than this share. Differently triangulated shapes never reach the first rule (no
-#: bijection between their vertices exists, so hundreds of vertices keep trading places), while
-#: their witness fraction levels off: on FAUST remeshed 000→004 it went 0.75, 0.93, 0.965,
-#: 0.966, and the error with it. Relative, because same-connectivity pairs still gain at the
-#: top: faust_reg 012→018 went 0.9888, 0.9939, 0.9988, 1.0 on its way to 100% exact (an absolute
-#: gain of 0.01 stopped it at 92%). Checked from the fourth pass on: early passes can lower the
-#: fraction while they fix the map (002→007: 0.45, 0.36, 0.62, ...), as false witnesses of the
-#: initial map lose their support.
+#: With the global step, also stop (from the fourth pass on) when a pass shrank the share of
+#: vertices LMD distrusts by less than this fraction of itself: differently triangulated pairs
+#: never reach :data:`CONVERGED_FRACTION`, but their witness share levels off. Relative, since
+#: same-connectivity pairs still gain near 1; not earlier, since early passes can lower the
+#: share while they fix the map (docs/decisions.md#stopping).
 MIN_UNTRUSTED_DROP = 0.1
 #: From this pass (0-based) on, the global repair also checks long-range distances
 #: (:func:`~hope_rs.anchors.anchor_step`): LMD looks at 2-rings only, so a region mapped
-#: consistently onto its mirror image passes it. Checking in the second pass only, measured on
-#: every remeshed FAUST and TOSCA pair: faust_r mean error 0.0525 → 0.0458 (007→008 0.131 →
-#: 0.066, 002→003 0.101 → 0.089), tosca_r 0.0370 → 0.0371, faust_reg still 100% exact. A
-#: mirrored region that one check halves survives to the end, though (faust_r 002→003: 29% of
-#: the vertices over 0.2 off after the first pass, 17% after the second repair, still 12% at
-#: the end), so every later pass checks again: 63 remeshed pairs 0.0473 → 0.0423 (paired
-#: difference -0.0050 ± 0.0020). Checking from the first pass, on the initial map, gave 0.0418
-#: but flagged right vertices in earlier measurements (faust_reg 018→019 ended at 90.6-92.7%
-#: exact instead of 100% in two of three variants).
+#: consistently onto its mirror image passes it. Every later pass checks again (a mirrored
+#: region one check halves survives otherwise); not the first pass, where on the initial map
+#: it flags right vertices (docs/decisions.md#global-repair).
 GLOBAL_CHECK_PASS = 1
 #: From this pass (0-based) on, a witness's current match is worth :data:`STAY_COUNTS` more
-#: overlap counts, so it moves only for a clear gain. Differently triangulated shapes have no
-#: bijection between their vertices, and one-to-one steps keep trading trusted vertices for
-#: equal overlaps; each pass then slid the map further (FAUST remeshed 001→007 went 0.030,
-#: 0.040, 0.050, 0.061, 0.069 over passes 2-6); with the extra count, 63 remeshed pairs went
-#: 0.0410 → 0.0387 in mean error. Earlier passes still move everything: they fix the initial
-#: map's large errors, witnesses included. A stronger hold (three counts, or witnesses fixed)
-#: left identically triangulated FAUST pairs short of 100% exact: a witness one vertex off
-#: must still be able to move.
+#: overlap counts, so it moves only for a clear gain: between different triangulations the
+#: one-to-one steps otherwise trade witnesses between equal overlaps and slide the map. Earlier
+#: passes still move everything (they fix the initial map's large errors); a stronger hold
+#: keeps identically triangulated pairs from exact, since a witness one vertex off must still
+#: be able to move (docs/decisions.md#stay).
 STAY_PASS = 2
 STAY_COUNTS = 1
 #: From this pass (0-based) on, each pass first moves back whole regions that LMD trusts
@@ -110,9 +91,8 @@ class RefineResult:
     settled: bool = False
 
 
-# BLAS runs only small products here (the global repair's projections); with more than one
-# thread OpenBLAS's idle workers spin and take a core from rayon: 17% of all cycles of a 5k
-# match went to blas_thread_server before this.
+# One BLAS thread: the products here are small (the global repair's projections), and
+# OpenBLAS's spinning idle workers would take a core from rayon.
 @with_single_threaded_blas
 def refine(
     a: Shape,
@@ -144,17 +124,14 @@ def refine(
 
     A last step at hop radius ``polish_k`` lets every vertex take its best-overlapping candidate
     without the one-to-one constraint. When the shapes are triangulated differently no bijection
-    between their vertices exists, and forcing one leaves many vertices an edge or two off: on
-    FAUST remeshed 000→004 the polish lowers the mean geodesic error from 0.025 to 0.018 (k = 3 was
-    best among 1..8), and on identically triangulated pairs it changes nothing. ``None`` keeps the
-    one-to-one map.
+    between their vertices exists, and forcing one leaves many vertices an edge or two off; on
+    identically triangulated pairs the polish changes nothing (docs/decisions.md#polish).
+    ``None`` keeps the one-to-one map.
 
     With ``global_step`` each pass starts with :func:`global_repair`, which re-places the
     vertices LMD does not trust by their geodesic distances to trusted ones; it is recorded in
     the history as a step with k = 0. The k-hop steps alone win back a wrongly matched region
-    a few hops per pass; on FAUST remeshed 002→007 (initial mean error 0.36) six passes left
-    0.117 without the repair and 0.054 with it, on 004→009 0.132 against 0.061, and faust_reg
-    019→020 reached 100% exact in 25 steps instead of 97.9% in 49. From the second pass on, the
+    a few hops per pass (docs/decisions.md#global-repair). From the second pass on, the
     repair also distrusts vertices whose long-range distances disagree (see
     :data:`GLOBAL_CHECK_PASS`), which LMD alone cannot see, and is preceded by a step that
     moves back whole regions mapped to the wrong place (:data:`REGION_CHECK_PASS`).
@@ -285,7 +262,7 @@ def assign_by_overlap(
         raise ValueError(f"stay must be in [0, 1000] overlap counts, got {stay}")
     keep = injective_completion(f, b.n_vertices, b.points)
     # ``keep`` is a full assignment inside the pattern, which spares the solver its
-    # feasibility search (a quarter of its time at 28k).
+    # feasibility search.
     hint = keep if a.n_vertices <= b.n_vertices else _hint_rows(keep)
     # The cost is built and solved in one Rust call (src/step.rs), so it never makes the round
     # trip through NumPy; rows left out take their best column there.
@@ -328,9 +305,9 @@ def injective_completion(f: np.ndarray, n_b: int, points: np.ndarray | None = No
     current image, closest pairs first. Without them the duplicates take the unused columns in
     index order, which ties the result to how the two meshes happen to be numbered: on a pair
     numbered alike (TOSCA cat0 → cat6, whose ground truth is the identity) the k-th duplicate
-    then lands near its true match, and with B's vertices relabelled at random HOPE's mean error
-    on that pair went from 0.017 to 0.19. Only the refinement's cost needs this, so ``points``
-    is optional for other callers.
+    then lands near its true match, which leaks the ground truth into the cost
+    (docs/decisions.md#numbering). Only the refinement's cost needs this, so ``points`` is
+    optional for other callers.
     """
     f = np.asarray(f, dtype=np.int64)
     _, first = np.unique(f, return_index=True)
