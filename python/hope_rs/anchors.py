@@ -36,28 +36,20 @@ GLOBAL_MIN_FLAGGED = 0.1
 #: A flagged vertex moves only when its place by anchor distances is at least this far from its
 #: current image (sqrt(area) units; a lower bound from anchor distances, see
 #: :func:`shift_lower_bound`). A mirrored region moves far; a right map whose distances a pose
-#: bends beyond the agreement tolerance gets placements a few edges off. Started from the TOSCA
-#: cat's true map, one pass of HOPE kept 92.1% exact, and the check then flagged and re-placed
-#: 9720 vertices (35%), leaving 59.6%. Mean error over 63 remeshed pairs, against 0.01945
-#: when every flagged vertex moved: 0.05 0.01960, 0.1 0.01912, 0.15 0.01885 (paired with 0.1:
-#: -0.00028 +- 0.00010, better on 25, worse on 9), 0.2 0.01902 (TOSCA cat0->cat1 0.028 ->
-#: 0.041), 0.3 0.0209 and never moving them 0.0219 (FAUST 002->003, a mirrored region, 0.017
-#: -> 0.083 and 0.092). With 0.15, faust_reg 018->019 85.1% -> 100% exact, the TOSCA cat
-#: 0->6 40.7% / 0.0149 -> 41.7% / 0.0139 and 6->0 37.5% / 0.0157 -> 47.8% / 0.0131.
+#: bends beyond the agreement tolerance gets placements a few edges off
+#: (docs/decisions.md#global-repair).
 FLAGGED_MIN_SHIFT = 0.15
 #: :func:`swapped_regions`: a region is a component of the vertices with at least this share
 #: of their 2-ring consistent (LMD's witnesses need half, and at half the swapped hands of
-#: TOSCA remeshed david stayed joined to the body). 0.7 and 0.8 gave 0.0198 and 0.0200 mean
-#: error over 63 remeshed pairs; 0.7 also freed a limb of cat0→cat2 (0.045 → 0.029) ...
+#: TOSCA remeshed david stayed joined to the body; docs/decisions.md#global-repair) ...
 REGION_CONSISTENT = 0.7
 #: ... of at least this many vertices; it moves when its share of agreeing anchor distances
 #: rises by this much ...
 REGION_MIN_SIZE = 10
 REGION_MIN_GAIN = 0.2
 #: ... and the median vertex moves at least this far (a lower bound from anchor distances, in
-#: sqrt(area) units). Swapped hands measured 0.6-0.95; on TOSCA remeshed cat0→cat2, whose
-#: poses bend geodesics by more than the agreement tolerance, right regions with few agreeing
-#: distances measured 0.12-0.23.
+#: sqrt(area) units): a swapped region moves far, a right region whose geodesics a pose bends
+#: moves little (docs/decisions.md#global-repair).
 REGION_MIN_SHIFT = 0.3
 
 

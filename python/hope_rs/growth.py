@@ -4,21 +4,20 @@ The last step of the shared-face finish (:mod:`hope_rs.shared_faces`). It keeps 
 of the map it can trust and rebuilds the rest outward from it, vertex by vertex:
 
 - **Seeds**: handles (vertices whose faces all map onto faces of B) in connected patches of at
-  least :data:`~hope_rs.handles.SEED_SHARE` of A's vertices. On the TOSCA cat every wrong
-  handle lay in a patch of at most 1% of the vertices (a region that HOPE shifted as a whole
-  by a few edges), and every patch above 2% was at least 95% right.
+  least :data:`~hope_rs.handles.SEED_SHARE` of A's vertices: wrong handles lie in small
+  patches (a region that HOPE shifted as a whole by a few edges), large patches are mostly
+  right.
 - **Across shared faces**: a face of A with two mapped vertices names the image of its third
   vertex, if the two triangles have nearly the same shape (see ``_core.grow_across_faces``).
-- **By local affine fits**: where the triangulations differ (TOSCA's cat6 is retriangulated
-  on 22% of the cat, where the pose stretches its edges by a median 33%), each unmapped
+- **By local affine fits**: where the triangulations differ (retriangulated regions, often
+  where the pose stretches the edges most), each unmapped
   vertex with enough mapped vertices in its 2-ring gets the affine map that best carries those
   onto their images; the B vertex nearest its predicted position is taken if it is clearly the
   nearest free one (:data:`AFFINE_STAGES`).
 - **From both sides**: the same growth from B to A, and rounds that keep what the two agree on
   (see :func:`grow`).
 
-Vertices never reached keep their image. On the cat, after the finish's rounds, 68.6% -> 98.0%
-exact (cat0 -> cat6) and 71.5% -> 97.6% (cat6 -> cat0), in about 2 s.
+Vertices never reached keep their image. See docs/decisions.md#growth for the measurements.
 """
 
 from __future__ import annotations
@@ -32,8 +31,8 @@ from .kernels import khop_neighbourhoods
 from .shape import Shape
 
 #: Largest triangle shape difference for growing across a face (in edge lengths; see
-#: ``_core.grow_across_faces``). Measured on the cat's true map: a face both meshes share
-#: differs by less than 0.5 in 94% of cases, a retriangulated one in 18%.
+#: ``_core.grow_across_faces``): keeps most right proposals and few wrong ones
+#: (docs/decisions.md#growth).
 FACE_ERROR = 0.5
 #: Acceptance tests of the affine growth, strict first: the nearest free B vertex is taken if
 #: its distance to the prediction is below ``accept`` times its distance to its own nearest
@@ -41,9 +40,8 @@ FACE_ERROR = 0.5
 AFFINE_STAGES = ((0.35, 2.0), (0.5, 1.5), (0.7, 1.2))
 #: The affine fits weigh each mapped neighbour by exp(-r² / (WEIGHT_WIDTH × the mean r² of
 #: the vertex's mapped neighbours)), r its distance on A: the stretch varies within a 2-ring.
-#: On the cat (cat0 -> cat6 / cat6 -> cat0) unweighted fits gave 93.3% / 92.4% exact; 1.0 gave
-#: 97.5% / 97.2%, 0.7 98.0% / 97.7%, 0.5 98.2% / 97.7%, and 0.35 94.1% / 93.7% (the cat's head,
-#: reached through a narrow neck, then grew one vertex off in both directions).
+#: Narrower widths grew a region reached through a narrow neck (the cat's head) one vertex off
+#: (docs/decisions.md#growth).
 WEIGHT_WIDTH = 0.7
 #: An unmapped vertex is fitted once at least this many vertices of its 2-ring are mapped.
 MIN_KNOWN = 6
@@ -54,11 +52,10 @@ ROUNDS = 3
 FACES_FIRST = ("faces", 0, 1, 2)
 #: The order after the retriangulated regions were cleared (see :func:`grow`): the affine
 #: stages first, so that fits from every side of a region place its vertices before wrong
-#: face proposals spread in (on the cat, from the true map outside the two patches: 71% / 72%
-#: of the patches exact with faces first, 85% / 81% this way).
+#: face proposals spread in (docs/decisions.md#growth).
 AFFINE_FIRST = (0, 1, 2, "faces")
-#: The order of the agreement rounds (measured on the cat with unweighted fits: 93.3% / 92.4%
-#: exact in 2.9 s, with :data:`AFFINE_FIRST` 93.2% / 92.3% in 3.6 s).
+#: The order of the agreement rounds: faster than :data:`AFFINE_FIRST` with the same accuracy
+#: (docs/decisions.md#growth).
 AGREEMENT_ORDER = (0, 1, "faces", 2)
 #: Rounds in which the growths from A's side and from B's side (inverted) keep the vertices
 #: they agree on and grow the rest again.
@@ -73,9 +70,8 @@ def grow(a: Shape, b: Shape, f: np.ndarray) -> np.ndarray:
     Each first grows faces first, then keeps only its handle patches large enough to seed,
     less their edge vertices (the retriangulated regions go, and wrong picks at their edges),
     and grows again affine first. Then, :data:`AGREEMENT_ROUNDS` times, both keep only what
-    they agree on and grow again from it. On the cat after the finish's rounds 98.0% / 97.6%
-    (cat0 -> cat6 / cat6 -> cat0) of the vertices came out exact; the README's "Growth from
-    trusted patches" lists what each step added.
+    they agree on and grow again from it. See docs/decisions.md#growth for what each step
+    added.
     """
     f = np.asarray(f, dtype=np.int64)
     n_a, n_b = a.n_vertices, b.n_vertices

@@ -3,7 +3,7 @@
 A vertex of A is a handle of a map ``f`` when every face around it maps onto a face of B with
 the same orientation and no other vertex shares its image. On shapes that are one
 triangulation in two poses, the true map makes almost every vertex a handle; on shapes
-remeshed independently few vertices are (at most 8.6% on 45 FAUST pairs). The shared-face
+remeshed independently few vertices are. The shared-face
 finish (:mod:`hope_rs.shared_faces`) deforms towards them, and the growth
 (:mod:`hope_rs.growth`) starts from those in large connected patches.
 """
@@ -16,8 +16,8 @@ from scipy.sparse.csgraph import connected_components
 
 from .shape import Shape
 
-#: Handle patches with fewer of A's vertices than this share do not seed the growth (on the
-#: TOSCA cat every wrong handle lay in a patch of at most 1%; see :mod:`hope_rs.growth`).
+#: Handle patches with fewer of A's vertices than this share do not seed the growth (wrong
+#: handles lie in small patches; see :mod:`hope_rs.growth` and docs/decisions.md#growth).
 SEED_SHARE = 0.02
 
 

@@ -2,25 +2,20 @@
 
 Where A and B are one triangulation in two poses (FAUST registrations, the TOSCA cat) or a part
 of one, the true map sends faces onto faces. HOPE's k-hop overlaps cannot see an error of a few
-edges where a pose stretches the surface: the TOSCA cat's cat0 -> cat6 changes the length of 5%
-of its shared edges by more than 27%, and there HOPE's map drifts smoothly by a median 3 edges,
-a drift that the overlaps of drifted witnesses reproduce.
+edges where a pose stretches the surface: there HOPE's map drifts smoothly by a few edges, a
+drift that the overlaps of drifted witnesses reproduce.
 
 Each round takes as handles the vertices whose faces all map onto faces of B (with their
 orientation) and whose image no other vertex shares, deforms A as rigidly as possible (ARAP,
 Sorkine and Alexa 2007) so that the handles sit on their images, moves every other vertex to
 the vertex of B nearest its deformed position, and then runs a few HOPE steps at a fixed hop
 radius with every vertex voting, which pull the moved vertices onto a one-to-one map. Rounds
-repeat while the handle patches that can seed the growth grow. On the cat (after two HOPE
-passes and the spectral pass; see :func:`hope_rs.match`) the rounds took the map from 41.7% to
-about 70% exact, mean geodesic error 0.0139 -> 0.005; FAUST 012 without its legs against the
-whole 018 from 93.1% to 99.98%. Last, :func:`hope_rs.growth.grow` rebuilds the map from its
-trusted patches outward (the cat: to 98.0% / 97.6% exact both ways, mean error 0.0003 /
-0.0007). The README's "Shared-face finish" and "Growth from trusted patches" list the variants
-measured.
+repeat while the handle patches that can seed the growth grow. Last,
+:func:`hope_rs.growth.grow` rebuilds the map from its trusted patches outward. See
+docs/decisions.md#shared-faces and docs/decisions.md#growth for the variants measured.
 
-Shapes without shared faces (independently remeshed ones: at most 8.6% of the vertices are
-handles on 45 FAUST pairs) do not qualify (see :data:`MIN_HANDLES`).
+Shapes without shared faces (independently remeshed shapes have few handles) do not qualify
+(see :data:`MIN_HANDLES`).
 """
 
 from __future__ import annotations
@@ -36,16 +31,14 @@ from .handles import face_handles, large_patches
 from .refine import assign_by_overlap
 from .shape import Shape
 
-#: Larger shapes are not finished (not measured there; a round's three HOPE steps alone took
-#: 0.5 s at 28k vertices).
+#: Larger shapes are not finished (not measured there).
 MAX_VERTICES = 60_000
 #: Rounds run only while at least this share of A's vertices are handles.
 MIN_HANDLES = 0.2
 #: At most this many rounds. They stop earlier once the share of A's vertices in handle
 #: patches large enough to seed the growth (:func:`~hope_rs.handles.seed_handles`) grows by
-#: less than :data:`MIN_GROWTH`: the rounds are there to seed it. On the cat the growth gave
-#: the same maps after 8 and 5 rounds (cat0 -> cat6 / cat6 -> cat0; 97.96% / 97.64% exact) as
-#: after 10, where the earlier rule (handles growing by 0.2%) stopped, 1.4 s and 4.0 s sooner.
+#: less than :data:`MIN_GROWTH`: the rounds are there to seed it
+#: (docs/decisions.md#shared-faces).
 ROUNDS = 10
 MIN_GROWTH = 0.01
 #: HOPE steps after each round's snapping, and their hop radius.
@@ -89,7 +82,7 @@ class _Arap:
         j = self.j = np.concatenate([edges[:, 1], edges[:, 0]])
         w = sp.csr_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
         self.lap = (sp.diags(np.asarray(w.sum(axis=1)).ravel()) - w).tocsr()
-        # Sums over each vertex's edges as one sparse product (np.add.at took 0.3 s at 28k).
+        # Sums over each vertex's edges as one sparse product (faster than np.add.at).
         self.per_vertex = sp.csr_matrix(
             (np.ones(len(i)), (i, np.arange(len(i)))), shape=(n, len(i))
         )

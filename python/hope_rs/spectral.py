@@ -5,9 +5,9 @@ connectivity but leaves a vertex-level roughness where they do not: no bijection
 triangulations exists, and every forced pairing is an edge or two off. ZoomOut (Melzi et al.
 2019) turns a map into a functional map on the Laplace–Beltrami eigenbases, grows the basis
 20 → 120 and reads a new map off each size; the result is smooth but rarely exact. Started
-from HOPE's map, it repairs what HOPE leaves (63 remeshed FAUST/TOSCA pairs: mean geodesic
-error 0.0423 → 0.0244), while on identically triangulated pairs it would trade HOPE's exact
-map for a smooth near miss (faust_reg 100% → 11-44% exact).
+from HOPE's map, it repairs what HOPE leaves on differently triangulated pairs, while on
+identically triangulated pairs it would trade HOPE's exact map for a smooth near miss (see
+docs/decisions.md#spectral).
 
 So the result takes, region by region, whichever map distorts A's 2-rings less (LMD's mean
 distortion, smoothed over a few rings of A so the choice is made by regions, not vertex by
@@ -34,9 +34,9 @@ from .lmd import MIN_CONSISTENT, local_map_distortion
 from .refine import RefineResult, refine
 from .shape import Shape
 
-#: ZoomOut's basis sizes: from K_START to K_END eigenfunctions in steps of K_STEP. On the 63
-#: remeshed pairs, ending at 120 gave 0.0244 mean error against 0.0254 at 100 (and 0.0250-0.0257
-#: at 60), for about 1.3 s more per 5k pair; steps of 10 lost 0.0006 on a 16-pair subset.
+#: ZoomOut's basis sizes: from K_START to K_END eigenfunctions in steps of K_STEP. A larger
+#: final basis lowered the error on remeshed pairs at about a second more per 5k-vertex pair
+#: (docs/decisions.md#spectral).
 K_START, K_END, K_STEP = 20, 120, 5
 #: ZoomOut iterates on at most this many vertices of each shape (evenly spread: a stride
 #: through the position-ordered internal numbering). Each sample of A is then matched among
@@ -46,12 +46,8 @@ MAX_SAMPLES = 8000
 CANDIDATES = 32
 #: From this basis size on, each vertex of a shape small enough to have no samples looks for
 #: its image only among the LOCAL_CANDIDATES vertices of B nearest (in space) to its current
-#: one, not among all of B: by then the map moves by a few edges per size. On the 63 remeshed
-#: pairs the pass took 0.30 s less per 5k pair (0.87 s against 1.17 s, eigenbases cached) and
-#: the mean error moved by +0.00002 ± 0.00005 (paired; 15 pairs better, 19 worse). With 32
-#: candidates it moved by +0.00009 ± 0.00006 (33 worse, 16 better); searching locally from
-#: size 40 cost +0.00012. Sampled shapes keep the search among B's samples: on the TOSCA cat
-#: the local search saved 1.2 s but took the mean error from 0.0146 to 0.0174.
+#: one, not among all of B: by then the map moves by a few edges per size. Sampled shapes keep
+#: the search among B's samples (docs/decisions.md#spectral).
 LOCAL_FROM = 60
 LOCAL_CANDIDATES = 64
 #: The stage is skipped when either shape has more vertices: their eigenbases alone would take
@@ -62,20 +58,13 @@ MAX_VERTICES = 60_000
 MAX_DISCREPANCY_RATIO = 1.1
 #: ... and also when ZoomOut's own map disagrees more than this factor times HOPE's: then the
 #: two eigenbases do not correspond (a partial shape), and the regions taken from it are suspect
-#: even when the chosen map's distances look no worse. FAUST 012 without its legs against 018:
-#: ZoomOut 1.43 times HOPE's discrepancy, the chosen map 0.96 times, with a mean geodesic error
-#: of 0.0194 against HOPE's 0.0053; on the 61 of 63 remeshed pairs where the choice took any
-#: ZoomOut region the factor was at most 1.016, on the TOSCA cat 0.95, on other cuts of FAUST
-#: (a side, 30%) 1.02-1.03.
+#: even when the chosen map's distances look no worse (docs/decisions.md#spectral).
 MAX_ZOOMOUT_DISCREPANCY_RATIO = 1.2
 #: When the refinement reaches its last pass and that pass is at least this one (0-based: the
 #: fourth, the last of the default four), ZoomOut starts from the map after the pass's first
-#: (k = 8) step, in a background thread while the rest of the pass runs, instead of after the
-#: polish (see :class:`EarlyZoomOut`). On the 63 remeshed pairs (all 45 FAUST pairs, 9 TOSCA
-#: pairs both ways) the mean error went 0.01885 -> 0.01886 (paired +0.00001 +- 0.00001), every
-#: faust_reg pair stayed 100% exact and the cat 41.7% / 47.8% exact (0 -> 6 / 6 -> 0). Started
-#: at the beginning of the pass instead (before its global repair) it cost +0.00024 +- 0.00019
-#: (TOSCA remeshed cat0 -> cat1 0.028 -> 0.039), after the repair +0.00017 +- 0.00016.
+#: step, in a background thread while the rest of the pass runs, instead of after the polish
+#: (see :class:`EarlyZoomOut`); the maps are the same within noise. Earlier starts, before
+#: the pass's global repair, cost accuracy (docs/decisions.md#spectral).
 EARLY_FROM_PASS = 3
 #: Rounds of 1-ring averaging of the distortion difference before the choice.
 SMOOTHING_STEPS = 32
@@ -113,9 +102,8 @@ def zoomout(
     """
     phi_a, mass_a = a.spectral_basis(k_end)
     phi_b, _ = b.spectral_basis(k_end)
-    # Its products are small (k x k fits, n x k embeddings), where OpenBLAS's threads cost more
-    # than they give: the whole loop took 1.35 s on one BLAS thread against 2.25 s on two at
-    # 5k vertices (the nearest-neighbour search splits its rows between threads itself).
+    # Small products (k x k fits, n x k embeddings): one BLAS thread is faster here; the
+    # nearest-neighbour search splits its rows between threads itself.
     with single_threaded_blas():
         return _zoomout(a, b, f, phi_a, mass_a, phi_b, k_start, k_end, step, max_samples, stop)
 
@@ -167,9 +155,8 @@ def functional_map(
 ) -> np.ndarray:
     """C minimising ||phi_a C - pulled_b|| in the ``mass``-weighted norm (rows are vertices of
     A; ``pulled_b`` holds B's eigenfunctions at each vertex's image), by its normal equations;
-    ``gram`` is phi_aᵀ M phi_a if known. (An SVD least-squares solve took 70 ms per size at 5k
-    vertices, 17 times per pass; the eigenvectors are M-orthonormal, so the system is
-    well-conditioned.)"""
+    ``gram`` is phi_aᵀ M phi_a if known. (Normal equations rather than an SVD least-squares
+    solve: the eigenvectors are M-orthonormal, so the system is well conditioned.)"""
     if gram is None:
         gram = phi_a.T @ (mass[:, None] * phi_a)
     return scipy.linalg.solve(gram, phi_a.T @ (mass[:, None] * pulled_b), assume_a="pos")
@@ -178,7 +165,7 @@ def functional_map(
 def nearest_rows(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Index of the nearest row of ``y`` for each row of ``x`` (Euclidean, exhaustive): the
     initial map's float32 BLAS search. In 20-120 dimensions a k-d tree searches nearly
-    everything anyway, and was 4x slower here."""
+    everything anyway, and was slower here."""
     x32, y32 = x.astype(np.float32), y.astype(np.float32)
     return _nearest_one(x32, y32, np.einsum("ij,ij->i", y32, y32))[0][:, 0]
 
@@ -204,14 +191,13 @@ class _SpectralNeighbours:
     ) -> np.ndarray:
         k = min(k, self.points.shape[0])
         if self.near.shape[1] < k:
-            # Every vertex's spatial neighbours, once: a k-d tree query per call took 43 ms of
-            # the 53 ms a 5k call took with 64 candidates.
+            # Every vertex's spatial neighbours, once: a k-d tree query per call took most of
+            # the call's time.
             from scipy.spatial import cKDTree
 
             _, near = cKDTree(self.points).query(self.points, k=k, workers=2)
             self.near = near.reshape(self.points.shape[0], -1).astype(np.int64, copy=False)
-        # In Rust: NumPy gathered an (n, CANDIDATES, k) array per call (the cat's pass without
-        # its bases took 3.6-4.5 s with it, 2.7-3.0 s now).
+        # In Rust: NumPy gathered an (n, CANDIDATES, k) array per call.
         return _core.nearest_among(
             np.ascontiguousarray(emb_a, dtype=np.float32),
             np.ascontiguousarray(emb_b, dtype=np.float32),
@@ -271,9 +257,7 @@ class BasisPrefetch:
     the caller refines.
 
     HOPE's auction runs on one core, and the eigensolves release the GIL, so the solves fill
-    the idle core: on a 5k FAUST remeshed pair the match took 3.10 s against 3.55 s (mean of
-    six alternating runs; the refinement itself slowed by about 0.45 s, the spectral stage
-    went from 1.5 s to 0.5 s). The thread keeps the caller's CPU priority: the caller waits for
+    the idle core. The thread keeps the caller's CPU priority: the caller waits for
     its bases, so a lowered priority starves both on a busy machine (see
     ``docs/decisions.md#spectral``).
 
@@ -335,9 +319,8 @@ def _pass_zoomout(
 
 class EarlyZoomOut:
     """ZoomOut started from the refinement's map partway through its last pass, in a background
-    thread: the pass's auctions run on one core, and ZoomOut fills the other. On the TOSCA cat
-    the match took 19.1-19.8 s against 20.6-21.9 s, FAUST remeshed 002->007 2.46-2.52 s against
-    2.73-2.81 s (see :data:`EARLY_FROM_PASS` for the accuracy).
+    thread: the pass's auctions run on one core, and ZoomOut fills the other (see
+    :data:`EARLY_FROM_PASS` for the accuracy, docs/decisions.md#spectral for the time).
 
     :meth:`start` is the refinement's ``on_last_pass`` hook. The thread first waits for the
     :class:`BasisPrefetch` of the same match; when either basis is missing after it (its solve
@@ -454,12 +437,9 @@ def long_range_discrepancy(
 
     The choice by region compares 2-rings only. Where the two bases differ (a partial shape:
     FAUST without its legs against a whole body) ZoomOut can map a region smoothly to the wrong
-    place, which its 2-rings do not show; its distances to the rest of the shape do: HOPE's map
-    0.122, the chosen one 0.179, and a mean geodesic error of 0.048 against 0.103 (measured
-    before :data:`~hope_rs.anchors.FLAGGED_MIN_SHIFT`; since then HOPE's map there is better,
-    0.0053, and the ZoomOut map's own discrepancy is what tells, see
-    :data:`MAX_ZOOMOUT_DISCREPANCY_RATIO`). On the remeshed pairs the chosen map bends these
-    distances as little as HOPE's or less.
+    place, which its 2-rings do not show; its distances to the rest of the shape do (see
+    :data:`MAX_ZOOMOUT_DISCREPANCY_RATIO` and docs/decisions.md#spectral). On remeshed pairs
+    the chosen map bends these distances as little as HOPE's or less.
     """
     cand = np.flatnonzero(trusted)
     if cand.size < 4:
