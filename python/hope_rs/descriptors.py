@@ -41,8 +41,7 @@ def shot(mesh: Mesh, *, radius: float = SHOT_RADIUS) -> np.ndarray:
 
 def _shot_as_numbered(mesh: Mesh, radius: float = SHOT_RADIUS, sites=False) -> np.ndarray:
     # Computed in the numbering given: its sums run in neighbour order, and where a local frame
-    # is nearly degenerate the last bits decide an axis (0.14% of the TOSCA cat's vertices
-    # changed, by up to 0.23, under a random renumbering). The public functions pass the
+    # is nearly degenerate the last bits decide an axis. The public functions pass the
     # position-fixed numbering (hope_rs.numbering), so relabelling a mesh relabels its
     # descriptors bit for bit. The same holds for every `_as_numbered` function below.
     # ``sites``: those of hope_rs.sites.shot_sites for this mesh and radius if the caller has
@@ -141,9 +140,8 @@ def _shift_invert(L, M, sigma: float, stop: threading.Event | None):
 #: Coarse eigenpairs beyond the ``k`` asked for in :func:`laplacian_basis_from_coarse`: the
 #: Rayleigh–Ritz step then has room to sort out the top of the spectrum.
 COARSE_EXTRA = 20
-#: Steps of shifted inverse iteration on the fine mesh in :func:`laplacian_basis_from_coarse`.
-#: On the TOSCA cat (28k vertices, coarse copy 8k, k = 120): one step left a median relative
-#: residual of 0.10, two of 0.010.
+#: Steps of shifted inverse iteration on the fine mesh in :func:`laplacian_basis_from_coarse`
+#: (two steps reach about 1% median relative residual; docs/decisions.md#spectral).
 COARSE_ITERATIONS = 2
 #: The fine iteration's shift, as a fraction of the largest coarse eigenvalue: small enough to
 #: damp the prolongation's high frequencies strongly, large enough that the constant function
@@ -161,12 +159,10 @@ def laplacian_basis_from_coarse(
     The coarse eigenvectors, copied to the fine vertices, span nearly the right subspace but
     are piecewise constant; :data:`COARSE_ITERATIONS` steps of shifted inverse iteration on
     the fine Laplacian (one sparse factorisation, block solves) smooth them, and a
-    Rayleigh–Ritz step turns the subspace into mass-orthonormal approximate eigenvectors. On
-    the TOSCA cat (28k vertices): 3.2 s instead of 5-6 s for ARPACK on the fine mesh, the first
-    20, 60 and 120 exact eigenvectors lie in the approximate ones' span to 4 decimals,
-    eigenvalues within 1.6%, and the default match gave the same accuracy (42.4% exact / 0.0146
-    against 42.6% / 0.0145). Raises ``RuntimeError`` when the subspace collapses. ``stop``: see
-    :func:`laplacian_basis_as_numbered`.
+    Rayleigh–Ritz step turns the subspace into mass-orthonormal approximate eigenvectors:
+    faster than ARPACK on the fine mesh, with the same accuracy of the match
+    (docs/decisions.md#spectral). Raises ``RuntimeError`` when the subspace collapses.
+    ``stop``: see :func:`laplacian_basis_as_numbered`.
     """
     import scipy.sparse.linalg as sla
 
@@ -209,9 +205,9 @@ def spectral_basis_of(
 
     Solved on one BLAS thread, so that the bits do not depend on who asks: :func:`hope_rs.match`
     solves in a background thread while HOPE refines (see
-    :class:`~hope_rs.spectral.BasisPrefetch`), the batch cache ahead of the pairs. (Alone, one
-    thread is slower: 0.68 s against 0.48 s for a 5k shape.) ``stop``: when set, the solve
-    raises :class:`~hope_rs._cancel.Cancelled` at its next step."""
+    :class:`~hope_rs.spectral.BasisPrefetch`), the batch cache ahead of the pairs (alone, one
+    thread is slower). ``stop``: when set, the solve raises
+    :class:`~hope_rs._cancel.Cancelled` at its next step."""
     with single_threaded_blas():
         return _spectral_basis_of(mesh, k, coarse, stop)
 

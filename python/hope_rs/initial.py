@@ -15,9 +15,8 @@ N_CANDIDATES = 32
 #: Descriptors are projected on this many principal axes before the neighbour search.
 PCA_DIMS = 64
 #: Above this many target vertices the exact search (quadratic time) gives way to an inverted-file
-#: search (about n^1.5). On FAUST subdivided to 27.5k vertices: exact 18-24 s, inverted file 14 s,
-#: 94% of the 32 candidates and 96% of the nearest ones found, initial map 20.4% exact against
-#: 21.9%; at 110k the exact search was still in its partition after 4 minutes (2 busy cores).
+#: search (about n^1.5), which finds most but not all of the exact candidates
+#: (docs/decisions.md#initial-map).
 EXACT_SEARCH_LIMIT = 60_000
 #: Threads of the exhaustive nearest-neighbour search (one BLAS thread each).
 MAX_THREADS = 8
@@ -37,13 +36,11 @@ def nearest_candidates(da: np.ndarray, db: np.ndarray, n: int) -> tuple[np.ndarr
         sample = both[:: max(1, both.shape[0] // 20000)] - mu
         # Eigenvectors of the small d x d covariance: far cheaper than an SVD of the samples.
         # One cast, then ``x.T @ x`` on a single buffer, which NumPy runs as a symmetric
-        # rank-k update: the mixed float64 @ float32 product took 0.12-0.64 s on the TOSCA
-        # cat's 28k x 352 samples, this 0.08-0.2 s, with the same values.
+        # rank-k update (faster than the mixed float64 @ float32 product, same values).
         s64 = sample.astype(np.float64)
         cov = s64.T @ s64
-        # One BLAS thread for the projection: with numpy 2.4's OpenBLAS a float32 product
-        # gave other bits on two threads than on one (1.5e-7 on a 300-vertex pair, 13 of its
-        # 300 initial matches), so the map depended on the process's thread count (a Ray
+        # One BLAS thread for the projection: a float32 product can give other bits on two
+        # threads than on one, so the map would depend on the process's thread count (a Ray
         # worker runs with one).
         with single_threaded_blas():
             _, vecs = np.linalg.eigh(cov)
@@ -139,9 +136,9 @@ def _inverted_file_candidates(da: np.ndarray, db: np.ndarray, n: int):
 def _nearest_one(da: np.ndarray, db: np.ndarray, nb2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The single nearest row of ``db`` per row of ``da`` (argmin, no partial sort).
 
-    The rows of ``da`` are split between threads that each run single-threaded BLAS: at 5000 x
-    5000 x 120 that took 60 ms against 132 ms on one thread, and OpenBLAS's own two threads
-    were no faster while they slowed the small products around this call in the spectral pass.
+    The rows of ``da`` are split between threads that each run single-threaded BLAS: faster
+    than one thread, and OpenBLAS's own threads were no faster while they slowed the small
+    products around this call in the spectral pass.
     """
     idx = np.empty((da.shape[0], 1), dtype=np.int64)
     dist = np.empty((da.shape[0], 1), dtype=np.float32)
@@ -184,10 +181,8 @@ def initial_map(
 
     With ``one_to_one``, the assignment of least total descriptor distance among each vertex's
     ``n_candidates`` nearest descriptors instead (vertices it cannot place take their nearest).
-    That is not the default: forcing SHOT matches apart made the initial map worse, not
-    better, on every pair we measured (mean geodesic error on FAUST remeshed 000→004 0.129
-    against 0.079 for nearest neighbours, 002→007 0.358 against 0.332, faust_reg 019→020
-    0.187 against 0.145), and it cost seconds more.
+    That is not the default: forcing SHOT matches apart made every measured initial map worse
+    and cost seconds more (docs/decisions.md#initial-map).
     """
     from .refine import injective_completion
 

@@ -12,9 +12,8 @@ from .shape import Shape
 #: tolerance (distances scaled by sqrt(area)): 1.25 times the geometric mean of A's mean edge
 #: length and the local edge length at p and f(p), so it follows the mesh density; p is a
 #: witness when at least this fraction of its 2-ring is consistent. A fraction rather than the
-#: mean distortion keeps witnesses available under heavy corruption: with 50% of a FAUST map
-#: shuffled, no vertex has a mean distortion below half an edge, while 28% keep a consistent
-#: majority (99.9% of them right).
+#: mean distortion keeps witnesses available when much of the map is wrong
+#: (docs/decisions.md#lmd).
 MIN_CONSISTENT = 0.5
 
 

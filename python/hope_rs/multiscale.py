@@ -1,9 +1,8 @@
-"""Coarse-to-fine matching for large meshes: HOPE on coarse copies, lifted, then one fine pass.
+"""Coarse-to-fine matching for large meshes: HOPE on coarse copies, lifted, then a few fine passes.
 
 A refinement step costs about linearly in the vertex count, and a k-hop ball of a dense mesh
-covers a small patch, so dense pairs run every pass of the schedule (FAUST subdivided to 110k
-vertices: 46 steps, about 130 s; 250k: 55 steps, over 5 minutes, measured with a limit of 6
-passes, now 4). ``match(..., multiscale=True)`` instead
+covers a small patch, so dense pairs run every pass of the schedule and take minutes.
+``match(..., multiscale=True)`` instead
 
 1. clusters each dense mesh's vertices on a grid of cells at most ``COARSE_SPACING`` ×
    sqrt(area) wide (the Morton grid of :mod:`hope_rs.sites`, whose cells halve until they fit;
@@ -17,38 +16,10 @@ passes, now 4). ``match(..., multiscale=True)`` instead
 4. runs :func:`fine_passes` passes of the usual refinement on the fine meshes (two up to 60k
    vertices, else one).
 
-Both shapes must be dense enough to halve: a coarse copy matched against a sparse shape (FAUST
-subdivided to 27k vertices against the 6.9k original, the coarse copy clustered to 10k) did
-worse than the default path (mean error 0.070 against 0.048; the coarse match itself went from
-0.108 to 0.128), so :func:`hope_rs.match` then takes the default path.
-
-Measured with ``python benches/bench_scale.py --multiscale`` (FAUST tr_reg_012 → 018 subdivided,
-identically triangulated, scored on the original 6890 vertices against the identity; the TOSCA
-cat pair, 27,894 vertices; exact share / mean geodesic error; one 2-core machine):
-
-=================  =============  ==================  ==================  ====================
-case               coarse         lifted map          after the fine pass default ``match``
-=================  =============  ==================  ==================  ====================
-cat0 → cat6        8.1k, 5.4 s    2.6% / 0.0376       26.8% / 0.0279,     45.1% / 0.0313,
-                                                      10.5 s in all       28–34 s
-faust 110k         13.2k, 7.9 s   2.2% / 0.0174       7.6% / 0.0131,      36.4% / 0.0088,
-                                                      31.2 s, 1.18 GiB    122.6 s, 1.40 GiB
-faust 250k         13.9k, 11.9 s  1.3% / 0.0183       3.4% / 0.0163,      16.2% / 0.0147,
-                                                      77.0 s, 2.31 GiB    327.5 s, 3.00 GiB
-=================  =============  ==================  ==================  ====================
-
-("coarse": vertices of the coarse copy of A and the seconds of the whole coarse stage, SHOT at
-the coarse vertices included.) So it trades accuracy for time. More fine passes did not pay
-(at 110k, two: 0.0123 in 47 s of refinement; six: 0.0100 in 97 s), nor did passes of small
-hop radii only (k = 3, 2, 1 made the lifted map worse). Lifting every vertex of a cell to the
-image of the cell's vertex instead of by the local linear map gave about the same mean error
-(0.0178) but left LMD trusting 35% of the vertices instead of 82%, and the fine pass then ended
-at 0.027. A finer grid (side halved) took the cat to 47.8% / 0.0200, better than the default
-path, but in 38 s; at 110k it would give a coarse copy of about 50k vertices.
-
-It is not for small meshes: on 63 differently triangulated 5k pairs (45 FAUST, 18 TOSCA), with
-cells made wide enough for them to coarsen, the mean error was 0.0601 with one fine pass and
-0.0478 with six, against 0.0423 for the default path.
+Both shapes must be dense enough to halve, else :func:`hope_rs.match` takes the default path
+(a coarse copy matched against a sparser shape did worse than it). It trades accuracy for time
+and is off by default; see docs/decisions.md#multiscale for the measurements and the variants
+that did not pay.
 """
 
 from __future__ import annotations
@@ -66,9 +37,8 @@ COARSE_SPACING = 0.0125
 MIN_COARSENING = 2.0
 #: Passes of the refinement schedule on the fine meshes after the lift (see
 #: :func:`fine_passes`): FINE_PASSES, or FINE_PASSES_SMALL when neither fine mesh has more than
-#: FINE_PASSES_SMALL_VERTICES vertices. With two passes instead of one, the TOSCA cat (28k)
-#: went from 22.1% exact / 0.0166 in 14.1 s to 34.4% / 0.0158 in 17.9 s, while FAUST
-#: subdivided to 110k went from 0.0112 in 36.6 s to 0.0099 in 62.8 s.
+#: FINE_PASSES_SMALL_VERTICES vertices (a second pass pays below that size and costs too much
+#: time above; docs/decisions.md#multiscale).
 FINE_PASSES = 1
 FINE_PASSES_SMALL = 2
 FINE_PASSES_SMALL_VERTICES = 60_000
@@ -145,8 +115,7 @@ def lift_map(
 
     def moments(u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Sum over each vertex's edges of u v^T, then over its 1-ring: the 2-ring's edges
-        (a 1-ring's edges alone are often nearly coplanar, or two: on FAUST clustered to 2.5k
-        vertices, 3% of the fine vertices then missed their own image under the identity)."""
+        (a 1-ring's edges alone are often nearly coplanar, or two)."""
         outer = (u[:, :, None] * v[:, None, :]).reshape(-1, 9)
         own = np.stack([np.bincount(e[:, 0], outer[:, k], minlength=n) for k in range(9)], 1)
         ring = sp.csr_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))

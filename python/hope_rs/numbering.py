@@ -3,9 +3,8 @@
 Every stage of HOPE breaks ties by index somewhere: which of equal overlap counts a cost row
 keeps, the order in which the auction's bidders go, which vertex the initial map prefers among
 equal descriptor distances. Run in the numbering of the files, the result then depends on how
-the files happen to number their vertices: the TOSCA cat pair gave a mean error of 0.059 as
-numbered and 0.037 and 0.049 under two random renumberings of the same meshes. Even SHOT and
-WKS change in their last bits (and SHOT, where a local frame is nearly degenerate, by more).
+the files happen to number their vertices (docs/decisions.md#numbering). Even SHOT and WKS
+change in their last bits (and SHOT, where a local frame is nearly degenerate, by more).
 :class:`~hope_rs.Shape` therefore renumbers each mesh by position (:func:`canonical_order`),
 and every kernel and descriptor works in that numbering; :func:`hope_rs.match` translates maps
 in and out. Relabelling the vertices or faces of the input then relabels the output and changes
@@ -13,9 +12,9 @@ nothing else.
 
 The order is a Morton (Z-order) curve through the bounding box, so vertices near each other on
 the surface are mostly near each other in memory: the k-hop balls, the overlap counts and the
-auction's price reads stay local. On the cat pair a random numbering made the refinement's
-steps 1.5x slower; the Morton order ran them about as fast as the files' own order, which
-numbers vertices along the surface (20.2 s against 19.1 s).
+auction's price reads stay local: a random numbering makes the refinement's steps slower,
+while the Morton order runs them about as fast as the files' own order, which numbers
+vertices along the surface (docs/decisions.md#numbering).
 """
 
 from __future__ import annotations

@@ -63,8 +63,8 @@ class Shape:
         # on the input's numbering either.
         self.scale = self.internal.scale
         self.graph = _core.MeshGraph(self.internal.vertices, self.internal.faces, self.k_max)
-        # In the internal numbering: the initial map reads them there, and a copy in the
-        # input's numbering would add 0.7 GB at 250k vertices.
+        # In the internal numbering: the initial map reads them there, and a second copy in
+        # the input's numbering would double their memory.
         self._descriptors: dict[str, np.ndarray] = {}
         self._sites: tuple[np.ndarray, np.ndarray] | None | bool = False  # False: not yet known
         self._coarse: tuple | None | bool = False

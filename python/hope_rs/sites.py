@@ -2,19 +2,15 @@
 
 SHOT describes a vertex by the points within a radius that is a fixed fraction of the shape
 (0.1 sqrt(area)), so its support holds a fixed fraction of all vertices and computing it at
-every vertex costs n² (faust250k: 176 s of a 417 s match). A descriptor over that support
+every vertex costs n², a large share of a dense match. A descriptor over that support
 barely changes across a distance far below the radius, though. On a mesh denser than a grid
 of cells of side ``SITE_SPACING`` × radius, SHOT is therefore computed at one vertex per
 occupied cell (its *site*, with every vertex of the mesh still voting in its support), and the
 other vertices of the cell share it; the initial map searches between sites only.
 
-Measured on FAUST tr_reg_012 → 018 subdivided to 110,204 vertices (41,031 and 41,709 sites):
-SHOT 6.8 s instead of 29 s, initial map 2.7 s instead of 5.9 s, initial mean geodesic error
-0.0696 against 0.0688 with every vertex described (4.7% exactly right against 9.8%: only
-sites can be), and after refinement 40.3% exact / mean 0.0095 against 38.5% / 0.0092. At
-27k vertices cells of twice the side (10k sites) left a worse start (mean 0.081 against 0.067),
-so the spacing stays at a sixteenth of the radius; meshes with fewer than two vertices per cell
-(every FAUST, TOSCA and remeshed shape in ../shared/data) keep one descriptor per vertex.
+Wider cells left a worse start, so the spacing stays at a sixteenth of the radius
+(docs/decisions.md#descriptors); meshes with fewer than two vertices per cell (the usual
+benchmark shapes) keep one descriptor per vertex.
 
 The grid is the Morton grid of :mod:`hope_rs.numbering`: cells are aligned with the bounding
 box, so the sites depend on the geometry only, not on the numbering.
