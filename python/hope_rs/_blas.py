@@ -1,8 +1,8 @@
 """One BLAS thread for small dense linear algebra.
 
 OpenBLAS spreads even a 352 x 352 ``eigh`` over every core, and its spinning threads then compete
-with rayon's: inside ``match`` on 2 cores that ``eigh`` took 3 s instead of 25 ms, and a
-5000 x 32 SVD 0.65 s instead of 10 ms. Large products keep all threads.
+with rayon's, which slows such small problems many times over (docs/decisions.md#speed).
+Large products keep all threads.
 """
 
 from __future__ import annotations

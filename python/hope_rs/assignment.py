@@ -50,7 +50,7 @@ def auction_assignment(cost, *, maximize: bool = True) -> np.ndarray:
         except _core.DuplicateEntries:
             # scipy's convention: duplicates add up. Looked for by the solver's own parallel
             # scan, which costs nothing extra, rather than by scipy's canonical-format check up
-            # front (27 ms of a 0.37 s solve at 28k, k = 8).
+            # front.
             m = m.copy()
             m.sum_duplicates()
             return _solve(m.indptr, m.indices, m.data, *m.shape, maximize)

@@ -3,7 +3,7 @@
 A batch runs in two kinds of tasks. *Prepare* tasks, one per shape, parse the mesh and compute
 its descriptors into the on-disk :class:`~hope_rs.cache.ShapeCache` (a temporary one when caching
 is off), so every shape is precomputed once however many pairs it is in. *Pair* tasks load both
-shapes from there, rebuild the k-hop neighbourhoods (0.06 s at 5k vertices) and run
+shapes from there, rebuild the k-hop neighbourhoods (cheap) and run
 :func:`hope_rs.match`. A pair starts as soon as its two shapes are ready. The parent process
 writes each map atomically as soon as its pair is done (also with one job: tasks then run one
 at a time, when their result is waited for); a rerun skips pairs whose map file exists and is
@@ -426,8 +426,8 @@ def cpu_count() -> int:
 
 def default_jobs() -> int:
     """Local worker processes by default: one per two cores. The Rust kernels already use every
-    core they are given, and on 2 cores 4 warm faust_r pairs took 74 s in one process (2 threads)
-    against 82 s in two (1 thread each), with twice the memory."""
+    core they are given, and more processes with fewer threads each were not faster while they
+    took more memory (docs/decisions.md#speed)."""
     return max(1, cpu_count() // 2)
 
 

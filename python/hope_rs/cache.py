@@ -1,15 +1,15 @@
 """On-disk cache of per-shape precomputation, keyed by content, so batches pay it once per shape.
 
-What is cached, per mesh (measured on a 5k-vertex FAUST remesh / the 28k TOSCA cat, 2 cores):
+What is cached, per mesh:
 
-- the parsed mesh (OFF parsing is pure Python: 0.23 s / 0.56 s; loading the arrays back: ~1 ms),
-- descriptors: SHOT (0.18 s / 3.6 s), and for WKS/HKS the Laplacian eigenpairs (several seconds)
-  and the signatures computed from them,
+- the parsed mesh (OFF parsing is pure Python; loading the arrays back is nearly free),
+- descriptors: SHOT, and for WKS/HKS the Laplacian eigenpairs and the signatures computed from
+  them,
 - the spectral pass's eigenbasis (120 eigenpairs of the robust Laplacian in the shape's internal
-  numbering: 0.7 s / 6.5 s to compute), for shapes the pass runs on.
+  numbering), for shapes the pass runs on.
 
-The k-hop neighbourhoods live in the Rust ``MeshGraph`` and are rebuilt (0.1 s / 0.4 s): storing
-them would cost more disk than the rebuild costs time.
+The k-hop neighbourhoods live in the Rust ``MeshGraph`` and are rebuilt: storing them would cost
+more disk than the rebuild costs time.
 
 Entries are keyed by the SHA-256 of the mesh file's bytes (or of the vertex and face arrays), the
 descriptor parameters, the package version and a fingerprint of the compiled extension, so editing
