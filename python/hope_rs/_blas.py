@@ -15,8 +15,8 @@ _controller: ThreadpoolController | None = None
 
 
 def _blas_controller() -> ThreadpoolController:
-    """One controller for the process: building one scans every loaded library (2 ms, paid 33
-    times per match of the TOSCA cat before it was kept)."""
+    """One controller for the process: building one scans every loaded library, and a match
+    sets BLAS limits many times (docs/decisions.md#speed)."""
     global _controller
     if _controller is None:
         # SciPy's wheels bring their own OpenBLAS; load it first so the controller sees it.

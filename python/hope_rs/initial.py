@@ -148,9 +148,8 @@ def _nearest_one(da: np.ndarray, db: np.ndarray, nb2: np.ndarray) -> tuple[np.nd
     dbt = db.T
 
     def search(lo: int, hi: int) -> None:
-        # One buffer for every chunk's distances, written in place: a fresh 16 MB array per
-        # chunk and operation had the kernel zero about 6 GB of new pages over a 28k x 28k
-        # search.
+        # One buffer for every chunk's distances, written in place: a fresh array per chunk
+        # and operation had the kernel zero new pages each time (gigabytes over a large search).
         buf = np.empty((min(step, hi - lo), db.shape[0]), dtype=np.float32)
         for s in range(lo, hi, step):
             chunk = da[s : min(s + step, hi)]
