@@ -66,9 +66,9 @@ pub fn auction_assignment_int(cost: &CsrView<i64>, maximize: bool) -> Result<Vec
 
 /// [`auction_assignment_int`] whose first epsilon is at least the scaled value range over
 /// `floor_div`. No choice suits every cost: HOPE's top-k overlap costs, where crowding pushes
-/// some persons far down their rows, solved 3.3x faster with 16 than with the default 1024
-/// (5k FAUST remeshed, k = 8: 1.06M bids in the first phase against 87k), while synthetic
-/// banded costs with small integer values became 2-4x slower with it.
+/// some persons far down their rows, solve faster with a coarse floor (16) than with the
+/// default 1024, while small banded integer costs solve slower with it (see
+/// docs/decisions.md#auction).
 pub fn auction_assignment_int_with(
     cost: &CsrView<i64>,
     maximize: bool,
@@ -80,8 +80,8 @@ pub fn auction_assignment_int_with(
 /// [`auction_assignment_int_with`] given `hint`, a full assignment (row -> column or -1) the
 /// caller knows to lie in the pattern, such as HOPE's current map. A hint that checks out
 /// (every entry stored, columns distinct, min(n_rows, n_cols) rows covered) proves feasibility,
-/// so the Hopcroft–Karp search is skipped: on HOPE's 28k costs that search took 90 ms of a
-/// 400 ms solve. Any other hint is ignored. The result does not depend on the hint.
+/// so the Hopcroft–Karp search, a sizeable share of a solve, is skipped. Any other hint is
+/// ignored. The result does not depend on the hint.
 pub fn auction_assignment_int_hinted<T: IntValue>(
     cost: &CsrView<T>,
     maximize: bool,
@@ -833,8 +833,8 @@ impl<W: Copy + Into<i64> + Sync> Values for Stored<W> {
 
 /// Min and second-min price over all objects, for the dummy persons' bids. Price changes are
 /// only recorded and applied when the minimum is asked for: dummies bid rarely while persons
-/// raise the same contested prices many times in between, and updating the tree on every raise
-/// cost 4% of a 5k match (4999 x 5000 costs, one dummy).
+/// raise the same contested prices many times in between, so updating the tree on every raise
+/// would cost more than the bids it serves.
 struct MinTree {
     size: usize,
     m1: Vec<i64>,

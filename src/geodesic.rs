@@ -12,8 +12,8 @@ pub struct EdgeGraph<'a> {
     pub vertices: &'a [[f64; 3]],
     pub adj: CsrView<'a, ()>,
     /// The length of each stored edge, in `adj`'s entry order ([`edge_lengths`]): one load
-    /// per relaxed edge instead of two vertex loads and a square root made full searches on
-    /// the TOSCA cat 10-15% faster, with the same distances.
+    /// per relaxed edge instead of two vertex loads and a square root is faster, with the same
+    /// distances.
     pub lengths: Cow<'a, [f64]>,
 }
 

@@ -59,8 +59,8 @@ impl RingDistances {
 
 /// Edge-graph distances from every vertex of a shape to the vertices around it, rows sorted by
 /// vertex id. LMD looks up d_B(f(p), f(r)) here instead of running a search from f(p) at every
-/// refinement step: on a 5k pair the searches took 40 ms per call and a pass makes ten calls,
-/// while a lookup is a binary search in a row of about a hundred entries.
+/// refinement step (a pass calls LMD about ten times), while a lookup is a binary search in a
+/// row of about a hundred entries.
 #[derive(Debug, Clone)]
 pub struct LocalDistances {
     offsets: Vec<usize>,
@@ -162,12 +162,7 @@ fn lmd_reach(ring_dists: &[f64], scale_a: f64, unit: f64) -> f64 {
     ring_dists.iter().copied().fold(0.0, f64::max) / scale_a + 2.0 * unit
 }
 
-/// Scale of [`tolerance`]. Measured on 63 remeshed pairs (all 45 of FAUST's 10 remeshes, 18
-/// TOSCA pairs both ways), mean geodesic error: one global mean edge 0.0461; the tolerance below
-/// at 0.8 / 1.0 / 1.25 / 1.5 times: 0.0505 / 0.0421 / 0.0410 / 0.0415; the global edge at 1.25 /
-/// 1.5 / 2.0 times: 0.0403 / 0.0418 / 0.0423 (differences of 0.002 are within the spread
-/// between pairs). On the TOSCA cat (28k, both directions) the local form at 1.0-1.25 reached
-/// 0.016-0.018 and 0.009-0.011, against 0.051 and 0.023 with one global edge.
+/// Scale of [`tolerance`]; see docs/decisions.md#lmd for the values measured.
 const TOLERANCE: f64 = 1.25;
 
 /// How far d_B(f(p), f(r)) may stray from d_A(p, r) for r to count as consistent:
@@ -179,10 +174,9 @@ const TOLERANCE: f64 = 1.25;
 /// fraction of an edge. Meshes are far from uniform (the TOSCA cat's edges run from 0.12 to 2.3
 /// times their mean, the FAUST remeshes' from 0.36 to 1.8), and one global mean edge spans
 /// several local edges in fine regions, where maps slid by a few vertices then pass as
-/// witnesses: on the cat, half of the final map's witnesses were not exact. A's local edge
-/// alone (no global part) did as well on the remeshed pairs but only half as well on the cat,
-/// whose triangulations differ in a few percent of their edges (a flip changes a graph distance
-/// by a fraction of an edge, a large share of a fine one).
+/// witnesses. A's local edge alone (no global part) did worse where the triangulations differ
+/// in a few percent of their edges (a flip changes a graph distance by a fraction of an edge, a
+/// large share of a fine one; docs/decisions.md#lmd).
 /// Capped at two units, the margin by which the search radius exceeds the 2-ring, so that
 /// clamping B's distances there never changes a verdict.
 fn tolerance(unit: f64, la: f64, lb: f64) -> f64 {

@@ -180,7 +180,7 @@ impl OverlapRows {
 
     /// Copies every row to its place: `indices` and `data` must have length `nnz()`. Each
     /// segment is freed as soon as it is copied, so the peak is the output plus the segments in
-    /// flight rather than two whole copies (peak 3.0 GiB instead of 4.5 GiB at 28k, 10k per row).
+    /// flight rather than two whole copies.
     pub fn write_into(self, indices: &mut [u32], data: &mut [u32]) {
         let nnz = self.nnz();
         assert!(
@@ -228,8 +228,7 @@ impl OverlapRows {
 
 /// The walk (see [`walk_into`]) and the segments of rows along it, computed by `work` on
 /// consecutive chunks of `SEGMENT` positions. One thread walks while the others start on the
-/// segments already walked, then joins them: at 28k vertices, k = 8, the walk alone took 80 ms
-/// of a 400 ms call.
+/// segments already walked, then joins them: the walk alone is a sizeable share of a call.
 fn walk_and_segments<A, W>(
     n_a: usize,
     n_b: usize,
@@ -325,7 +324,7 @@ fn walk_into<A: Rows>(a: &A, sketch: Option<&[u32]>, out: &[AtomicU32], walked: 
                             let hv: &[u32; HASHES] =
                                 h[at..at + HASHES].try_into().expect("HASHES entries");
                             // Fixed-size arrays: the comparison compiles to a few vector ops
-                            // (the walk took 80-110 ms at 28k, k = 8, with slices; 62-70 now).
+                            // (slices made the walk slower).
                             let same: u32 = (0..HASHES).map(|j| (hp[j] == hv[j]) as u32).sum();
                             // Ties go to the earliest member (max_by_key keeps the last).
                             (same, std::cmp::Reverse(v))
@@ -357,8 +356,7 @@ const HASHES: usize = 8;
 fn min_hashes<A: Rows>(a: &A) -> Vec<u32> {
     let n = a.n_rows();
     // Each vertex's hashes once, so that a row's signature is an element-wise minimum over
-    // table rows (a few vector ops per member; hashing every member 8 times took 60 ms of CPU
-    // at 28k vertices, k = 8).
+    // table rows (a few vector ops per member, instead of hashing every member 8 times).
     let table: Vec<[u32; HASHES]> = (0..n as u32)
         .into_par_iter()
         .map(|v| std::array::from_fn(|h| mix(v, h as u32)))
@@ -432,10 +430,9 @@ unsafe fn remove_raw(count: *mut u32, ball: &[u32]) {
 }
 
 /// Whether the inner loops use AVX-512F gather/scatter: the CPU has it (see [`avx512_present`])
-/// and scatters well. AMD's cores through Zen 4 microcode their scatters: there the scalar loops
-/// were faster (28k vertices, k = 8: 0.24 s against 0.29-0.32 s on a Zen 4 EPYC), while on the
-/// Intel machine the gather/scatter loops were written on they had cut the call from about 0.45
-/// to 0.3-0.4 s. Both paths give the same output bit for bit.
+/// and scatters well. AMD's cores through Zen 4 microcode their scatters, and there the scalar
+/// loops are faster; on Intel the gather/scatter loops are the faster ones (see
+/// docs/decisions.md#speed). Both paths give the same output bit for bit.
 fn simd_available() -> bool {
     avx512_present() && scatter_is_fast()
 }
@@ -617,8 +614,8 @@ impl Accumulator {
         rows: &[u32],
     ) -> Segment {
         let n_a = self.member.len();
-        // Sized from this thread's previous segment: growing 1 MB vectors by doubling spent
-        // a tenth of the call copying them.
+        // Sized from this thread's previous segment: growing large vectors by doubling spent
+        // a good part of the call copying them.
         let guess = rows.len() * self.per_row + rows.len() * self.per_row / 8;
         let mut out = Segment {
             starts: Vec::with_capacity(rows.len() + 1),

@@ -91,7 +91,7 @@ fn points_vec(v: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<[f64; 3]>> {
 /// millions of entries for a k = 8 cost, so contiguous arrays (the common case) are written in
 /// parallel into one zeroed allocation: its pages are then first touched, and faulted in, by
 /// both cores (collecting the converted items instead went through per-task buffers and a
-/// second copy, 0.4-0.5 s for a 28k-vertex cost at k = 8).
+/// second copy).
 fn convert_vec<T, U>(a: &PyReadonlyArray1<'_, T>, what: &str) -> PyResult<Vec<U>>
 where
     T: numpy::Element + Copy + TryInto<U> + std::fmt::Display + Sync,

@@ -4,8 +4,7 @@
 //!
 //! Horn's quaternion method (J. Opt. Soc. Am. A, 1987): the rotation is the unit quaternion
 //! that is the top eigenvector of a symmetric 4 × 4 matrix built from `M`, so it is always a
-//! proper rotation and needs no sign fix. NumPy's batched SVD took 43 ms per call for the
-//! 28k-vertex TOSCA cat; this takes a few.
+//! proper rotation and needs no sign fix. Faster than NumPy's batched SVD.
 use crate::error::{invalid, Result};
 use crate::jacobi::sym_eigen;
 use rayon::prelude::*;

@@ -462,8 +462,7 @@ fn local_frame(nb: &Scratch, radius: f64, normal: V3) -> Option<[V3; 3]> {
 
 /// Instruction sets [`describe`] is compiled for, picked at run time. The wider ones give the
 /// same descriptors bit for bit (no fused multiply-add, and the operations keep their order), and
-/// are faster: on the 28k-vertex TOSCA cat one shape took 1.22 s with the baseline x86-64 build
-/// (SSE2), 1.0 s with AVX2 and 0.92 s with AVX-512.
+/// are faster (docs/decisions.md#speed).
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Isa {
     Baseline,
@@ -635,21 +634,8 @@ fn describe(p: V3, normal: V3, grid: &Grid, radius: f64, nb: &mut Scratch, row: 
 }
 
 /// SHOT descriptors, row-major (n_vertices x 352), each row L2-normalised (all-zero for a vertex with too few neighbours).
-/// `radius` is absolute (callers pass a multiple of sqrt(surface area)).
-///
-/// **Recommended radius: `0.075 * sqrt(surface area)`** (0.1 is as good across subjects but
-/// ~1.4x slower). Measured by nearest-neighbour matching of descriptors between FAUST
-/// registrations (identity ground truth; chance of landing within 3 edges ~0.6%), as fractions
-/// of vertices whose match is the true vertex / within 1 edge / within 3 edges:
-///
-/// | radius / sqrt(area) | tr_reg_012 -> 018 (same subject) | tr_reg_012 -> 020 (other subject) |
-/// |---|---|---|
-/// | 0.05  | 0.48 / 0.70 / 0.76 | 0.19 / 0.42 / 0.54 |
-/// | 0.075 | 0.48 / 0.73 / 0.83 | 0.20 / 0.48 / 0.63 |
-/// | 0.1   | 0.40 / 0.68 / 0.82 | 0.21 / 0.48 / 0.68 |
-/// | 0.125 | 0.36 / 0.65 / 0.82 | 0.20 / 0.45 / 0.67 |
-/// | 0.15  | 0.33 / 0.61 / 0.80 | 0.20 / 0.44 / 0.68 |
-/// | 0.2   | 0.14 / 0.36 / 0.60 |                    |
+/// `radius` is absolute: callers pass a multiple of sqrt(surface area); hope_rs uses 0.1
+/// (docs/decisions.md#descriptors, which keeps the measurements of other radii).
 ///
 /// Cost grows with the number of neighbours (about with `radius^2`).
 ///

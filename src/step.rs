@@ -2,8 +2,7 @@
 //! optimal assignment, and a partner for every vertex the assignment leaves out.
 //!
 //! Building the cost here and handing it straight to the solver spares the round trip through
-//! NumPy (writing the cost out, adding the bonus there, copying it back in), about 40 ms of a
-//! 28k-vertex step.
+//! NumPy (writing the cost out, adding the bonus there, copying it back in).
 use crate::auction::auction_assignment_int_hinted;
 use crate::csr::{Csr, CsrView};
 use crate::error::{invalid, Result};
