@@ -3,8 +3,8 @@
 //! Where A and B are one triangulation in two poses, a face (u, v, w) of A whose edge (u, v) is
 //! mapped onto an edge of B names the image of w: the third vertex of the face of B on the same
 //! side of that edge. Where the triangulations differ (a retriangulated region), that vertex is
-//! wrong, and wrong images then spread. A proposal is therefore kept only
-//! if the two triangles have nearly the same shape, and the best-shaped proposals are taken first.
+//! wrong, and wrong images then spread. A proposal is therefore kept only if the two triangles
+//! have nearly the same shape, and the best-shaped proposals are taken first.
 use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashMap};
 

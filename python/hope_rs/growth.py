@@ -10,10 +10,10 @@ of the map it can trust and rebuilds the rest outward from it, vertex by vertex:
 - **Across shared faces**: a face of A with two mapped vertices names the image of its third
   vertex, if the two triangles have nearly the same shape (see ``_core.grow_across_faces``).
 - **By local affine fits**: where the triangulations differ (retriangulated regions, often
-  where the pose stretches the edges most), each unmapped
-  vertex with enough mapped vertices in its 2-ring gets the affine map that best carries those
-  onto their images; the B vertex nearest its predicted position is taken if it is clearly the
-  nearest free one (:data:`AFFINE_STAGES`).
+  where the pose stretches the edges most), each unmapped vertex with enough mapped vertices
+  in its 2-ring gets the affine map that best carries those onto their images; the B vertex
+  nearest its predicted position is taken if it is clearly the nearest free one
+  (:data:`AFFINE_STAGES`).
 - **From both sides**: the same growth from B to A, and rounds that keep what the two agree on
   (see :func:`grow`).
 

@@ -257,9 +257,8 @@ class BasisPrefetch:
     the caller refines.
 
     HOPE's auction runs on one core, and the eigensolves release the GIL, so the solves fill
-    the idle core. The thread keeps the caller's CPU priority: the caller waits for
-    its bases, so a lowered priority starves both on a busy machine (see
-    ``docs/decisions.md#spectral``).
+    the idle core. The thread keeps the caller's CPU priority: the caller waits for its bases,
+    so a lowered priority starves both on a busy machine (see ``docs/decisions.md#spectral``).
 
     Use it inside :func:`~hope_rs._blas.single_threaded_blas`, entered before :meth:`start`
     and left after :meth:`finish`: BLAS thread limits are global, and a limit restored while
