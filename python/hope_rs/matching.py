@@ -164,31 +164,21 @@ def match(
         Start each pass by re-placing untrusted vertices by their geodesic distances to trusted
         ones (see :func:`hope_rs.refine.global_repair`); ``False`` is the paper's loop.
     multiscale : bool
-        For large meshes: match coarse copies of the shapes first (with the options above),
-        lift that map to the fine vertices and refine it for
-        :func:`~hope_rs.multiscale.fine_passes` passes (see :mod:`hope_rs.multiscale`).
-        Faster, with a larger error than the default path (see docs/decisions.md#multiscale).
-        Unless both shapes are dense enough to halve (see
-        :func:`~hope_rs.multiscale.coarse_mesh`), this is the default path.
+        Match coarse copies first, lift that map and refine it on the full meshes (see
+        :mod:`hope_rs.multiscale`): faster on large meshes, with a larger error
+        (docs/decisions.md#multiscale). Shapes too sparse to halve take the default path.
     spectral : bool
-        After HOPE, run ZoomOut from its map and keep, region by region, whichever of the two
-        maps distorts A's 2-rings less (see :mod:`hope_rs.spectral`): lowers the error on
-        differently triangulated shapes and keeps HOPE's map on identically triangulated ones.
-        Costs two Laplace–Beltrami eigenbases; skipped above
-        :data:`~hope_rs.spectral.MAX_VERTICES` vertices, when HOPE's map has settled (see
-        :attr:`hope_rs.refine.RefineResult.settled`) and, with ``shared_faces``, when HOPE's
-        map sends every face of A onto a face of B one to one. See docs/decisions.md#spectral.
+        After HOPE, run ZoomOut from its map and keep, region by region, whichever map distorts
+        A's 2-rings less (see :mod:`hope_rs.spectral`). Skipped above
+        :data:`~hope_rs.spectral.MAX_VERTICES` vertices, when HOPE's map has settled, and (with
+        ``shared_faces``) when it sends every face onto a face (docs/decisions.md#spectral).
     shared_faces : bool
-        Last, on shapes that share most of their triangulation (at least
-        :data:`~hope_rs.shared_faces.MIN_HANDLES` of A's vertices have all their faces mapped
-        onto faces of B), run the finishing rounds of :mod:`hope_rs.shared_faces`: deform A as
-        rigidly as possible onto the images of those vertices, move the others to the nearest
-        vertex of B and repair with HOPE steps; then rebuild the map outward from its trusted
-        patches (:mod:`hope_rs.growth`). The refinement hands over after the pass in which
-        such vertices reach that share (from its second pass on). Skipped above
-        :data:`~hope_rs.shared_faces.MAX_VERTICES` vertices. Independently remeshed shapes
-        never qualify, and their map is the same as with ``False``. See
-        docs/decisions.md#shared-faces.
+        On shapes that share most of their triangulation (at least
+        :data:`~hope_rs.shared_faces.MIN_HANDLES` of A's vertices with all their faces mapped
+        onto faces of B), finish with :mod:`hope_rs.shared_faces` and :mod:`hope_rs.growth`.
+        Independently remeshed shapes never qualify and get the same map as with ``False``;
+        skipped above :data:`~hope_rs.shared_faces.MAX_VERTICES` vertices
+        (docs/decisions.md#shared-faces).
     callback : callable, optional
         Called with each :class:`~hope_rs.refine.Iteration` as it finishes (of the coarse
         match too, with ``multiscale``); the polish step has ``polish=True``. An exception it
