@@ -60,7 +60,7 @@ def cmd_match(args) -> int:
     if not args.multiscale and not args.quiet and min(a.n_vertices, b.n_vertices) >= HINT_VERTICES:
         print(
             "hope-rs: hint: on meshes this large, --multiscale is about 3x faster, with a larger "
-            "error (see the README)",
+            "error (see docs/method.md, multiscale)",
             file=sys.stderr,
         )
     # The bar on a terminal; with -v the log says the same, one line per stage.
