@@ -1,5 +1,7 @@
 """Generated test meshes."""
 
+from pathlib import Path
+
 import numpy as np
 from scipy.spatial import ConvexHull
 
@@ -43,3 +45,11 @@ def moved_copy(a, seed: int):
     truth = np.empty_like(perm)
     truth[perm] = np.arange(perm.size)
     return b, truth
+
+
+def write_off(path, v, f) -> None:
+    """An ASCII OFF file of vertices ``v`` and triangles ``f``, coordinates written exactly."""
+    lines = [f"OFF\n{len(v)} {len(f)} 0\n"]
+    lines += [f"{x!r} {y!r} {z!r}\n" for x, y, z in np.asarray(v, dtype=float).tolist()]
+    lines += [f"3 {i} {j} {k}\n" for i, j, k in np.asarray(f).tolist()]
+    Path(path).write_text("".join(lines))

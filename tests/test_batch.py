@@ -2,8 +2,7 @@ import os
 
 import numpy as np
 import pytest
-from meshes import bumpy_sphere
-from test_mesh_and_cli import write_off
+from meshes import bumpy_sphere, write_off
 
 import hope_rs
 from hope_rs.batch import imatch_many, map_name, read_pairs

@@ -11,8 +11,7 @@ import uuid
 from pathlib import Path
 
 import pytest
-from meshes import bumpy_sphere
-from test_mesh_and_cli import write_off
+from meshes import bumpy_sphere, write_off
 
 import hope_rs
 from hope_rs.map_io import read_map

@@ -8,9 +8,8 @@ import warnings
 
 import numpy as np
 import pytest
-from meshes import bumpy_sphere
+from meshes import bumpy_sphere, write_off
 from test_map_io import unwritable_folder
-from test_mesh_and_cli import write_off
 
 import hope_rs
 import hope_rs.batch

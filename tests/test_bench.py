@@ -5,8 +5,7 @@ import csv
 import numpy as np
 import pytest
 from conftest import data_path, relabel
-from meshes import bumpy_sphere
-from test_mesh_and_cli import write_off
+from meshes import bumpy_sphere, write_off
 
 import hope_rs
 from hope_rs.cli import main

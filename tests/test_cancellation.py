@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scipy.sparse.linalg as sla
+from meshes import write_off
 from threadpoolctl import threadpool_info
 
 import hope_rs
@@ -127,13 +128,6 @@ def test_cancellable_eigensolve_is_bit_identical_to_eigsh(pair):
     np.testing.assert_array_equal(evals, np.maximum(e[order], 0.0))
 
 
-def write_off(path: Path, mesh) -> None:
-    with open(path, "w") as fh:
-        fh.write(f"OFF\n{mesh.n_vertices} {len(mesh.faces)} 0\n")
-        np.savetxt(fh, mesh.vertices, fmt="%.9g")
-        np.savetxt(fh, np.column_stack([np.full(len(mesh.faces), 3), mesh.faces]), fmt="%d")
-
-
 CLI_REPORTING_THREADS = """
 import atexit, sys, threading
 names = lambda: sorted(t.name for t in threading.enumerate() if t.name.startswith("hope_rs-"))
@@ -147,7 +141,7 @@ def test_ctrl_c_in_the_cli_exits_130_at_once(pair, tmp_path):
     import pty
 
     for name, mesh in zip("ab", pair):
-        write_off(tmp_path / f"{name}.off", mesh)
+        write_off(tmp_path / f"{name}.off", mesh.vertices, mesh.faces)
     out = tmp_path / "map.txt"
     env = dict(os.environ, PYTHONPATH=str(PYTHON_DIR))
     # The progress line is written only to a terminal: give the child one for stderr.

@@ -9,21 +9,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from meshes import bumpy_sphere
+from meshes import bumpy_sphere, write_off
 
 import hope_rs
 import hope_rs.multiscale as M
 from hope_rs.cli import main
 from hope_rs.progress import STAGES, ProgressBar, ProgressEvent
 from hope_rs.refine import Iteration
-
-
-def write_off(path, v, f):
-    with open(path, "w") as fh:
-        fh.write(f"OFF\n{len(v)} {len(f)} 0\n")
-        fh.writelines(f"{x} {y} {z}\n" for x, y, z in v)
-        fh.writelines(f"3 {i} {j} {k}\n" for i, j, k in f)
-
 
 DEFAULT_STAGES = ["shapes", "descriptors", "init", "refine", "polish", "spectral", "faces"]
 

@@ -3,17 +3,10 @@ import json
 import numpy as np
 import pytest
 from conftest import data_path
-from meshes import bumpy_sphere
+from meshes import bumpy_sphere, write_off
 
 import hope_rs
 from hope_rs.cli import main
-
-
-def write_off(path, v, f):
-    with open(path, "w") as fh:
-        fh.write(f"OFF\n{len(v)} {len(f)} 0\n")
-        fh.writelines(f"{x} {y} {z}\n" for x, y, z in v)
-        fh.writelines(f"3 {a} {b} {c}\n" for a, b, c in f)
 
 
 def test_off_keeps_vertex_order_and_other_formats_match(tmp_path):

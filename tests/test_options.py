@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+from meshes import write_off
 
 import hope_rs
 import hope_rs.batch
@@ -109,17 +110,10 @@ def test_a_prebuilt_shape_with_a_smaller_k_max_is_rejected(pair):
         hope_rs.match(a, pair[1])
 
 
-def write_off(path, mesh) -> None:
-    with open(path, "w") as fh:
-        fh.write(f"OFF\n{mesh.n_vertices} {len(mesh.faces)} 0\n")
-        np.savetxt(fh, mesh.vertices, fmt="%.9g")
-        np.savetxt(fh, np.column_stack([np.full(len(mesh.faces), 3), mesh.faces]), fmt="%d")
-
-
 @pytest.mark.parametrize("k_max", ["0", "99", "-3"])
 def test_cli_rejects_k_max_with_one_line(pair, tmp_path, capsys, k_max):
-    write_off(tmp_path / "a.off", pair[0])
-    write_off(tmp_path / "b.off", pair[1])
+    write_off(tmp_path / "a.off", pair[0].vertices, pair[0].faces)
+    write_off(tmp_path / "b.off", pair[1].vertices, pair[1].faces)
     out = tmp_path / "map.txt"
     argv = ["match", str(tmp_path / "a.off"), str(tmp_path / "b.off"), "-o", str(out)]
     assert cli.main([*argv, "--k-max", k_max, "-q"]) == 2
@@ -152,8 +146,8 @@ def test_a_batch_checks_match_options_before_any_work(
 
 
 def test_batch_cli_rejects_k_max_with_one_line(pair, tmp_path, capsys):
-    write_off(tmp_path / "a.off", pair[0])
-    write_off(tmp_path / "b.off", pair[1])
+    write_off(tmp_path / "a.off", pair[0].vertices, pair[0].faces)
+    write_off(tmp_path / "b.off", pair[1].vertices, pair[1].faces)
     (tmp_path / "pairs.txt").write_text("a.off b.off\n")
     out = tmp_path / "maps"
     assert cli.main(["batch", str(tmp_path / "pairs.txt"), "--out", str(out), "--k-max", "1"]) == 2

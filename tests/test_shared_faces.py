@@ -3,8 +3,7 @@
 import numpy as np
 import pytest
 from conftest import data_path
-from meshes import bumpy_sphere, moved_copy, random_rigid
-from test_mesh_and_cli import write_off
+from meshes import bumpy_sphere, moved_copy, random_rigid, write_off
 
 import hope_rs
 from hope_rs import _core, handles
@@ -133,6 +132,7 @@ def test_a_partial_shape_of_the_same_triangulation_becomes_exact(faust_pair):
     assert (res.map == idx).mean() > 0.999  # measured 100% (99.98% before the growth)
 
 
+@pytest.mark.slow
 def test_cli_and_batch_no_shared_faces_flags(faust_pair, tmp_path, capsys):
     from hope_rs.cli import main
 

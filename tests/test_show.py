@@ -3,20 +3,13 @@ colour-transfer exports."""
 
 import numpy as np
 import pytest
-from meshes import bumpy_sphere
+from meshes import bumpy_sphere, write_off
 
 import hope_rs
 from hope_rs.cli import main
 from hope_rs.show import detect_up, position_colours, view_frame, write_ply_pair
 
 pytest.importorskip("matplotlib")
-
-
-def write_off(path, v, f):
-    with open(path, "w") as fh:
-        fh.write(f"OFF\n{len(v)} {len(f)} 0\n")
-        fh.writelines(f"{x} {y} {z}\n" for x, y, z in v)
-        fh.writelines(f"3 {i} {j} {k}\n" for i, j, k in f)
 
 
 @pytest.fixture
