@@ -53,3 +53,11 @@ def write_off(path, v, f) -> None:
     lines += [f"{x!r} {y!r} {z!r}\n" for x, y, z in np.asarray(v, dtype=float).tolist()]
     lines += [f"3 {i} {j} {k}\n" for i, j, k in np.asarray(f).tolist()]
     Path(path).write_text("".join(lines))
+
+
+def bumpy_sphere_files(folder, count: int, n: int) -> list[Path]:
+    """``folder/s0.off`` … ``s{count-1}.off``: bumpy spheres of ``n`` vertices, one per seed."""
+    paths = [Path(folder) / f"s{s}.off" for s in range(count)]
+    for s, path in enumerate(paths):
+        write_off(path, *bumpy_sphere(n, s))
+    return paths

@@ -8,7 +8,7 @@ import warnings
 
 import numpy as np
 import pytest
-from meshes import bumpy_sphere, write_off
+from meshes import bumpy_sphere_files
 from test_map_io import unwritable_folder
 
 import hope_rs
@@ -26,8 +26,7 @@ N = 300
 def folder(tmp_path_factory):
     """Three small generated meshes and a pairs file of three pairs."""
     d = tmp_path_factory.mktemp("reliable")
-    for s in range(3):
-        write_off(d / f"s{s}.off", *bumpy_sphere(N, s))
+    bumpy_sphere_files(d, 3, N)
     (d / "pairs.txt").write_text("s0 s1\ns1 s2\ns2 s0\n")
     return d
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from meshes import bumpy_sphere, write_off
+from meshes import bumpy_sphere_files
 from test_map_io import unwritable_folder
 
 import hope_rs
@@ -26,10 +26,8 @@ N = 300
 
 @pytest.fixture(scope="module")
 def meshes(tmp_path_factory):
-    d = tmp_path_factory.mktemp("cli")
-    for s in range(2):
-        write_off(d / f"s{s}.off", *bumpy_sphere(N, s))
-    return str(d / "s0.off"), str(d / "s1.off")
+    a, b = bumpy_sphere_files(tmp_path_factory.mktemp("cli"), 2, N)
+    return str(a), str(b)
 
 
 def one_line_error(err: str, status: str = "error") -> str:

@@ -14,7 +14,10 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
+from .orientation import face_keys
 from .shape import Shape
+
+__all__ = ["face_handles", "face_keys", "large_patches", "seed_handles"]
 
 #: Handle patches with fewer of A's vertices than this share do not seed the growth (wrong
 #: handles lie in small patches; see :mod:`hope_rs.growth` and docs/decisions.md#growth).
@@ -36,22 +39,6 @@ def face_handles(a: Shape, b: Shape, f: np.ndarray) -> np.ndarray:
     bad[fa[~ok].ravel()] = True
     shared = np.bincount(f[known], minlength=n_b)[f] > 1
     return known & ~bad & ~shared
-
-
-def face_keys(faces: np.ndarray, n: int) -> np.ndarray:
-    """One integer per oriented face, the same for its three rotations."""
-    # Rotate each face so that its smallest index comes first, which keeps the orientation.
-    first = np.argmin(faces, axis=1)
-    rows = np.arange(len(faces))[:, None]
-    rot = faces[rows, (first[:, None] + np.arange(3)) % 3]
-    n = np.int64(n)
-    if n > 2_000_000:  # n**3 would overflow int64; fall back to a structured key
-        return (
-            np.ascontiguousarray(rot)
-            .view([("a", np.int64), ("b", np.int64), ("c", np.int64)])
-            .ravel()
-        )
-    return (rot[:, 0] * n + rot[:, 1]) * n + rot[:, 2]
 
 
 def seed_handles(a: Shape, b: Shape, f: np.ndarray) -> np.ndarray:

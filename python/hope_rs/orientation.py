@@ -35,7 +35,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
-__all__ = ["orient_faces"]
+__all__ = ["face_keys", "orient_faces"]
 
 #: A component whose centroid volume is below this times ``area ** 1.5`` counts as flat.
 FLAT_VOLUME = 1e-12
@@ -61,11 +61,7 @@ def orient_faces(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
         return np.zeros(0, dtype=bool)
     srt = np.sort(f, axis=1)
     # Work in the order of the sorted vertex triples: independent of face order and winding.
-    n = int(srt[:, 2].max()) + 1
-    if n < 2**21:  # the triple fits one int64 key
-        by_key = np.argsort((srt[:, 0] * n + srt[:, 1]) * n + srt[:, 2], kind="stable")
-    else:
-        by_key = np.lexsort((srt[:, 2], srt[:, 1], srt[:, 0]))
+    by_key = np.argsort(face_keys(srt, int(srt[:, 2].max()) + 1), kind="stable")
     f, srt = f[by_key], srt[by_key]
     # +1 if the face runs its vertices in the ascending cyclic order, -1 otherwise.
     sign = np.where(_is_ascending_cycle(f), 1.0, -1.0)
@@ -84,6 +80,22 @@ def orient_faces(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     flip = np.empty(m, dtype=bool)
     flip[by_key] = flip_sorted
     return flip
+
+
+def face_keys(faces: np.ndarray, n: int) -> np.ndarray:
+    """One integer per oriented face, the same for its three rotations."""
+    # Rotate each face so that its smallest index comes first, which keeps the orientation.
+    first = np.argmin(faces, axis=1)
+    rows = np.arange(len(faces))[:, None]
+    rot = faces[rows, (first[:, None] + np.arange(3)) % 3]
+    n = np.int64(n)
+    if n > 2_000_000:  # n**3 would overflow int64; fall back to a structured key
+        return (
+            np.ascontiguousarray(rot)
+            .view([("a", np.int64), ("b", np.int64), ("c", np.int64)])
+            .ravel()
+        )
+    return (rot[:, 0] * n + rot[:, 1]) * n + rot[:, 2]
 
 
 def _is_ascending_cycle(f: np.ndarray) -> np.ndarray:
