@@ -4,17 +4,16 @@
 other way: it lists, for each vertex of shape 2, a vertex of shape 1.)
 """
 
-from importlib.metadata import PackageNotFoundError
-from importlib.metadata import version as _dist_version
-
-from .assignment import auction_assignment
-from .batch import PairResult, match_many, read_pairs
-from .cache import ShapeCache
-from .evaluate import geodesic_errors, load_vts, score
-from .kernels import khop_neighbourhoods, overlap_cost
-from .map_io import read_map, write_map
+from . import _compat
+from ._version import __version__ as __version__
+from .batch.cache import ShapeCache
+from .batch.match_many import PairResult, match_many, read_pairs
+from .evaluation.evaluate import geodesic_errors, load_vts, score
+from .geometry.map_io import read_map, write_map
+from .geometry.mesh import Mesh, load_mesh
+from .kernels.assignment import auction_assignment
+from .kernels.khop import khop_neighbourhoods, overlap_cost
 from .matching import MatchResult, match
-from .mesh import Mesh, load_mesh
 from .shape import Shape
 
 __all__ = [
@@ -37,7 +36,4 @@ __all__ = [
     "write_map",
 ]
 
-try:
-    __version__ = _dist_version("hope-rs")
-except PackageNotFoundError:  # a source tree on sys.path without installed metadata
-    __version__ = "0+unknown"
+_compat.install()

@@ -2,20 +2,43 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 
 from . import _core
-from .descriptors import (
-    SHOT_RADIUS,
-    _shot_as_numbered,
+from .features.descriptors import (
+    BasisConfig,
+    DescriptorConfig,
     descriptors_as_numbered,
+    shot_as_numbered,
     spectral_basis_of,
 )
-from .mesh import as_mesh, scale_exponent, unique_edges
-from .numbering import canonical_mesh
-from .sites import shot_sites
+from .geometry.coarsen import CoarsenConfig, coarse_mesh
+from .geometry.mesh import as_mesh, scale_exponent, unique_edges
+from .geometry.numbering import canonical_mesh
+from .geometry.sites import shot_sites
 
-K_MAX = 8
+__all__ = ["Shape", "ShapeConfig"]
+
+
+@dataclass(frozen=True)
+class ShapeConfig:
+    """Settings of a :class:`Shape`'s precomputation.
+
+    Attributes
+    ----------
+    descriptors : DescriptorConfig
+        SHOT radius, SHOT sites on dense meshes, eigenpairs of WKS/HKS.
+    basis : BasisConfig
+        Eigenbases of dense meshes seeded from their coarse copies.
+    coarsen : CoarsenConfig
+        The coarse copy (multiscale matching, basis seeding).
+    """
+
+    descriptors: DescriptorConfig = field(default_factory=DescriptorConfig)
+    basis: BasisConfig = field(default_factory=BasisConfig)
+    coarsen: CoarsenConfig = field(default_factory=CoarsenConfig)
 
 
 class Shape:
@@ -42,11 +65,16 @@ class Shape:
     k_max : int, keyword-only
         Largest hop radius the refinement may use.
     orient : bool, keyword-only
-        Orient the internal mesh's faces (:mod:`hope_rs.orientation`); ``False`` keeps them as
-        given (for meshes derived from an oriented one, such as the multiscale coarse copy).
+        Orient the internal mesh's faces (:mod:`hope_rs.geometry.orientation`); ``False``
+        keeps them as given (for meshes derived from an oriented one, such as the multiscale
+        coarse copy).
+    config : ShapeConfig, keyword-only
+        Settings of the descriptors, eigenbases and coarse copy.
     """
 
-    def __init__(self, mesh, *, k_max: int = K_MAX, orient: bool = True):
+    def __init__(
+        self, mesh, *, k_max: int = 8, orient: bool = True, config: ShapeConfig = ShapeConfig()
+    ):
         mesh = as_mesh(mesh)
         if (
             isinstance(k_max, bool)
@@ -56,6 +84,7 @@ class Shape:
             raise ValueError(f"k_max must be an integer in [2, 64], got {k_max!r}")
         self.mesh = mesh
         self.k_max = int(k_max)
+        self.config = config
         self.internal, self.order, self.rank = canonical_mesh(mesh, orient=orient)
         # The internal mesh's coordinates are the input's times 4**scale_exponent (exact).
         self.scale_exponent = scale_exponent(mesh.vertices)
@@ -97,10 +126,11 @@ class Shape:
         if kind not in self._descriptors:
             # The internal mesh is in the position-fixed numbering already: this equals
             # descriptors(self.mesh, kind)[self.order] bit for bit, without renumbering again.
+            cfg = self.config.descriptors
             self._descriptors[kind] = (
-                _shot_as_numbered(self.internal, SHOT_RADIUS, self.descriptor_sites("shot"))
+                shot_as_numbered(self.internal, cfg.shot_radius, self.descriptor_sites("shot"))
                 if kind == "shot"
-                else descriptors_as_numbered(self.internal, kind)
+                else descriptors_as_numbered(self.internal, kind, n_eigen=cfg.n_eigen)
             )
         return self._descriptors[kind]
 
@@ -112,7 +142,8 @@ class Shape:
         if kind != "shot":
             return None
         if self._sites is False:
-            self._sites = shot_sites(self.internal, SHOT_RADIUS)
+            cfg = self.config.descriptors
+            self._sites = shot_sites(self.internal, cfg.shot_radius, cfg.sites)
         return self._sites
 
     def has_descriptors(self, kind: str) -> bool:
@@ -120,16 +151,18 @@ class Shape:
         return kind in self._descriptors
 
     def coarse_level(self):
-        """(:class:`~hope_rs.multiscale.Coarse`, its :class:`Shape`) of this shape's internal
+        """(:class:`~hope_rs.geometry.coarsen.Coarse`, its :class:`Shape`) of this shape's internal
         mesh for multiscale matching, built once; ``None`` when the mesh is not dense enough
-        to coarsen (see :func:`hope_rs.multiscale.coarse_mesh`)."""
+        to coarsen (see :func:`hope_rs.geometry.coarsen.coarse_mesh`)."""
         if self._coarse is False:
-            from .multiscale import coarse_mesh
-
-            c = coarse_mesh(self.internal)
+            c = coarse_mesh(self.internal, self.config.coarsen)
             # The coarse copy keeps the faces of this oriented mesh as they come: vertex
             # clustering leaves non-manifold spots that a second orientation would flip.
-            self._coarse = None if c is None else (c, Shape(c.mesh, k_max=self.k_max, orient=False))
+            self._coarse = (
+                None
+                if c is None
+                else (c, Shape(c.mesh, k_max=self.k_max, orient=False, config=self.config))
+            )
         return self._coarse
 
     def spectral_basis(self, k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -154,7 +187,10 @@ class Shape:
         :class:`~hope_rs._cancel.Cancelled` at its next step."""
         # The multiscale coarse copy, when built already, seeds the basis.
         coarse = self._coarse if self._coarse in (False, None) else self._coarse[0]
-        _, evecs, mass = spectral_basis_of(self.internal, k, coarse=coarse, stop=stop)
+        cfg = self.config
+        _, evecs, mass = spectral_basis_of(
+            self.internal, k, coarse=coarse, config=cfg.basis, coarsen=cfg.coarsen, stop=stop
+        )
         return evecs, mass
 
     def set_spectral_basis(self, evecs: np.ndarray, mass: np.ndarray) -> None:

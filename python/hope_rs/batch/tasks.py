@@ -1,0 +1,120 @@
+"""The tasks of a batch, run in worker processes or Ray tasks: prepare a shape, match a pair.
+
+They never raise: a failure is returned as ``{"error": ...}`` and reported per shape or pair.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections import OrderedDict
+
+from ..geometry.mesh import Mesh
+from ..matching import match
+from ..pipeline.spectral import applies_to_size
+from ..shape import Shape
+from .cache import ShapeCache, cached_shape, descriptor_params, file_digest, mesh_digest
+
+__all__ = ["limit_threads", "pair_task", "prepare_task"]
+
+#: Shapes a worker keeps built between pairs, counted in vertices.
+SHAPE_BUDGET = 300_000
+
+
+def limit_threads(n: int | None) -> None:
+    """Cap the Rust kernels' thread pool (read once, at the first parallel call) of this process,
+    unless the user set ``RAYON_NUM_THREADS``."""
+    if n and "RAYON_NUM_THREADS" not in os.environ:
+        os.environ["RAYON_NUM_THREADS"] = str(n)
+
+
+def _error(e: BaseException) -> str:
+    return f"{type(e).__name__}: {e}"
+
+
+def prepare_task(
+    spec: tuple, cache_root: str, kinds: tuple, want_data: bool = False, basis: int = 0
+) -> dict:
+    """Parse a shape and compute its descriptors into the cache, and with ``basis`` > 0 the
+    spectral pass's eigenbasis of that many eigenpairs (on a shared disk only, for shapes the pass can run on);
+    returns its digest and size (and its arrays when ``want_data``, for backends whose workers
+    do not share a disk)."""
+    try:
+        cache = ShapeCache(cache_root)
+        if spec[0] == "path":
+            digest = file_digest(spec[1])
+            mesh = cache.mesh(spec[1], digest)
+        else:
+            mesh = Mesh(spec[1], spec[2])
+            digest = mesh_digest(mesh)
+            if cache.get(digest, "mesh", {}) is None:
+                cache.put(digest, "mesh", {}, {"vertices": mesh.vertices, "faces": mesh.faces})
+        given = spec[3] if spec[0] == "mesh" else {}
+        descr = {}
+        for kind in kinds:
+            if kind in given:  # a Shape that already computed them
+                descr[kind] = given[kind]
+                cache.put(digest, kind, descriptor_params(kind), {"d": given[kind]})
+            else:
+                descr[kind] = cache.descriptors(mesh, kind, digest)
+        if basis and not want_data and applies_to_size(mesh.n_vertices):
+            cache.spectral_basis(mesh, digest, basis)
+        out = {"digest": digest, "n_vertices": mesh.n_vertices}
+        if want_data:
+            out["data"] = {
+                "digest": digest, "vertices": mesh.vertices, "faces": mesh.faces,
+                "descriptors": descr,
+            }  # fmt: skip
+        return out
+    except Exception as e:  # noqa: BLE001 - reported per shape, the batch goes on
+        return {"error": _error(e)}
+
+
+_SHAPES: OrderedDict = OrderedDict()
+
+
+def _shape(token, cache_root: str | None, kinds: tuple, k_max: int, basis: int = 0) -> Shape:
+    """The Shape of a digest (read from the cache) or of shipped arrays, kept for later pairs;
+    with ``basis`` > 0, the cached eigenbasis of that size too, when there is one."""
+    if isinstance(token, dict):  # arrays shipped with the task
+        key = (token["digest"], k_max)
+    else:
+        key = (token, k_max)
+    if key in _SHAPES:
+        _SHAPES.move_to_end(key)
+        return _SHAPES[key]
+    if isinstance(token, dict):
+        shape = Shape(Mesh(token["vertices"], token["faces"]), k_max=k_max)
+        for kind, d in token["descriptors"].items():
+            shape.set_descriptors(kind, d)
+    else:
+        cache = ShapeCache(cache_root)
+        got = cache.get(token, "mesh", {})
+        if got is None:
+            raise RuntimeError(f"shape {token[:12]} vanished from the cache {cache_root}")
+        shape = cached_shape(
+            Mesh(got["vertices"], got["faces"]), cache=cache, kinds=kinds, k_max=k_max,
+            digest=token,
+        )  # fmt: skip
+        got = cache.spectral_basis(shape.mesh, token, basis, compute=False) if basis else None
+        if got is not None:
+            shape.set_spectral_basis(*got)
+    _SHAPES[key] = shape
+    while sum(s.n_vertices for s in _SHAPES.values()) > SHAPE_BUDGET and len(_SHAPES) > 2:
+        _SHAPES.popitem(last=False)
+    return shape
+
+
+def pair_task(job: dict, a, b) -> dict:
+    """Match one pair; ``a``/``b`` are cache digests or dicts of arrays."""
+    limit_threads(job.get("threads"))
+    try:
+        t0 = time.perf_counter()
+        basis = job.get("basis", 0)
+        sa = _shape(a, job["cache_root"], job["kinds"], job["k_max"], basis)
+        sb = _shape(b, job["cache_root"], job["kinds"], job["k_max"], basis)
+        load = time.perf_counter() - t0
+        res = match(sa, sb, init=job["init"], k_max=job["k_max"], **job["options"])
+        return {"map": res.map, "timings": {"load": load, **res.timings}}
+    except Exception as e:  # noqa: BLE001 - reported per pair, the batch goes on
+        return {"error": _error(e)}

@@ -1,0 +1,5 @@
+"""The ``hope-rs`` command."""
+
+from .main import main
+
+__all__ = ["main"]

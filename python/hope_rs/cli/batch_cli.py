@@ -1,0 +1,161 @@
+"""``hope-rs batch PAIRS_FILE --out DIR``: the command line of :mod:`hope_rs.batch`."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import textwrap
+import time
+
+from ..batch.match_many import imatch_many, read_pairs
+
+__all__ = ["ENVIRONMENT", "EXIT_STATUS", "add_batch_parser", "cmd_batch", "environment_help"]
+
+#: Environment variables the command line reads, with what they do (the one list the help
+#: texts print and the README is checked against).
+ENVIRONMENT = {
+    "HOPE_RS_CACHE": "per-shape cache folder (default $XDG_CACHE_HOME/hope_rs)",
+    "XDG_CACHE_HOME": "base of the default cache folder (default ~/.cache)",
+    "RAYON_NUM_THREADS": "threads of the Rust kernels (default: every core; in a batch, "
+    "cores / jobs per worker)",
+    "HOPE_NO_SIMD": "set: run the portable loops instead of the AVX2/AVX-512 ones",
+    "HOPE_RS_DEBUG": "set to 1: print the traceback of an unexpected error",
+}
+
+#: Exit statuses of every subcommand.
+EXIT_STATUS = {
+    0: "success",
+    1: "a runtime failure: a pair of a batch failed, an output could not be written, or an "
+    "internal error",
+    2: "a usage or input error: bad arguments, an unreadable or malformed input file, an "
+    "unwritable output folder (nothing is computed)",
+    130: "interrupted (Ctrl-C); a batch keeps the maps already written",
+}
+
+
+def environment_help() -> str:
+    """The ``exit status`` and ``environment`` sections of a help epilog."""
+
+    def item(head: str, text: str, width: int) -> str:
+        return textwrap.fill(
+            text, 78, initial_indent=f"  {head:<{width}} ", subsequent_indent=" " * (width + 3)
+        )
+
+    lines = ["exit status:"]
+    lines += [item(str(code), text, 4) for code, text in EXIT_STATUS.items()]
+    lines.append("environment:")
+    lines += [item(name, text, 18) for name, text in ENVIRONMENT.items()]
+    return "\n".join(lines)
+
+
+def add_batch_parser(sub) -> None:
+    """Register the ``batch`` subcommand on an argparse subparsers object."""
+    p = sub.add_parser(
+        "batch",
+        help="match every pair of a pairs file; one map file per pair in --out",
+        description=textwrap.fill(
+            "Match every pair listed in PAIRS_FILE (one pair per line: two mesh paths, relative "
+            "ones resolved against the file's folder; quote paths holding spaces or separate "
+            "the two with a tab). Each map is written atomically to OUT/<a>__<b>.txt (or .npy) as soon as "
+            "it is done; a rerun (e.g. after Ctrl-C or a crash) skips pairs whose map file is "
+            "whole and redoes the others. Exit status 1 when some pair failed (the others still "
+            "finish).",
+            78,
+        ),
+        epilog=environment_help(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("pairs", metavar="PAIRS_FILE", help="text file, one pair of mesh paths a line")
+    p.add_argument("--out", required=True, help="output folder (created if missing)")
+    p.add_argument(
+        "--format", default="txt", choices=["txt", "npy"],
+        help="map files: txt (one B index per line, default) or npy (NumPy int64)",
+    )  # fmt: skip
+    p.add_argument("--ext", default="", help="suffix appended to names without it, e.g. .off")
+    p.add_argument(
+        "-j", "--jobs", type=int, help="local worker processes (default: one per two cores)"
+    )
+    p.add_argument("--backend", default="local", choices=["local", "ray"], help="where to run")
+    p.add_argument("--ray-address", help="Ray cluster address (default: ray.init()'s choice)")
+    p.add_argument("--cache", help="per-shape cache folder (default: $HOPE_RS_CACHE)")
+    p.add_argument("--no-cache", action="store_true", help="keep the cache for this run only")
+    p.add_argument("--init", default="shot", choices=["shot", "wks", "hks"], help="descriptors")
+    p.add_argument("--k-max", type=int, default=8, help="largest hop radius (default 8)")
+    p.add_argument(
+        "--multiscale", action="store_true", help="match(..., multiscale=True) for every pair"
+    )
+    p.add_argument(
+        "--no-spectral", action="store_true", help="match(..., spectral=False) for every pair"
+    )
+    p.add_argument(
+        "--no-shared-faces",
+        action="store_true",
+        help="match(..., shared_faces=False) for every pair",
+    )
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress output")
+    p.set_defaults(func=cmd_batch)
+
+
+def cmd_batch(args) -> int:
+
+    if args.no_cache and args.cache:
+        raise ValueError("give either --cache DIR or --no-cache, not both")
+    if args.backend != "ray" and args.ray_address:
+        raise ValueError("--ray-address needs --backend ray")
+    if args.jobs is not None and args.jobs < 1:
+        raise ValueError(f"--jobs must be a positive integer, got {args.jobs}")
+    pairs = read_pairs(args.pairs, ext=args.ext)
+    shapes = list(dict.fromkeys(p for pair in pairs for p in pair))
+    index = {p: i for i, p in enumerate(shapes)}
+    t0 = time.perf_counter()
+    counts = {"matched": 0, "skipped": 0, "failed": 0}
+    failures = []
+    results = imatch_many(
+        shapes,
+        [(index[a], index[b]) for a, b in pairs],
+        out_dir=args.out,
+        jobs=args.jobs,
+        backend=args.backend,
+        cache=False if args.no_cache else (args.cache or True),
+        init=args.init,
+        k_max=args.k_max,
+        multiscale=args.multiscale,
+        spectral=not args.no_spectral,
+        shared_faces=not args.no_shared_faces,
+        progress=not args.quiet,
+        ray_options={"address": args.ray_address} if args.backend == "ray" else None,
+        map_format=args.format,
+    )
+    interrupted = started = False
+    try:
+        for r in results:
+            started = True
+            counts["skipped" if r.skipped else ("matched" if r.ok else "failed")] += 1
+            if not r.ok:
+                failures.append(f"{r.a} -> {r.b}: {r.error}")
+    except KeyboardInterrupt:
+        interrupted = started = True
+    finally:
+        results.close()  # on any early exit: end the workers now
+        if started:
+            _summary(args, len(pairs), counts, failures, time.perf_counter() - t0, interrupted)
+    if interrupted:
+        print(
+            "hope-rs: interrupted; the maps written are kept, rerun the same command to finish",
+            file=sys.stderr,
+        )
+        return 130
+    return 1 if counts["failed"] else 0
+
+
+def _summary(args, total: int, counts: dict, failures: list, seconds: float, interrupted: bool):
+    for line in failures:
+        print(f"hope-rs: pair failed: {line}", file=sys.stderr)
+    rate = 60 * counts["matched"] / seconds if seconds > 0 else 0.0
+    left = total - sum(counts.values())
+    print(
+        f"{total} pairs: {counts['matched']} matched, {counts['skipped']} skipped, "
+        f"{counts['failed']} failed" + (f", {left} not done (interrupted)" if interrupted else "")
+        + f" in {seconds:.1f} s ({rate:.1f} pairs/min) -> {args.out}",
+        flush=True,
+    )  # fmt: skip

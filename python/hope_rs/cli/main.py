@@ -1,0 +1,217 @@
+"""The ``hope-rs`` command line: ``match`` two mesh files, run the bundled ``demo``, ``bench``
+methods on data sets (:mod:`hope_rs.bench`), ``show`` a map (:mod:`hope_rs.show`) or match a
+``batch`` of pairs (:mod:`hope_rs.batch`)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import sys
+import traceback
+import warnings
+
+from .._version import __version__
+from ..batch.match_many import one_line_warning
+from ..evaluation import bench, show
+from ..evaluation.demo import run_demo
+from ..geometry.map_io import check_writable_folder, map_format, write_map
+from ..geometry.mesh import load_mesh
+from ..matching import check_match_options, match
+from ..pipeline.progress import ProgressBar
+from .batch_cli import add_batch_parser, environment_help
+
+
+def _summary(res) -> dict:
+    return {
+        "n_vertices": int(res.map.size),
+        "iterations": [
+            {
+                "k": h.k,
+                "witness_fraction": h.witness_fraction,
+                "changed": h.changed,
+                "seconds": h.seconds,
+                "pass": h.n_pass,
+                "polish": h.polish,
+            }
+            for h in res.history
+        ],
+        "timings": res.timings,
+        "stages": [vars(s) for s in res.stages],
+    }
+
+
+#: ``hope-rs match`` suggests ``--multiscale`` when both meshes have at least this many vertices.
+HINT_VERTICES = 100_000
+
+
+def cmd_match(args) -> int:
+    options = {
+        "init": args.init, "k_max": args.k_max, "multiscale": args.multiscale,
+        "spectral": not args.no_spectral, "shared_faces": not args.no_shared_faces,
+    }  # fmt: skip
+    check_match_options(**options)  # before any work, like the output below
+    if args.output:  # before any work: a known suffix, a folder we can write to
+        if os.path.isdir(args.output):
+            raise ValueError(f"output {args.output!r} is a folder; give a file name")
+        map_format(args.output)
+        check_writable_folder(os.path.dirname(os.path.abspath(args.output)))
+    a, b = load_mesh(args.a), load_mesh(args.b)
+    if not args.multiscale and not args.quiet and min(a.n_vertices, b.n_vertices) >= HINT_VERTICES:
+        print(
+            "hope-rs: hint: on meshes this large, --multiscale is about 3x faster, with a larger "
+            "error (see docs/method.md, multiscale)",
+            file=sys.stderr,
+        )
+    # The bar on a terminal; with -v the log says the same, one line per stage.
+    bar = ProgressBar()
+    show_bar = bar.live and not args.quiet and not args.verbose
+    try:
+        res = match(a, b, progress=bar if show_bar else None, **options)
+    finally:
+        bar.close()
+    coarse = next((s for s in res.stages if s.name == "coarse"), None)
+    if coarse is not None and not coarse.ran and not args.quiet and not args.verbose:
+        print(f"hope-rs: note: --multiscale: {coarse.reason}", file=sys.stderr)
+    if args.output:
+        write_map(args.output, res.map)
+    elif not args.json:
+        sys.stdout.write("\n".join(map(str, res.map.tolist())) + "\n")
+    if args.json:
+        print(json.dumps(_summary(res), indent=2))
+    return 0
+
+
+def cmd_demo(args) -> int:
+
+    report = run_demo(verbose=not args.json)
+    if args.json:
+        print(json.dumps(report, indent=2))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="hope-rs",
+        description="Dense 3D shape matching with HOPE.",
+        epilog=environment_help(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--version", action="version", version=f"hope-rs {__version__}")
+    sub = p.add_subparsers(dest="command", required=True)
+    p.add_argument(
+        "-v", "--verbose", action="count", default=0,
+        help="log each stage with its time and why a stage was skipped (-vv: every step) on stderr",
+    )  # fmt: skip
+    m = sub.add_parser(
+        "match",
+        help="match mesh A to mesh B; writes one B vertex index per line",
+        epilog=environment_help(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    m.add_argument("a", help="source mesh (OFF, OBJ, PLY, STL)")
+    m.add_argument("b", help="target mesh")
+    m.add_argument(
+        "-o", "--output",
+        help="map file: .txt or .csv (one B index per line) or .npy (NumPy int64); written "
+        "atomically (default: standard output)",
+    )  # fmt: skip
+    m.add_argument("--init", default="shot", choices=["shot", "wks", "hks"], help="descriptors")
+    m.add_argument("--k-max", type=int, default=8, help="largest hop radius (default 8)")
+    m.add_argument(
+        "--multiscale",
+        action="store_true",
+        help="for large meshes: match coarse copies first, then one or two fine passes (faster, less exact)",
+    )
+    m.add_argument(
+        "--no-spectral",
+        action="store_true",
+        help="return HOPE's own map, without the spectral (ZoomOut) pass after it",
+    )
+    m.add_argument(
+        "--no-shared-faces",
+        action="store_true",
+        help="skip the finishing rounds for shapes that share their triangulation",
+    )
+    m.add_argument("--json", action="store_true", help="print timings and a summary as JSON")
+    m.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    m.add_argument(
+        "-v", "--verbose", action="count", default=argparse.SUPPRESS,
+        help="as hope-rs -v: log each stage (-vv: every step) instead of the bar",
+    )  # fmt: skip
+    m.set_defaults(func=cmd_match)
+    d = sub.add_parser(
+        "demo", help="match the bundled FAUST pair and score it against ground truth"
+    )
+    d.add_argument("--json", action="store_true", help="print the report as JSON")
+    d.set_defaults(func=cmd_demo)
+
+    bench.add_parser(sub)
+    show.add_parser(sub)
+    add_batch_parser(sub)
+    return p
+
+
+#: Errors that are the input's or the user's, not the program's: exit status 2, one line.
+USAGE_ERRORS = (
+    ValueError, TypeError, FileNotFoundError, PermissionError, IsADirectoryError,
+    NotADirectoryError,
+)  # fmt: skip
+
+
+def main(argv=None) -> int:
+    """Run the command line; returns the exit status (see ``hope-rs --help``)."""
+    args = build_parser().parse_args(argv)
+    debug = os.environ.get("HOPE_RS_DEBUG", "") not in ("", "0")
+    formatwarning, warnings.formatwarning = warnings.formatwarning, one_line_warning
+    handler = _log_to_stderr(args.verbose)
+    try:
+        return args.func(args)
+    except KeyboardInterrupt:
+        print("hope-rs: interrupted", file=sys.stderr)
+        return 130
+    except MemoryError as e:  # a run too large for this machine: not the input's fault
+        if debug:
+            traceback.print_exc()
+        print(f"hope-rs: error: out of memory: {e}", file=sys.stderr)
+        return 1
+    except USAGE_ERRORS as e:
+        if debug:
+            traceback.print_exc()
+        print(f"hope-rs: error: {e}", file=sys.stderr)
+        return 2
+    except OSError as e:  # e.g. a full disk while writing: the run failed, not its input
+        if debug:
+            traceback.print_exc()
+        print(f"hope-rs: error: {e}", file=sys.stderr)
+        return 1
+    except Exception as e:  # noqa: BLE001 - a bug: one line and a hint, not a traceback
+        if debug:
+            traceback.print_exc()
+        print(
+            f"hope-rs: internal error: {type(e).__name__}: {e} (rerun with HOPE_RS_DEBUG=1 for "
+            "the traceback, and please report it)",
+            file=sys.stderr,
+        )
+        return 1
+    finally:
+        warnings.formatwarning = formatwarning
+        if handler is not None:
+            logger = logging.getLogger("hope_rs")
+            logger.removeHandler(handler)
+            logger.setLevel(handler.previous_level)
+
+
+def _log_to_stderr(verbose: int) -> logging.Handler | None:
+    """With -v, the package logger's INFO lines (one per stage) on stderr; -vv adds DEBUG
+    (one per refinement step). Returns the handler, to remove when the command ends."""
+    if not verbose:
+        return None
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("hope-rs: %(message)s"))
+    logger = logging.getLogger("hope_rs")
+    handler.previous_level = logger.level
+    logger.setLevel(logging.INFO if verbose == 1 else logging.DEBUG)
+    logger.addHandler(handler)
+    return handler

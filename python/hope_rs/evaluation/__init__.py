@@ -1,0 +1,1 @@
+"""Scoring maps against ground truth, benchmark runs, the demo and pictures of maps."""

@@ -1,0 +1,229 @@
+"""Scoring maps against ground truth: geodesic errors and the figures papers report.
+
+Two distances are available (``method=``):
+
+* ``"graph"`` — shortest paths along B's edges (Rust Dijkstra, searched only until the target is
+  settled). Fast; overestimates surface geodesics by a few percent (up to ~8% on a regular grid).
+* ``"surface"`` — geodesic paths on the surface by edge flipping (Sharp & Crane, "You Can Find
+  Geodesic Paths in Triangle Meshes by Just Flipping Edges", SIGGRAPH Asia 2020), through
+  potpourri3d's ``EdgeFlipGeodesicSolver``. Each path starts from the edge-graph shortest path and
+  is straightened until it is a locally shortest surface geodesic: exact on flat or developable
+  regions (checked against Euclidean distance on a flat grid in the tests) and never longer than
+  the graph distance. One path per wrongly matched scored vertex, so there is no n x n matrix and
+  no all-vertices solve: the cost grows with the number and length of the errors only.
+
+Either way an exact match scores exactly 0.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import _core
+from .._validate import as_index_map
+from ..geometry.mesh import Mesh, as_mesh, unique_edges
+from ..shape import Shape
+
+#: Thresholds of the standard "% correspondences within geodesic error" curve.
+MAX_ERROR = 0.25
+#: Upper end of the short curve (and its AUC) that recent papers report.
+MAX_ERROR_SHORT = 0.10
+#: Points on each curve.
+CURVE_POINTS = 101
+GEODESIC_METHODS = ("graph", "surface")
+
+
+def load_vts(path: str | os.PathLike) -> np.ndarray:
+    """Read a ``.vts`` correspondence file (one 1-based vertex index per line) as 0-based."""
+    try:
+        rows = np.loadtxt(path, dtype=np.int64, ndmin=2)
+    except (OSError, ValueError) as e:
+        raise ValueError(f"cannot read {os.fspath(path)!r} as a .vts file: {e}") from None
+    idx = rows[:, 0] - 1
+    if idx.size and idx.min() < 0:
+        raise ValueError(f"{os.fspath(path)!r} holds an index below 1; .vts files are 1-based")
+    return idx
+
+
+def _mesh_and_shape(b) -> tuple[Mesh, Shape | None]:
+    shape_b = b if isinstance(b, Shape) else None
+    mesh_b = b.mesh if shape_b is not None else as_mesh(b, "b")
+    return mesh_b, shape_b
+
+
+def _graph_distances(mesh: Mesh, shape: Shape | None, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Edge-graph distances between vertices ``u[i]`` and ``v[i]`` of ``mesh`` (unscaled), on
+    the graph ``shape`` already holds (in its internal numbering) when there is one."""
+    if shape is None:
+        return _core.MeshGraph(mesh.vertices, mesh.faces, 0).pair_distances(u, v)
+    # The shape's graph is in its internal units, 4**scale_exponent times the mesh's (exact).
+    d = shape.graph.pair_distances(shape.rank[u], shape.rank[v])
+    return np.ldexp(d, -2 * shape.scale_exponent) if shape.scale_exponent else d
+
+
+def surface_distances(mesh: Mesh, sources, targets) -> np.ndarray:
+    """Surface geodesic length from ``sources[i]`` to ``targets[i]`` on ``mesh`` (unscaled).
+
+    Edge-flip geodesic paths (see the module notes); pairs in different connected components
+    get ``inf``. Needs the ``potpourri3d`` package (``pip install hope-rs[eval]``).
+    """
+    try:
+        import potpourri3d as pp3d
+    except ImportError:
+        raise ValueError(
+            "method='surface' needs potpourri3d: pip install potpourri3d "
+            "(or use method='graph' for edge-graph distances)"
+        ) from None
+    src = np.asarray(sources, dtype=np.int64)
+    dst = np.asarray(targets, dtype=np.int64)
+    graph = _core.MeshGraph(mesh.vertices, mesh.faces, 0)
+    out = graph.pair_distances(src, dst)  # upper bound, and inf across components
+    todo = np.flatnonzero(np.isfinite(out) & (src != dst))
+    if todo.size == 0:
+        return out
+    solver = pp3d.EdgeFlipGeodesicSolver(mesh.vertices, mesh.faces)
+    for i in todo:
+        path = solver.find_geodesic_path(int(src[i]), int(dst[i]))
+        length = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
+        out[i] = min(out[i], length)
+    return out
+
+
+def geodesic_errors(b, mapping, *, a_idx=None, b_idx=None, method: str = "graph") -> np.ndarray:
+    """Geodesic error of each scored correspondence, divided by sqrt(area) of B.
+
+    ``error_i = d_B(mapping[a_idx[i]], b_idx[i]) / sqrt(area(B))``; with no indices given,
+    the ground truth is the identity (vertex i of A ↔ vertex i of B).
+
+    Parameters
+    ----------
+    b : Mesh or Shape
+        The target shape.
+    mapping : (n_a,) array_like of int
+        ``mapping[i]`` is the vertex of B matched to vertex i of A.
+    a_idx, b_idx : array_like of int, optional
+        Scored ground-truth pairs (0-based); only these are scored, so pass a subsample to score
+        a large identity pair quickly.
+    method : {"graph", "surface"}
+        ``"graph"``: edge-graph shortest paths (fast, a few percent long). ``"surface"``: edge-flip
+        surface geodesics (near-exact, used by ``hope-rs bench``; needs potpourri3d). Distances
+        are computed only between the scored pairs, never as an n x n matrix.
+    """
+    if method not in GEODESIC_METHODS:
+        raise ValueError(f"method must be one of {GEODESIC_METHODS}, got {method!r}")
+    mesh_b, shape_b = _mesh_and_shape(b)
+    mapping = np.asarray(mapping)
+    n_a = mapping.shape[0] if mapping.ndim == 1 else -1
+    mapping = as_index_map(mapping, n_a, mesh_b.n_vertices, name="map")
+    if a_idx is None:
+        a_idx = np.arange(min(n_a, mesh_b.n_vertices))
+    if b_idx is None:
+        b_idx = a_idx
+    a_idx = as_index_map(a_idx, len(a_idx), n_a, name="a_idx")
+    b_idx = as_index_map(b_idx, len(a_idx), mesh_b.n_vertices, name="b_idx")
+    src = mapping[a_idx]
+    err = np.zeros(a_idx.size)
+    wrong = np.flatnonzero(src != b_idx)
+    if wrong.size == 0:
+        return err
+    if method == "surface":
+        err[wrong] = surface_distances(mesh_b, src[wrong], b_idx[wrong]) / mesh_b.scale
+    else:
+        err[wrong] = _graph_distances(mesh_b, shape_b, src[wrong], b_idx[wrong]) / mesh_b.scale
+    return err
+
+
+def _trapezoid(y: np.ndarray, x: np.ndarray) -> float:
+    f = np.trapezoid if hasattr(np, "trapezoid") else np.trapz  # numpy < 2 has only trapz
+    return float(f(y, x))
+
+
+def error_curve(
+    errors, *, max_error: float = MAX_ERROR, n: int = CURVE_POINTS
+) -> tuple[np.ndarray, np.ndarray]:
+    """The "% correspondences within geodesic error e" curve: thresholds ``(n,)`` from 0 to
+    ``max_error`` and the fraction (0..1) of errors at or below each."""
+    e = np.asarray(errors, dtype=np.float64).ravel()
+    if not (np.isfinite(max_error) and max_error > 0):
+        raise ValueError(f"max_error must be a positive number, got {max_error}")
+    t = np.linspace(0.0, max_error, n)
+    if e.size == 0:
+        return t, np.full(n, np.nan)
+    return t, np.searchsorted(np.sort(e), t, side="right") / e.size
+
+
+def curve_auc(errors, *, max_error: float = MAX_ERROR) -> float:
+    """Area under :func:`error_curve` on ``[0, max_error]``, divided by ``max_error`` (so 1 is
+    perfect)."""
+    t, c = error_curve(errors, max_error=max_error)
+    return _trapezoid(c, t) / max_error
+
+
+@dataclass
+class Score:
+    """Summary figures of one map (or of the pooled errors of several)."""
+
+    exact: float  #: fraction with error 0
+    mean: float  #: mean normalised geodesic error (unreachable pairs count as 1)
+    auc: float  #: area under the % within error curve on [0, 0.25], normalised to 1
+    auc_010: float = float("nan")  #: the same on [0, 0.10], as recent papers report
+
+    @property
+    def mean_x100(self) -> float:
+        """Mean error ×100, the unit most papers' tables use."""
+        return 100.0 * self.mean
+
+    def __str__(self) -> str:
+        return (
+            f"exact {100 * self.exact:.1f}%, mean error {self.mean:.4f} (x100 {self.mean_x100:.2f}),"
+            f" AUC {self.auc:.3f}, AUC@0.10 {self.auc_010:.3f}"
+        )
+
+
+def score(errors: np.ndarray, *, max_error: float = MAX_ERROR) -> Score:
+    """Fraction exactly right, mean error and curve AUCs (0..max_error and 0..0.10) of an array
+    of geodesic errors."""
+    e = np.asarray(errors, dtype=np.float64)
+    finite = np.where(np.isfinite(e), e, 1.0)
+    return Score(
+        float(np.mean(e == 0)),
+        float(finite.mean()),
+        curve_auc(e, max_error=max_error),
+        curve_auc(e, max_error=MAX_ERROR_SHORT),
+    )
+
+
+@dataclass
+class Smoothness:
+    """How continuous a map is, independent of ground truth."""
+
+    edge_stretch: float  #: mean of d_B(f(u), f(v)) / |uv| over A's edges, both in sqrt(area) units
+    coverage: float  #: fraction of B's vertices that some vertex of A maps to
+
+    def __str__(self) -> str:
+        return f"edge stretch {self.edge_stretch:.2f}, coverage {100 * self.coverage:.1f}%"
+
+
+def smoothness(a, b, mapping) -> Smoothness:
+    """Edge stretch and coverage of ``mapping`` (A → B).
+
+    For each edge (u, v) of A, the edge-graph geodesic between ``mapping[u]`` and ``mapping[v]``
+    on B is divided by the edge's length, both normalised by sqrt(area) of their shape. A smooth
+    map of equal-density meshes stretches edges by about 1; jumps (a limb mapped to the wrong side)
+    give long mapped edges and raise the mean. Edges mapped onto one vertex count as 0, so read
+    it together with ``coverage``, the fraction of B's vertices hit.
+    """
+    mesh_a, _ = _mesh_and_shape(a)
+    mesh_b, shape_b = _mesh_and_shape(b)
+    f = as_index_map(mapping, mesh_a.n_vertices, mesh_b.n_vertices, name="map")
+    edges = unique_edges(mesh_a.faces)
+    length = np.linalg.norm(mesh_a.vertices[edges[:, 0]] - mesh_a.vertices[edges[:, 1]], axis=1)
+    keep = length > 0
+    edges, length = edges[keep], length[keep] / mesh_a.scale
+    mapped = _graph_distances(mesh_b, shape_b, f[edges[:, 0]], f[edges[:, 1]]) / mesh_b.scale
+    ratio = np.where(np.isfinite(mapped), mapped, 1.0) / length
+    coverage = np.unique(f).size / mesh_b.n_vertices
+    return Smoothness(float(ratio.mean()), float(coverage))

@@ -1,0 +1,1 @@
+"""Per-vertex features: SHOT, HKS and WKS descriptors and Laplace–Beltrami eigenbases."""

@@ -1,0 +1,390 @@
+"""Every setting of :func:`hope_rs.match`, as data: one frozen dataclass per stage in
+:class:`MatchConfig`.
+
+The defaults are the method's one parameter set for all data; ``docs/decisions.md`` keeps,
+per setting, what else was tried. A config is printable, comparable and hashable, and
+:meth:`MatchConfig.key` is what caches and result files are keyed by.
+
+>>> from hope_rs import MatchConfig
+>>> cfg = MatchConfig().with_options(top_k=32, spectral=False)
+>>> cfg.refine.top_k, cfg.spectral.enabled
+(32, False)
+>>> MatchConfig() == MatchConfig()
+True
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from dataclasses import dataclass, field
+
+from ..kernels.search import SearchConfig
+from ..shape import ShapeConfig
+
+__all__ = [
+    "KEYWORDS",
+    "FinishConfig",
+    "GrowthConfig",
+    "InitialConfig",
+    "MatchConfig",
+    "MultiscaleConfig",
+    "RefineConfig",
+    "RepairConfig",
+    "SpectralConfig",
+]
+
+
+@dataclass(frozen=True)
+class InitialConfig:
+    """The initial map: each vertex's nearest descriptor (:mod:`hope_rs.pipeline.initial`).
+
+    Attributes
+    ----------
+    descriptor : {"shot", "wks", "hks"}
+        Descriptors compared (``match(init=...)``).
+    search : SearchConfig
+        The nearest-descriptor search (PCA dimensions, exact vs inverted-file search).
+    """
+
+    descriptor: str = "shot"
+    search: SearchConfig = field(default_factory=SearchConfig)
+
+
+@dataclass(frozen=True)
+class RepairConfig:
+    """The global repair of each refinement pass (:mod:`hope_rs.pipeline.anchors`).
+
+    Distances are edge-graph geodesics in sqrt(area) units (docs/decisions.md#global-repair).
+
+    Attributes
+    ----------
+    n_anchors : int
+        Farthest-point anchors among the witnesses.
+    search_dims : int
+        Principal axes of the anchor coordinates kept for the neighbour search.
+    unreachable : float
+        Stands in for the distance to a vertex of another component.
+    agree_rel, agree_abs : float
+        Two geodesic distances agree within ``agree_rel`` of their length plus ``agree_abs``.
+    global_min_agree : float
+        The global check keeps a vertex trusted when it agrees with this share of the anchors ...
+    global_min_flagged : float
+        ... and acts only when it flags at least this share of the trusted vertices.
+    flagged_min_shift : float
+        A flagged vertex moves only this far at least (a mirrored region moves far).
+    region_consistent : float
+        A swapped region is a component of vertices with this share of their 2-ring consistent ...
+    region_min_size : int
+        ... of at least this many vertices; it moves when its share of agreeing anchor
+        distances rises by ``region_min_gain`` ...
+    region_min_gain : float
+    region_min_shift : float
+        ... and its median vertex moves at least this far.
+    """
+
+    n_anchors: int = 32
+    search_dims: int = 12
+    unreachable: float = 4.0
+    agree_rel: float = 0.1
+    agree_abs: float = 0.03
+    global_min_agree: float = 0.7
+    global_min_flagged: float = 0.1
+    flagged_min_shift: float = 0.15
+    region_consistent: float = 0.7
+    region_min_size: int = 10
+    region_min_gain: float = 0.2
+    region_min_shift: float = 0.3
+
+
+@dataclass(frozen=True)
+class RefineConfig:
+    """HOPE's refinement (:mod:`hope_rs.pipeline.refine`); passes are 0-based.
+
+    Attributes
+    ----------
+    schedule : tuple of int or None
+        Hop radii of one pass; ``None``: k_max → 1 (docs/decisions.md#schedule).
+    max_passes : int
+        Passes of the schedule at most (docs/decisions.md#stopping).
+    min_consistent : float
+        LMD's witness rule: the share of a vertex's 2-ring that must keep its distances
+        (docs/decisions.md#lmd); the spectral pass's anchors use it too.
+    top_k : int
+        Candidates kept per row of every overlap cost (the polish's and the finish's too).
+    min_witness_fraction : float
+        Below this share of witnesses every vertex votes.
+    polish_k : int or None
+        Hop radius of the last, not one-to-one step; ``None``: no polish
+        (docs/decisions.md#polish).
+    global_step : bool
+        Start each pass with the global repair (docs/decisions.md#global-repair).
+    converged_fraction : float
+        Stop after a pass that changed fewer than this share of the vertices.
+    min_untrusted_drop : float
+        With the global step, stop (from pass ``untrusted_drop_pass`` on) when a pass shrank
+        the share of untrusted vertices by less than this fraction of itself.
+    untrusted_drop_pass : int
+    global_check_pass : int
+        From this pass on the repair also checks long-range distances.
+    region_check_pass : int
+        From this pass on each pass first moves back swapped regions.
+    stay_pass, stay_counts : int
+        From pass ``stay_pass`` on a witness's current match is worth ``stay_counts`` more
+        overlap counts (docs/decisions.md#stay).
+    auction_floor_div : int
+        First auction epsilon at least (value range) / this (docs/decisions.md#auction).
+    nearest_unused_k : int
+        Unused vertices ranked per group of duplicates beyond twice its size when the
+        refinement completes a map to a one-to-one one.
+    repair : RepairConfig
+    """
+
+    schedule: tuple[int, ...] | None = None
+    max_passes: int = 4
+    min_consistent: float = 0.5
+    top_k: int = 48
+    min_witness_fraction: float = 0.1
+    polish_k: int | None = 3
+    global_step: bool = True
+    converged_fraction: float = 0.01
+    min_untrusted_drop: float = 0.1
+    untrusted_drop_pass: int = 3
+    global_check_pass: int = 1
+    region_check_pass: int = 1
+    stay_pass: int = 2
+    stay_counts: int = 1
+    auction_floor_div: int = 16
+    nearest_unused_k: int = 16
+    repair: RepairConfig = field(default_factory=RepairConfig)
+
+
+@dataclass(frozen=True)
+class SpectralConfig:
+    """The spectral pass: ZoomOut from HOPE's map, then a per-region choice of the two
+    (:mod:`hope_rs.pipeline.spectral`, docs/decisions.md#spectral).
+
+    Attributes
+    ----------
+    enabled : bool
+    k_start, k_end, k_step : int
+        ZoomOut's basis sizes.
+    max_samples : int
+        ZoomOut iterates on at most this many vertices of each shape ...
+    candidates : int
+        ... each moved to the best of this many vertices of B around its sample's image.
+    local_from, local_candidates : int
+        From basis size ``local_from`` on, unsampled shapes search among the
+        ``local_candidates`` vertices of B nearest the current image.
+    max_vertices : int
+        Skipped when a shape has more vertices.
+    max_discrepancy_ratio : float
+        HOPE's map is kept when the chosen map bends distances to anchors more than this
+        factor times HOPE's ...
+    max_zoomout_discrepancy_ratio : float
+        ... or ZoomOut's own map more than this factor.
+    early_from_pass : int
+        ZoomOut starts during the refinement's last pass when that pass is at least this one.
+    smoothing_steps : int
+        Rounds of 1-ring averaging of the distortion difference before the choice.
+    margin : float
+        HOPE's map is kept where its smoothed distortion exceeds ZoomOut's by at most this
+        (A's mean edge lengths).
+    """
+
+    enabled: bool = True
+    k_start: int = 20
+    k_end: int = 120
+    k_step: int = 5
+    max_samples: int = 8000
+    candidates: int = 32
+    local_from: int = 60
+    local_candidates: int = 64
+    max_vertices: int = 60_000
+    max_discrepancy_ratio: float = 1.1
+    max_zoomout_discrepancy_ratio: float = 1.2
+    early_from_pass: int = 3
+    smoothing_steps: int = 32
+    margin: float = 0.05
+
+
+@dataclass(frozen=True)
+class GrowthConfig:
+    """The growth of the shared-face finish (:mod:`hope_rs.pipeline.growth`,
+    docs/decisions.md#growth).
+
+    Attributes
+    ----------
+    seed_share : float
+        Handle patches smaller than this share of A's vertices do not seed it.
+    face_error : float
+        Largest triangle shape difference for growing across a face (edge lengths).
+    affine_stages : tuple of (accept, ratio)
+        Acceptance tests of the affine growth, strict first.
+    weight_width : float
+        Width of the affine fits' Gaussian weights, relative to the mean squared distance.
+    min_known : int
+        A vertex is fitted once this many vertices of its 2-ring are mapped.
+    rounds : int
+        Rounds of growth at most.
+    faces_first, affine_first, agreement_order : tuple
+        Orders of the growth's steps ("faces" or an index of ``affine_stages``).
+    agreement_rounds : int
+        Rounds in which the growths from both sides keep what they agree on.
+    """
+
+    seed_share: float = 0.02
+    face_error: float = 0.5
+    affine_stages: tuple[tuple[float, float], ...] = ((0.35, 2.0), (0.5, 1.5), (0.7, 1.2))
+    weight_width: float = 0.7
+    min_known: int = 6
+    rounds: int = 3
+    faces_first: tuple = ("faces", 0, 1, 2)
+    affine_first: tuple = (0, 1, 2, "faces")
+    agreement_order: tuple = (0, 1, "faces", 2)
+    agreement_rounds: int = 3
+
+
+@dataclass(frozen=True)
+class FinishConfig:
+    """The shared-face finish (:mod:`hope_rs.pipeline.shared_faces`,
+    docs/decisions.md#shared-faces).
+
+    Attributes
+    ----------
+    enabled : bool
+    max_vertices : int
+        Larger shapes are not finished.
+    min_handles : float
+        Rounds run only while this share of A's vertices are handles.
+    rounds : int
+        Rounds at most; they stop once the seeded share grows by less than ``min_growth``.
+    min_growth : float
+    steps, step_k : int
+        HOPE steps after each round's snapping, and their hop radius.
+    arap_iterations : int
+        ARAP's alternations of rotations and the global solve.
+    anchor_weight : float
+        Pull of each free vertex towards its current image, relative to an edge.
+    growth : GrowthConfig
+    """
+
+    enabled: bool = True
+    max_vertices: int = 60_000
+    min_handles: float = 0.2
+    rounds: int = 10
+    min_growth: float = 0.01
+    steps: int = 3
+    step_k: int = 5
+    arap_iterations: int = 5
+    anchor_weight: float = 1e-3
+    growth: GrowthConfig = field(default_factory=GrowthConfig)
+
+
+@dataclass(frozen=True)
+class MultiscaleConfig:
+    """Coarse-to-fine matching (:mod:`hope_rs.pipeline.multiscale`,
+    docs/decisions.md#multiscale); the coarsening itself is ``MatchConfig.shape.coarsen``.
+
+    Attributes
+    ----------
+    enabled : bool
+    fine_passes : int
+        Refinement passes on the fine meshes after the lift ...
+    fine_passes_small : int
+        ... or this many when neither mesh has more than ``fine_passes_small_vertices``.
+    fine_passes_small_vertices : int
+    lift_ridge : float
+        Ridge of the lift's local linear fits, relative to the mean squared edge.
+    """
+
+    enabled: bool = False
+    fine_passes: int = 1
+    fine_passes_small: int = 2
+    fine_passes_small_vertices: int = 60_000
+    lift_ridge: float = 1e-3
+
+
+#: ``match``'s keyword options → (stage field of :class:`MatchConfig`, field of that stage).
+KEYWORDS: dict[str, tuple[str | None, str]] = {
+    "k_max": (None, "k_max"),
+    "schedule": ("refine", "schedule"),
+    "max_passes": ("refine", "max_passes"),
+    "min_consistent": ("refine", "min_consistent"),
+    "top_k": ("refine", "top_k"),
+    "polish_k": ("refine", "polish_k"),
+    "global_step": ("refine", "global_step"),
+    "multiscale": ("multiscale", "enabled"),
+    "spectral": ("spectral", "enabled"),
+    "shared_faces": ("finish", "enabled"),
+}
+
+
+@dataclass(frozen=True)
+class MatchConfig:
+    """All settings of :func:`hope_rs.match`.
+
+    Attributes
+    ----------
+    k_max : int
+        Largest hop radius, in [2, 64].
+    shape : ShapeConfig
+        Per-shape precomputation (descriptors, eigenbases, coarse copies) of shapes built
+        from meshes; a :class:`~hope_rs.Shape` passed in keeps its own.
+    initial, refine, spectral, finish, multiscale
+        The stages' settings.
+
+    Examples
+    --------
+    >>> from hope_rs import MatchConfig
+    >>> from hope_rs.pipeline.config import RefineConfig
+    >>> MatchConfig(refine=RefineConfig(max_passes=2)).refine.max_passes
+    2
+    >>> MatchConfig().with_options(multiscale=True).multiscale.enabled
+    True
+    """
+
+    k_max: int = 8
+    shape: ShapeConfig = field(default_factory=ShapeConfig)
+    initial: InitialConfig = field(default_factory=InitialConfig)
+    refine: RefineConfig = field(default_factory=RefineConfig)
+    spectral: SpectralConfig = field(default_factory=SpectralConfig)
+    finish: FinishConfig = field(default_factory=FinishConfig)
+    multiscale: MultiscaleConfig = field(default_factory=MultiscaleConfig)
+
+    def with_options(self, **options) -> MatchConfig:
+        """A copy with ``match``'s keyword options (see :data:`KEYWORDS`) set."""
+        cfg = self
+        for name, value in options.items():
+            if name not in KEYWORDS:
+                raise TypeError(
+                    f"unknown option {name!r}; the options are {', '.join(sorted(KEYWORDS))}"
+                )
+            stage, attr = KEYWORDS[name]
+            if name == "schedule" and value is not None:
+                value = tuple(int(k) for k in value)
+            if stage is None:
+                cfg = dataclasses.replace(cfg, **{attr: value})
+            else:
+                part = dataclasses.replace(getattr(cfg, stage), **{attr: value})
+                cfg = dataclasses.replace(cfg, **{stage: part})
+        return cfg
+
+    def options(self) -> dict:
+        """``match``'s keyword options as this config sets them (inverse of
+        :meth:`with_options`)."""
+        out = {}
+        for name, (stage, attr) in KEYWORDS.items():
+            part = self if stage is None else getattr(self, stage)
+            out[name] = getattr(part, attr)
+        return out
+
+    def to_dict(self) -> dict:
+        """Every setting, nested by stage (JSON-serialisable)."""
+        return dataclasses.asdict(self)
+
+    def key(self) -> str:
+        """A SHA-256 (hex) of every setting: equal configs, equal keys."""
+        text = json.dumps(self.to_dict(), sort_keys=True, default=list)
+        return hashlib.sha256(text.encode()).hexdigest()

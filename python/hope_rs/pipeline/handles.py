@@ -1,0 +1,55 @@
+"""Handles: the vertices a map has placed consistently with the faces both shapes share.
+
+A vertex of A is a handle of a map ``f`` when every face around it maps onto a face of B with
+the same orientation and no other vertex shares its image. On shapes that are one
+triangulation in two poses, the true map makes almost every vertex a handle; on shapes
+remeshed independently few vertices are. The shared-face finish (:mod:`hope_rs.shared_faces`)
+deforms towards them, and the growth (:mod:`hope_rs.growth`) starts from those in large
+connected patches.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from ..geometry.orientation import face_keys
+from ..shape import Shape
+
+__all__ = ["face_handles", "face_keys", "large_patches", "seed_handles"]
+
+
+def face_handles(a: Shape, b: Shape, f: np.ndarray) -> np.ndarray:
+    """Vertices of A whose faces all map onto faces of B, with the same orientation, and
+    whose image is the image of no other vertex. ``f`` may be partial (-1 where unknown):
+    unknown vertices are not handles, nor are those with an unknown neighbour on a face."""
+    fa, fb = a.internal.faces.astype(np.int64), b.internal.faces.astype(np.int64)
+    n_b = b.n_vertices
+    f = np.asarray(f, dtype=np.int64)
+    known = f >= 0
+    f = np.where(known, f, 0)
+    mapped = f[fa]
+    ok = np.isin(face_keys(mapped, n_b), face_keys(fb, n_b)) & known[fa].all(axis=1)
+    bad = np.zeros(a.n_vertices, dtype=bool)
+    bad[fa[~ok].ravel()] = True
+    shared = np.bincount(f[known], minlength=n_b)[f] > 1
+    return known & ~bad & ~shared
+
+
+def seed_handles(a: Shape, b: Shape, f: np.ndarray, min_share: float) -> np.ndarray:
+    """The handles of ``f`` (see :func:`face_handles`) in connected patches of at least
+    ``min_share`` of A's vertices (``GrowthConfig.seed_share``)."""
+    return large_patches(a, face_handles(a, b, f), min_share)
+
+
+def large_patches(a: Shape, mask: np.ndarray, min_share: float) -> np.ndarray:
+    """``mask`` restricted to its connected patches (over A's edges) of at least
+    ``min_share`` of A's vertices: wrong handles lie in small patches (see
+    :mod:`hope_rs.pipeline.growth` and docs/decisions.md#growth)."""
+    e = a.edges[mask[a.edges[:, 0]] & mask[a.edges[:, 1]]]
+    n = a.n_vertices
+    graph = sp.csr_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    label = connected_components(graph, directed=False)[1]
+    size = np.bincount(label, weights=mask)
+    return mask & (size[label] >= min_share * n)

@@ -1,0 +1,114 @@
+"""The option checks of :func:`hope_rs.match`, run before any expensive work.
+
+Each bad value gets a one-line message naming the option, what it allows and what it got.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+
+import numpy as np
+
+from ..features.descriptors import check_kind
+
+#: Hop radii a :class:`~hope_rs.Shape` supports: LMD reads 2-rings, and the hop balls of much
+#: larger radii cover most of a mesh.
+K_MAX_RANGE = (2, 64)
+#: Largest ``top_k``: column counts are 32-bit in the Rust core.
+TOP_K_LIMIT = 2**31 - 1
+INIT_KINDS = ("shot", "wks", "hks")
+
+
+def check_options(
+    *,
+    init,
+    k_max,
+    schedule,
+    max_passes,
+    min_consistent,
+    top_k,
+    polish_k,
+    global_step,
+    multiscale,
+    spectral,
+    shared_faces,
+    callback,
+    progress=None,
+) -> None:
+    """Raise ``TypeError`` (wrong kind of value) or ``ValueError`` (out of range) for the first
+    bad option of :func:`hope_rs.match`; the values themselves are left as given. An ``init``
+    array is checked against the vertex counts later, by the caller."""
+    lo, hi = K_MAX_RANGE
+    k_max = _integer("k_max", k_max, lo, hi, f"an integer in [{lo}, {hi}] (LMD reads 2-rings)")
+    if isinstance(init, str):
+        check_kind(init)
+    elif init is None or isinstance(init, (numbers.Number, dict, set)):
+        raise TypeError(
+            f"init must be one of {', '.join(map(repr, INIT_KINDS))} or an (n_a,) array of "
+            f"vertices of B, got {type(init).__name__}"
+        )
+    if schedule is not None:
+        _check_schedule(schedule, k_max)
+    _integer("max_passes", max_passes, 1, None, "an integer >= 1")
+    _unit_number("min_consistent", min_consistent)
+    allowed = f"an integer in [1, {TOP_K_LIMIT}] (candidates kept per vertex)"
+    _integer("top_k", top_k, 1, TOP_K_LIMIT, allowed)
+    if polish_k is not None:
+        _integer("polish_k", polish_k, 1, k_max, f"None or an integer in [1, k_max={k_max}]")
+    for name, value in [
+        ("global_step", global_step),
+        ("multiscale", multiscale),
+        ("spectral", spectral),
+        ("shared_faces", shared_faces),
+    ]:
+        if not isinstance(value, (bool, np.bool_)):
+            raise TypeError(f"{name} must be True or False, got {value!r}")
+    if callback is not None and not callable(callback):
+        raise TypeError(
+            "callback must be None or callable (it is called with each refinement Iteration), "
+            f"got {type(callback).__name__}"
+        )
+    if not (progress is None or isinstance(progress, (bool, np.bool_)) or callable(progress)):
+        raise TypeError(
+            "progress must be None, True, False or callable (it is called with each "
+            f"ProgressEvent), got {type(progress).__name__}"
+        )
+
+
+def _integer(name: str, value, lo: int, hi: int | None, allowed: str) -> int:
+    """``value`` as an int when it is an integer (not a bool) in [lo, hi]; ``allowed`` says
+    so in the message."""
+    if isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be {allowed}, not a bool (got {value!r})")
+    if not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be {allowed}, got {type(value).__name__} {value!r}")
+    if value < lo or (hi is not None and value > hi):
+        raise ValueError(f"{name} must be {allowed}, got {value}")
+    return int(value)
+
+
+def _unit_number(name: str, value) -> None:
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise TypeError(f"{name} must be a number in [0, 1], got {type(value).__name__}")
+    if not (math.isfinite(value) and 0 <= value <= 1):
+        raise ValueError(f"{name} must be a number in [0, 1], got {value}")
+
+
+def _check_schedule(schedule, k_max: int) -> None:
+    allowed = f"a non-empty list of integer hop radii in [1, k_max={k_max}]"
+    if isinstance(schedule, (str, bytes)):
+        raise TypeError(f"schedule must be {allowed}, got the string {schedule!r}")
+    if isinstance(schedule, np.ndarray) and schedule.ndim != 1:
+        raise ValueError(f"schedule must be {allowed}, got an array of shape {schedule.shape}")
+    try:
+        entries = list(schedule)
+    except TypeError:
+        raise TypeError(f"schedule must be {allowed}, got {type(schedule).__name__}") from None
+    if not entries:
+        raise ValueError(f"schedule must be {allowed}, got an empty one")
+    for k in entries:
+        if isinstance(k, (bool, np.bool_)) or not isinstance(k, (int, np.integer)):
+            raise TypeError(f"schedule must be {allowed}, got the entry {k!r}")
+        if not 1 <= k <= k_max:
+            raise ValueError(f"schedule must be {allowed}, got the entry {k}")

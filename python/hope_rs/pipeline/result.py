@@ -1,0 +1,99 @@
+"""The outcome of a match."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .config import MatchConfig
+from .progress import StageInfo
+from .state import Iteration
+
+__all__ = ["MatchResult"]
+
+
+@dataclass
+class MatchResult:
+    """The outcome of :func:`match`.
+
+    Attributes
+    ----------
+    map : (n_a,) int64
+        ``map[i]`` is the vertex of B matched to vertex ``i`` of A. For pyFM, see
+        :meth:`to_pyfm`.
+    init_map : (n_a,) int64
+        The map refinement started from.
+    history : list of Iteration
+        Per refinement step: k, witness fraction, vertices changed, seconds.
+    timings : dict
+        Seconds per stage ("shapes", "descriptors", "init" or, with ``multiscale``,
+        "coarse"; "refine", "spectral", "faces" (the finishing rounds of
+        :mod:`hope_rs.shared_faces`, when they ran), "total"). The spectral pass's eigenbases are solved
+        in a background thread during "refine" and count there, as does its ZoomOut when the
+        refinement reaches its last pass (:class:`~hope_rs.pipeline.spectral.EarlyZoomOut`).
+    coarse : MatchResult or None
+        With ``multiscale``, the match of the coarse copies.
+    hope_map : (n_a,) int64
+        HOPE's own map: the refinement's output, before the spectral pass chose between it and
+        its ZoomOut refinement region by region and before the shared-face finish. Equal to
+        ``map`` when neither of those changed it (see :attr:`stages`).
+    stages : list of StageInfo
+        Every stage in the order it ran, with whether it ran, why (or why not) and its seconds:
+        "shapes", "descriptors", "init" ("coarse" and "lift" with ``multiscale``), "refine",
+        "polish", "spectral", "faces" (see :data:`hope_rs.pipeline.progress.STAGES`). ``str()`` of an
+        entry reads "spectral: skipped (HOPE's map settled: ...)".
+    config : MatchConfig
+        The settings the match ran with.
+    """
+
+    map: np.ndarray
+    init_map: np.ndarray
+    history: list[Iteration] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
+    #: With ``multiscale``, the match of the coarse copies (each coarse vertex ``j`` is the
+    #: vertex ``coarse_level()[0].sites[j]`` of the shape's internal mesh); else ``None``.
+    coarse: MatchResult | None = None
+    hope_map: np.ndarray | None = None
+    stages: list[StageInfo] = field(default_factory=list)
+    #: The settings the match ran with.
+    config: MatchConfig | None = None
+
+    def stage(self, name: str) -> StageInfo:
+        """The :class:`~hope_rs.pipeline.progress.StageInfo` of the stage ``name`` (e.g. "spectral").
+
+        Raises
+        ------
+        KeyError
+            When the match did not consider that stage ("coarse" without ``multiscale``).
+        """
+        for s in self.stages:
+            if s.name == name:
+                return s
+        raise KeyError(
+            f"no stage {name!r} in this match; it has {', '.join(s.name for s in self.stages)}"
+        )
+
+    def to_pyfm(self) -> np.ndarray:
+        """The map as pyFM's ``p2p_21`` for ``mesh1 = B`` and ``mesh2 = A``.
+
+        pyFM (``pip install pyfmaps``) writes a point-to-point map as ``p2p_21``: for each
+        vertex of ``mesh2``, a vertex of ``mesh1``; it goes with the functional map ``FM_12``,
+        which carries functions on ``mesh1`` to ``mesh2`` (``pyFM.spectral.mesh_p2p_to_FM(p2p_21,
+        mesh1, mesh2)``). ``match(A, B).map`` gives a vertex of B for each vertex of A, so it is
+        ``p2p_21`` with ``mesh1`` built from B and ``mesh2`` from A::
+
+            res = hope_rs.match(a, b)
+            mesh1, mesh2 = TriMesh(b.vertices, b.faces), TriMesh(a.vertices, a.faces)
+            fm_12 = mesh_p2p_to_FM(res.to_pyfm(), mesh1, mesh2, dims=30)  # functions on B -> A
+
+        With ``mesh1`` = A and ``mesh2`` = B instead, match the other way:
+        ``hope_rs.match(b, a).to_pyfm()`` (a map is not one-to-one, so reversing it would lose
+        vertices of B that nothing maps to).
+
+        Returns
+        -------
+        (n_a,) int64
+            A copy of :attr:`map`.
+        """
+        return np.array(self.map, dtype=np.int64)

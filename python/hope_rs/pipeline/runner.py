@@ -1,0 +1,93 @@
+"""The stage runner: a match as a list of stages run in order on one state.
+
+:func:`run_match` takes two :class:`~hope_rs.Shape` objects and an initial map or descriptor
+kind, translates to the shapes' internal numbering, runs the stages
+(:func:`~hope_rs.pipeline.stages.default_stages` by default) and translates the result back.
+Every stage's :meth:`~hope_rs.pipeline.state.Stage.close` runs on every exit, so no
+background work outlives the match.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Callable
+
+import numpy as np
+
+from ..shape import Shape
+from .config import MatchConfig
+from .progress import StageLog
+from .result import MatchResult
+from .stages import default_stages
+from .state import QUIET, MatchState, Stage
+
+__all__ = ["run_match", "run_stages"]
+
+
+def run_stages(state: MatchState, stages: list[Stage]) -> MatchState:
+    """Runs ``stages`` on ``state`` in order (see :class:`~hope_rs.pipeline.state.Stage`)."""
+    try:
+        for stage in stages:
+            stage.attach(state)
+        for stage in stages:
+            reason = stage.skip_reason(state)
+            if reason is None:
+                stage.run(state)
+            elif reason is not QUIET:
+                state.log.skipped(stage.name, reason)
+            state.hooks.emit("stage_end", state, stage.name)
+    finally:
+        for stage in reversed(stages):
+            stage.close(state)
+    return state
+
+
+def run_match(
+    a: Shape,
+    b: Shape,
+    init,
+    config: MatchConfig,
+    *,
+    callback=None,
+    progress: Callable | None = None,
+    log: StageLog | None = None,
+    stages: list[Stage] | None = None,
+    on_stage: Callable | None = None,
+    timings: dict[str, float] | None = None,
+) -> MatchResult:
+    """The match of ``a`` to ``b``: ``init`` is a descriptor kind or a map in the shapes' input
+    numbering; ``progress`` receives the stages' events (or pass ``log``, which has them);
+    ``on_stage(state, name)`` is called after each stage (the benches sample memory there);
+    ``timings`` (seconds per stage) is filled in and returned as the result's. Options are not checked here (:func:`hope_rs.match` does)."""
+    t0 = time.perf_counter() if log is None else log.t0
+    log = StageLog(progress) if log is None else log
+    if not isinstance(init, str):
+        init = a.map_in(b, init)
+    state = MatchState(a, b, config, init, log, callback=callback, run=_nested_run(stages))
+    state.timings = {} if timings is None else timings
+    if not isinstance(init, str):
+        state.f0 = init
+    if on_stage is not None:
+        state.hooks.on("stage_end", on_stage)
+    run_stages(state, default_stages() if stages is None else stages)
+    state.timings["total"] = time.perf_counter() - t0
+    return MatchResult(
+        a.map_out(b, state.f).astype(np.int64),
+        a.map_out(b, state.f0).astype(np.int64),
+        state.history,
+        state.timings,
+        state.coarse,
+        a.map_out(b, state.hope_map).astype(np.int64),
+        log.stages,
+        state.config,
+    )
+
+
+def _nested_run(stages: list[Stage] | None) -> Callable:
+    """:func:`run_match` for a stage that matches other shapes, with fresh stages."""
+
+    def run(a: Shape, b: Shape, init, config: MatchConfig, *, callback=None, progress=None):
+        fresh = None if stages is None else [type(s)() for s in stages]
+        return run_match(a, b, init, config, callback=callback, progress=progress, stages=fresh)
+
+    return run

@@ -1,0 +1,486 @@
+"""A spectral pass after HOPE: ZoomOut from HOPE's map, then a per-region choice of the two.
+
+HOPE assigns vertices one to one by hop counts, which is exact where the two meshes share their
+connectivity but leaves a vertex-level roughness where they do not: no bijection between two
+triangulations exists, and every forced pairing is an edge or two off. ZoomOut (Melzi et al.
+2019) turns a map into a functional map on the Laplace–Beltrami eigenbases, grows the basis
+20 → 120 and reads a new map off each size; the result is smooth but rarely exact. Started
+from HOPE's map, it repairs what HOPE leaves on differently triangulated pairs, while on
+identically triangulated pairs it would trade HOPE's exact map for a smooth near miss (see
+docs/decisions.md#spectral).
+
+So the result takes, region by region, whichever map distorts A's 2-rings less (LMD's mean
+distortion, smoothed over a few rings of A so the choice is made by regions, not vertex by
+vertex): faust_reg keeps HOPE's exact map, remeshed pairs take the spectral one, and the TOSCA
+cat, exact in some regions and slid in others, takes each where it is better. A last check
+on distances to far-apart anchors (:func:`long_range_discrepancy`) keeps HOPE's map when the
+chosen one bends them, as ZoomOut does between a partial shape and a whole one.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+import warnings
+from contextlib import ExitStack
+
+import numpy as np
+import scipy.linalg
+import scipy.sparse as sp
+from scipy.spatial import cKDTree
+
+from .. import _core
+from .._blas import single_threaded_blas
+from ..kernels.search import nearest_one
+from ..shape import Shape
+from .anchors import distance_fields, farthest_witnesses, reachable
+from .config import RepairConfig, SpectralConfig
+from .lmd import local_map_distortion
+from .refine import RefineResult
+from .state import MatchState, Stage
+
+
+def basis_sizes(k_start: int, k_end: int, step: int) -> list[int]:
+    """ZoomOut's sizes ``k_start, k_start + step, ...``, ending at ``k_end`` exactly."""
+    ks = list(range(min(k_start, k_end), k_end + 1, step))
+    if ks[-1] != k_end:
+        ks.append(k_end)
+    return ks
+
+
+def zoomout(
+    a: Shape,
+    b: Shape,
+    f: np.ndarray,
+    config: SpectralConfig = SpectralConfig(),
+    *,
+    stop: threading.Event | None = None,
+) -> np.ndarray | None:
+    """ZoomOut (Melzi et al. 2019) from the map ``f`` (A → B, internal numbering).
+
+    At each basis size k the functional map C (k × k) is the least-squares fit, in A's mass
+    inner product, of B's eigenfunctions pulled back through the current map onto A's; each
+    vertex of A then takes the vertex of B whose spectral embedding mapped by C is nearest
+    its own, over the basis sizes ``config.k_start`` to ``config.k_end`` in steps of
+    ``config.k_step``. Returns the map at ``k_end`` (internal numbering), or None when ``stop`` was set
+    (checked before each basis size).
+    """
+    phi_a, mass_a = a.spectral_basis(config.k_end)
+    phi_b, _ = b.spectral_basis(config.k_end)
+    # Small products (k x k fits, n x k embeddings): one BLAS thread is faster here; the
+    # nearest-neighbour search splits its rows between threads itself.
+    with single_threaded_blas():
+        return _zoomout(a, b, f, phi_a, mass_a, phi_b, config, stop)
+
+
+def _zoomout(
+    a: Shape,
+    b: Shape,
+    f: np.ndarray,
+    phi_a: np.ndarray,
+    mass_a: np.ndarray,
+    phi_b: np.ndarray,
+    cfg: SpectralConfig,
+    stop: threading.Event | None = None,
+) -> np.ndarray | None:
+    k_end = min(cfg.k_end, phi_a.shape[1], phi_b.shape[1])
+    sa, sb = _samples(a.n_vertices, cfg.max_samples), _samples(b.n_vertices, cfg.max_samples)
+    sampled = sa.size < a.n_vertices or sb.size < b.n_vertices
+    near_b = _SpectralNeighbours(b)
+    pa, wa = phi_a[sa], mass_a[sa]
+    gram = pa.T @ (wa[:, None] * pa)  # the identity when every vertex is a sample
+    t = np.asarray(f, dtype=np.int64)[sa]  # vertices of B
+    for k in basis_sizes(cfg.k_start, k_end, cfg.k_step):
+        if stop is not None and stop.is_set():
+            return None
+        c = functional_map(pa[:, :k], wa, phi_b[t, :k], gram[:k, :k])
+        eb = phi_b[:, :k] @ c.T
+        if k >= cfg.local_from and not sampled:
+            t = near_b.best(pa[:, :k], eb, t, cfg.local_candidates)
+            continue
+        t = sb[nearest_rows(pa[:, :k], eb[sb])]
+        if sampled:
+            # Down from B's samples to its vertices: the map the next fit reads must be as
+            # sharp as the basis, or the high frequencies of C blur.
+            t = near_b.best(pa[:, :k], eb, t, cfg.candidates)
+    if not sampled:
+        return t
+    # Every vertex of A, near the image of its nearest sample.
+    _, own = cKDTree(a.points[sa]).query(a.points, workers=2)
+    return near_b.best(phi_a[:, :k], eb, t[own], cfg.candidates)
+
+
+def functional_map(
+    phi_a: np.ndarray, mass: np.ndarray, pulled_b: np.ndarray, gram: np.ndarray | None = None
+) -> np.ndarray:
+    """C minimising ||phi_a C - pulled_b|| in the ``mass``-weighted norm (rows are vertices of
+    A; ``pulled_b`` holds B's eigenfunctions at each vertex's image), by its normal equations;
+    ``gram`` is phi_aᵀ M phi_a if known. (Normal equations rather than an SVD least-squares
+    solve: the eigenvectors are M-orthonormal, so the system is well conditioned.)"""
+    if gram is None:
+        gram = phi_a.T @ (mass[:, None] * phi_a)
+    return scipy.linalg.solve(gram, phi_a.T @ (mass[:, None] * pulled_b), assume_a="pos")
+
+
+def nearest_rows(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Index of the nearest row of ``y`` for each row of ``x`` (Euclidean, exhaustive): the
+    initial map's float32 BLAS search. In 20-120 dimensions a k-d tree searches nearly
+    everything anyway, and was slower here."""
+    x32, y32 = x.astype(np.float32), y.astype(np.float32)
+    return nearest_one(x32, y32, np.einsum("ij,ij->i", y32, y32))[0][:, 0]
+
+
+def _samples(n: int, m: int) -> np.ndarray:
+    """``min(n, m)`` vertices spread over the shape: the internal numbering follows a
+    space-filling curve, so an even stride through it is an even spread in space."""
+    if n <= m:
+        return np.arange(n)
+    return np.unique(np.linspace(0, n - 1, m).round().astype(np.int64))
+
+
+class _SpectralNeighbours:
+    """Among the ``k`` vertices of B nearest (in space) to a guess, the one whose spectral
+    embedding is nearest a query's."""
+
+    def __init__(self, b: Shape):
+        self.points = b.points
+        self.near = np.empty((b.n_vertices, 0), dtype=np.int64)
+
+    def best(self, emb_a: np.ndarray, emb_b: np.ndarray, guess: np.ndarray, k: int) -> np.ndarray:
+        k = min(k, self.points.shape[0])
+        if self.near.shape[1] < k:
+            # Every vertex's spatial neighbours, once: a k-d tree query per call took most of
+            # the call's time.
+            _, near = cKDTree(self.points).query(self.points, k=k, workers=2)
+            self.near = near.reshape(self.points.shape[0], -1).astype(np.int64, copy=False)
+        # In Rust: NumPy gathered an (n, candidates, k) array per call.
+        return _core.nearest_among(
+            np.ascontiguousarray(emb_a, dtype=np.float32),
+            np.ascontiguousarray(emb_b, dtype=np.float32),
+            np.ascontiguousarray(self.near[guess, :k]),
+        )
+
+
+def choose_by_region(
+    a: Shape,
+    b: Shape,
+    h: np.ndarray,
+    z: np.ndarray,
+    *,
+    smoothing: int = SpectralConfig.smoothing_steps,
+    margin: float = SpectralConfig.margin,
+) -> np.ndarray:
+    """``h`` where it distorts A's 2-rings about as little as ``z`` or less, else ``z``
+    (maps A → B in internal numbering). The difference of the two maps' mean LMD is averaged
+    over 1-rings ``smoothing`` times first, so that regions choose, not single vertices."""
+    mh, _ = local_map_distortion(a, b, h)
+    mz, _ = local_map_distortion(a, b, z)
+    return _choose(a, h, z, mh.astype(np.float64) - mz, smoothing, margin)
+
+
+def _choose(a: Shape, h, z, d: np.ndarray, smoothing: int, margin: float) -> np.ndarray:
+    """:func:`choose_by_region` given ``d``, the per-vertex mean LMD of ``h`` minus ``z``'s."""
+    if smoothing:
+        p = _ring_average(a)
+        for _ in range(smoothing):
+            d = p @ d
+    return np.where(d <= margin, h, z)
+
+
+def _ring_average(a: Shape) -> sp.csr_matrix:
+    """The operator averaging a vertex function over each closed 1-ring of A (internal)."""
+    n = a.n_vertices
+    e = a.edges
+    rows = np.concatenate([e[:, 0], e[:, 1], np.arange(n)])
+    cols = np.concatenate([e[:, 1], e[:, 0], np.arange(n)])
+    m = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n, n))
+    return sp.diags(1.0 / np.asarray(m.sum(axis=1)).ravel()) @ m
+
+
+def applies(a: Shape, b: Shape, config: SpectralConfig = SpectralConfig()) -> bool:
+    """Whether :func:`spectral_refine` runs on these shapes: both sizes pass
+    :func:`applies_to_size`."""
+    return applies_to_size(a.n_vertices, config) and applies_to_size(b.n_vertices, config)
+
+
+def applies_to_size(n_vertices: int, config: SpectralConfig = SpectralConfig()) -> bool:
+    """At most ``config.max_vertices`` vertices, and enough for a basis of ``config.k_start``."""
+    return config.k_start + 2 <= n_vertices <= config.max_vertices
+
+
+class BasisPrefetch:
+    """Both shapes' eigenbases for :func:`spectral_refine`, solved in a background thread while
+    the caller refines.
+
+    HOPE's auction runs on one core, and the eigensolves release the GIL, so the solves fill
+    the idle core. The thread keeps the caller's CPU priority: the caller waits for its bases,
+    so a lowered priority starves both on a busy machine (see ``docs/decisions.md#spectral``).
+
+    Use it inside :func:`~hope_rs._blas.single_threaded_blas`, entered before :meth:`start`
+    and left after :meth:`finish`: BLAS thread limits are global, and a limit restored while
+    the solve runs would change its last bits. (Every route to a basis solves on one BLAS
+    thread, so the bases are the same bits whichever way they were computed.) A failure in
+    the thread is not raised: the basis is then left unset, and :func:`spectral_refine` solves
+    again and reports it as usual. :meth:`cancel` stops the solve at its next step (every
+    solve of the eigensolver checks :attr:`stop`).
+    """
+
+    def __init__(self, a: Shape, b: Shape, k: int):
+        self.shapes = [s for s in dict.fromkeys((a, b)) if not s.has_spectral_basis(k)]
+        self.k = k
+        self.solved: list[tuple[Shape, tuple[np.ndarray, np.ndarray]]] = []
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, name="hope_rs-eigenbases", daemon=True)
+
+    def start(self) -> BasisPrefetch:
+        if self.shapes:
+            self.thread.start()
+        return self
+
+    def _run(self) -> None:
+        for s in self.shapes:
+            try:
+                self.solved.append((s, s.solve_spectral_basis(self.k, stop=self.stop)))
+            except Exception:  # noqa: BLE001 - the caller solves again and reports it
+                return  # Cancelled, or a failure the spectral pass meets again
+
+    def cancel(self) -> None:
+        """Tells the thread to stop at the eigensolver's next step (one shift-invert solve)
+        and waits for it; bases solved before stay in :attr:`solved`."""
+        self.stop.set()
+        _join(self.thread)
+
+    def finish(self) -> None:
+        """Waits for the thread and stores the bases it solved in their shapes."""
+        _join(self.thread)
+        for s, (evecs, mass) in self.solved:
+            s.set_spectral_basis(evecs, mass)
+
+
+def _join(thread: threading.Thread | None) -> None:
+    """Waits for ``thread`` if it was started."""
+    if thread is not None and thread.ident is not None:
+        thread.join()
+
+
+class EarlyZoomOut:
+    """ZoomOut started from the refinement's map partway through its last pass, in a background
+    thread: the pass's auctions run on one core, and ZoomOut fills the other (see
+    ``SpectralConfig.early_from_pass`` for the accuracy, docs/decisions.md#spectral for the time).
+
+    :meth:`start` answers the runner's "last_pass" event. The thread first waits for the
+    :class:`BasisPrefetch` of the same match; when either basis is missing after it (its solve
+    failed) it does nothing, and :func:`spectral_refine` runs ZoomOut afterwards, which solves
+    the basis again and reports a failure as usual. :attr:`result` is ZoomOut's map, or None.
+    """
+
+    def __init__(self, a: Shape, b: Shape, prefetch: BasisPrefetch, config: SpectralConfig):
+        self.a, self.b, self.prefetch, self.config = a, b, prefetch, config
+        self.thread: threading.Thread | None = None
+        self.result: np.ndarray | None = None
+        self.stop = threading.Event()
+
+    def start(self, f: np.ndarray, n_pass: int) -> None:
+        if n_pass < self.config.early_from_pass or self.thread is not None:
+            return
+        self.thread = threading.Thread(
+            target=self._run, args=(np.array(f),), name="hope_rs-zoomout", daemon=True
+        )
+        self.thread.start()
+
+    def _run(self, f: np.ndarray) -> None:
+        self.prefetch.finish()
+        if self.stop.is_set():
+            return
+        k = self.config.k_end
+        if not (self.a.has_spectral_basis(k) and self.b.has_spectral_basis(k)):
+            return
+        try:
+            self.result = zoomout(self.a, self.b, f, self.config, stop=self.stop)
+        except Exception:  # noqa: BLE001 - spectral_refine runs it again and reports it
+            return
+
+    def join(self, cancel: bool = False) -> None:
+        """Waits for the thread; with ``cancel``, first tells it to stop at its next basis size
+        (its result is then None)."""
+        if cancel:
+            self.stop.set()
+        _join(self.thread)
+        if cancel:
+            self.result = None
+
+
+def spectral_refine(
+    a: Shape,
+    b: Shape,
+    h: np.ndarray,
+    z: np.ndarray | None = None,
+    config: SpectralConfig = SpectralConfig(),
+    *,
+    min_consistent: float = 0.5,
+    repair: RepairConfig = RepairConfig(),
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """(the map chosen by region between ``h`` and ZoomOut from it, the ZoomOut map), maps in
+    internal numbering. The ZoomOut map is ``None``, and ``h`` is returned unchanged, when a
+    shape is too large (``config.max_vertices``), too small for a basis of ``config.k_start``
+    functions, or its eigenbasis cannot be computed (a warning says so). ``z``: a ZoomOut map
+    computed already (:class:`EarlyZoomOut`), used instead of one from ``h``. The anchors of
+    :func:`long_range_discrepancy` are vertices both maps keep LMD-consistent (``min_consistent``)."""
+    if not applies(a, b, config):
+        return h, None
+    try:
+        if z is None:
+            z = zoomout(a, b, h, config)
+    except RuntimeError as e:  # ARPACK did not converge, or a singular factorisation
+        warnings.warn(f"spectral pass skipped, HOPE's map kept: {e}", RuntimeWarning, stacklevel=3)
+        return h, None
+    # LMD of both maps once: the region choice reads the means, the guard's anchors the
+    # consistent fractions.
+    mh, ch = local_map_distortion(a, b, h)
+    mz, cz = local_map_distortion(a, b, z)
+    f = _choose(a, h, z, mh.astype(np.float64) - mz, config.smoothing_steps, config.margin)
+    if not np.array_equal(f, h):
+        trusted = (ch >= min_consistent) & (cz >= min_consistent)
+        d_h, d_f, d_z = long_range_discrepancy(a, b, h, trusted, [h, f, z], repair)
+        bent = d_f > config.max_discrepancy_ratio * d_h
+        if bent or d_z > config.max_zoomout_discrepancy_ratio * d_h:
+            return h, z
+    return f, z
+
+
+def long_range_discrepancy(
+    a: Shape,
+    b: Shape,
+    h: np.ndarray,
+    trusted: np.ndarray,
+    maps: list[np.ndarray],
+    repair: RepairConfig = RepairConfig(),
+) -> list[float]:
+    """For each map of ``maps`` (A → B, internal numbering), the mean |d_A(p, x) - d_B(m(p),
+    h(x))| over vertices p and anchors x (sqrt(area) units, edge-graph geodesics): how far the
+    map bends distances to ``repair.n_anchors`` farthest-point anchors among the
+    ``trusted`` vertices (a mask: those both candidate maps keep LMD-consistent).
+
+    The choice by region compares 2-rings only. Where the two bases differ (a partial shape:
+    FAUST without its legs against a whole body) ZoomOut can map a region smoothly to the wrong
+    place, which its 2-rings do not show; its distances to the rest of the shape do (see
+    ``SpectralConfig.max_zoomout_discrepancy_ratio`` and docs/decisions.md#spectral). On remeshed pairs
+    the chosen map bends these distances as little as HOPE's or less.
+    """
+    cand = np.flatnonzero(trusted)
+    if cand.size < 4:
+        cand = np.arange(a.n_vertices)
+    anchors, da = farthest_witnesses(a, cand, repair.n_anchors)
+    db = distance_fields(b, h[anchors])
+    seen = np.isfinite(da)  # anchors in other components of A say nothing
+    db = reachable(db, repair)
+    out = []
+    for m in maps:
+        err = np.abs(da - db[:, m])
+        out.append(float(err[seen].mean()) if seen.any() else 0.0)
+    return out
+
+
+class SpectralStage(Stage):
+    """The "spectral" stage: :func:`spectral_refine` of the refinement's map.
+
+    While HOPE refines, both eigenbases are solved in a background thread
+    (:class:`BasisPrefetch`, from the "refine_start" event) and ZoomOut starts during the last
+    pass (:class:`EarlyZoomOut`, from "last_pass"); at "refine_end" the stage waits for both,
+    or, when the refinement raised or settled (no spectral pass follows), stops them first.
+    Both threads have ended when the refinement stage returns or raises, and :meth:`close`
+    stops them on any other exit.
+    """
+
+    name = "spectral"
+
+    def __init__(self):
+        self.prefetch: BasisPrefetch | None = None
+        self.early: EarlyZoomOut | None = None
+        self.blas: ExitStack | None = None
+        self.zoomout: np.ndarray | None = None
+
+    def attach(self, state: MatchState) -> None:
+        cfg = state.config.spectral
+        if cfg.enabled and applies(state.a, state.b, cfg):
+            state.hooks.on("refine_start", self._start)
+            state.hooks.on("last_pass", self._last_pass)
+            state.hooks.on("refine_end", self._refine_end)
+
+    def _start(self, state: MatchState) -> None:
+        cfg = state.config.spectral
+        # One BLAS thread from before the solves start to after they end (see BasisPrefetch).
+        self.blas = ExitStack()
+        self.blas.enter_context(single_threaded_blas())
+        self.prefetch = BasisPrefetch(state.a, state.b, cfg.k_end)
+        self.early = EarlyZoomOut(state.a, state.b, self.prefetch, cfg)
+        self.prefetch.start()
+
+    def _last_pass(self, f: np.ndarray, n_pass: int) -> None:
+        if self.early is not None:
+            self.early.start(f, n_pass)
+
+    def _refine_end(self, state: MatchState, res: RefineResult | None) -> None:
+        if self.prefetch is None:
+            return
+        cancel = res is None or res.settled
+        if not cancel and res.history and res.history[-1].polish:
+            state.log.start("spectral", detail="finishing the eigenbases and ZoomOut")
+        early = self.early
+        self._stop(cancel)
+        if res is not None:
+            self.zoomout = early.result
+
+    def _stop(self, cancel: bool) -> None:
+        """Joins both threads (told to stop first with ``cancel``) and restores BLAS."""
+        prefetch, early, blas = self.prefetch, self.early, self.blas
+        self.prefetch = self.early = self.blas = None
+        try:
+            if cancel:
+                # Both flags before any wait, so that a second Ctrl-C during the joins below
+                # still leaves the threads stopping.
+                early.stop.set()
+                prefetch.stop.set()
+            early.join(cancel=cancel)
+            prefetch.finish()
+        finally:
+            blas.close()
+
+    def close(self, state: MatchState) -> None:
+        if self.prefetch is not None:
+            self._stop(cancel=True)
+
+    def skip_reason(self, state: MatchState):
+        if not state.config.spectral.enabled:
+            return "turned off (spectral=False)"
+        return state.done
+
+    def run(self, state: MatchState) -> None:
+        a, b, cfg = state.a, state.b, state.config.spectral
+        t = state.log.start("spectral", detail="ZoomOut from HOPE's map, chosen region by region")
+        h = state.f
+        f, z = spectral_refine(
+            a,
+            b,
+            h,
+            self.zoomout,
+            cfg,
+            min_consistent=state.config.refine.min_consistent,
+            repair=state.config.refine.repair,
+        )
+        if z is None:
+            if not applies(a, b, cfg):
+                reason = (
+                    f"shapes of {a.n_vertices} and {b.n_vertices} vertices; the pass runs on "
+                    f"{cfg.k_start + 2} to {cfg.max_vertices}"
+                )
+            else:
+                reason = "an eigenbasis could not be computed (see the warning)"
+            state.log.skipped("spectral", reason)
+            return
+        state.timings["spectral"] = time.perf_counter() - t
+        changed = int(np.count_nonzero(f != h))
+        state.log.ran(
+            "spectral", state.timings["spectral"], f"changed {changed} of {f.size} vertices"
+        )
+        state.f = f

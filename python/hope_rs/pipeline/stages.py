@@ -1,0 +1,29 @@
+"""The stage list of :func:`hope_rs.match`, in the order it runs.
+
+Adding or removing a stage touches its own module, this list and its field of
+:class:`~hope_rs.pipeline.config.MatchConfig`.
+"""
+
+from __future__ import annotations
+
+from .initial import DescriptorStage, InitialStage
+from .multiscale import MultiscaleStage
+from .refine import RefineStage
+from .shared_faces import FinishStage
+from .spectral import SpectralStage
+from .state import Stage
+
+__all__ = ["default_stages"]
+
+
+def default_stages() -> list[Stage]:
+    """Fresh instances of the stages (a stage keeps the state of one match, such as the
+    spectral pass's background threads)."""
+    return [
+        MultiscaleStage(),  # "coarse", "lift": multiscale=True only
+        DescriptorStage(),  # "descriptors"
+        InitialStage(),  # "init"
+        RefineStage(),  # "refine", "polish"
+        SpectralStage(),  # "spectral"
+        FinishStage(),  # "faces"
+    ]
