@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 import hope_rs
-from hope_rs.cache import ShapeCache, cached_shape
+from hope_rs.batch.cache import ShapeCache, cached_shape
 
 DEFAULT_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 

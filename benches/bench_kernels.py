@@ -52,7 +52,7 @@ import scipy
 import scipy.sparse as sp
 
 import hope_rs
-from hope_rs.mesh import load_mesh
+from hope_rs.geometry.mesh import load_mesh
 
 BENCH_DIR = Path(__file__).resolve().parent
 DEFAULT_DATA = BENCH_DIR.parent.parent / "shared" / "data"

@@ -14,7 +14,7 @@ the time of each stage. Default parameters throughout: one parameter set for eve
 scores the map after undoing it. faust_reg and TOSCA pairs come numbered alike (their ground
 truth is the identity), so a result that holds only as numbered has used that alignment; an
 earlier version of the refinement did (see "A correction" in the README). Shapes now number
-their vertices by position (``hope_rs.numbering``), so the maps, and every figure but the
+their vertices by position (``hope_rs.geometry.numbering``), so the maps, and every figure but the
 times, come out the same with or without it.
 """
 
@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 import hope_rs
-from hope_rs.datasets import Pair, pairs_of
+from hope_rs.evaluation.datasets import Pair, pairs_of
 
 DEFAULT_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 

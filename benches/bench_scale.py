@@ -94,9 +94,9 @@ def run_case(name: str, data: Path, multiscale: bool = False, spectral: bool = T
     With ``multiscale``, the "descriptors" stage is the whole coarse match and its lift (as in
     ``match(..., multiscale=True)``), and "init" is empty. ``spectral``: as in ``match``."""
     import hope_rs
-    from hope_rs.initial import shapes_initial_map
+    from hope_rs.pipeline.initial import shapes_initial_map
     from hope_rs.matching import refine_spectral_finish
-    from hope_rs.spectral import applies
+    from hope_rs.pipeline.spectral import applies
 
     folder, a, b, target = CASES[name]
     ma = hope_rs.load_mesh(data / folder / f"{a}.off")
@@ -121,7 +121,7 @@ def run_case(name: str, data: Path, multiscale: bool = False, spectral: bool = T
     t1 = time.perf_counter()
     # As in match: shapes too coarse to halve take the default path.
     if multiscale and sa.coarse_level() is not None and sb.coarse_level() is not None:
-        from hope_rs.multiscale import coarse_start, fine_passes
+        from hope_rs.pipeline.multiscale import coarse_start, fine_passes
 
         coarse_spectral = spectral and not applies(sa, sb)  # as in match
         f0 = coarse_start(sa, sb, "shot", spectral=coarse_spectral)[1]  # internal numbering

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from hypothesis import settings
 
-from hope_rs.demo import demo_pair
-from hope_rs.mesh import load_mesh
+from hope_rs.evaluation.demo import demo_pair
+from hope_rs.geometry.mesh import load_mesh
 
 # CI runs a fixed sequence of examples, so a landing never hinges on the draw; local runs stay
 # random to keep finding new cases.

@@ -19,7 +19,8 @@ PHYSICAL = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGESIZE")
 
 PRELUDE = """
 import numpy as np, scipy.sparse as sp
-from hope_rs import _core, kernels, assignment
+from hope_rs import _core, kernels
+from hope_rs.kernels import assignment
 faces = np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int64)
 vertices = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=np.float64)
 empty = np.zeros(0, dtype=np.int64)

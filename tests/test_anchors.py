@@ -8,10 +8,11 @@ from scipy.sparse.csgraph import dijkstra
 from test_match import isometric_copy
 
 import hope_rs
-from hope_rs.anchors import anchor_step, distance_fields, swapped_regions
-from hope_rs.datasets import Pair
-from hope_rs.lmd import local_map_distortion
-from hope_rs.refine import refine
+from hope_rs.pipeline.anchors import anchor_step, distance_fields, swapped_regions
+from hope_rs.evaluation.datasets import Pair
+from hope_rs.pipeline.lmd import local_map_distortion
+from hope_rs.pipeline.config import RefineConfig
+from hope_rs.pipeline.refine import refine
 from hope_rs.shape import Shape
 
 
@@ -142,7 +143,7 @@ def test_refine_undoes_swapped_ends():
     f = a.map_in(b, f)
     assert np.mean(f == np.arange(a.n_vertices)) < 0.91
     # The ends are under GLOBAL_MIN_FLAGGED of the tube: the global check alone left them.
-    g = refine(a, b, f, polish_k=None).map
+    g = refine(a, b, f, RefineConfig(polish_k=None)).map
     assert np.mean(g == np.arange(a.n_vertices)) > 0.99
 
 
@@ -164,6 +165,6 @@ def test_swapped_hands_of_tosca_david_are_repaired(monkeypatch):
 
     mean, far = error(hope_rs.match(a, b, spectral=False))
     assert mean < 0.04 and far < 0.005
-    monkeypatch.setattr(hope_rs.refine, "swapped_regions", lambda a, b, f, consistent: f)
+    monkeypatch.setattr(hope_rs.pipeline.refine, "swapped_regions", lambda a, b, f, consistent: f)
     mean_off, far_off = error(hope_rs.match(a, b, spectral=False))
     assert mean_off > 0.08 and far_off > 0.05

@@ -5,8 +5,8 @@ import pytest
 from meshes import bumpy_sphere, write_off
 
 import hope_rs
-from hope_rs.batch import imatch_many, map_name, read_pairs
-from hope_rs.cache import ShapeCache, cached_shape, file_digest
+from hope_rs.batch.driver import imatch_many, map_name, read_pairs
+from hope_rs.batch.cache import ShapeCache, cached_shape, file_digest
 from hope_rs.cli import main
 
 
@@ -165,8 +165,8 @@ def test_ray_backend_matches_the_local_run_pair_for_pair(folder, tmp_path):
 
 @pytest.mark.slow
 def test_the_spectral_basis_is_cached_once_per_shape_and_reused(folder, tmp_path, monkeypatch):
-    import hope_rs.batch as batch_module
-    import hope_rs.descriptors
+    import hope_rs.batch.tasks as batch_module
+    import hope_rs.features.descriptors
     import hope_rs.shape
 
     shapes = [folder / "m" / f"s{s}.off" for s in range(3)]
@@ -180,7 +180,7 @@ def test_the_spectral_basis_is_cached_once_per_shape_and_reused(folder, tmp_path
 
     monkeypatch.setattr(batch_module, "_SHAPES", type(batch_module._SHAPES)())
     monkeypatch.setattr(hope_rs.shape, "spectral_basis_of", no_eigensolve)
-    monkeypatch.setattr(hope_rs.descriptors, "laplacian_basis_as_numbered", no_eigensolve)
+    monkeypatch.setattr(hope_rs.features.descriptors, "laplacian_basis_as_numbered", no_eigensolve)
     again = hope_rs.match_many(shapes, pairs, jobs=1, cache=tmp_path / "c")
     for x, y in zip(first, again):
         assert x.ok and y.ok, (x.error, y.error)

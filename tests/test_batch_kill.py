@@ -14,7 +14,7 @@ import pytest
 from meshes import bumpy_sphere, write_off
 
 import hope_rs
-from hope_rs.map_io import read_map
+from hope_rs.geometry.map_io import read_map
 
 pytestmark = [
     pytest.mark.slow,

@@ -12,12 +12,13 @@ from meshes import bumpy_sphere_files
 from test_map_io import unwritable_folder
 
 import hope_rs
-import hope_rs.batch
+import hope_rs.batch.driver
+import hope_rs.batch.tasks
 import hope_rs.matching
-from hope_rs.batch import imatch_many, map_name, read_pairs
-from hope_rs.cache import ShapeCache, cached_shape
+from hope_rs.batch.driver import imatch_many, map_name, read_pairs
+from hope_rs.batch.cache import ShapeCache, cached_shape
 from hope_rs.cli import main
-from hope_rs.map_io import read_map
+from hope_rs.geometry.map_io import read_map
 
 N = 300
 
@@ -56,7 +57,7 @@ def count_matches(monkeypatch):
         calls.append(1)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(hope_rs.batch, "match", counting)
+    monkeypatch.setattr(hope_rs.batch.tasks, "match", counting)
     return calls
 
 
@@ -86,7 +87,7 @@ def test_ctrl_c_prints_the_summary_keeps_the_maps_and_a_rerun_finishes(
             raise KeyboardInterrupt
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(hope_rs.batch, "match", interrupted_second)
+    monkeypatch.setattr(hope_rs.batch.tasks, "match", interrupted_second)
     out = tmp_path / "out"
     args = ["batch", str(folder / "pairs.txt"), "--ext", ".off", "--out", str(out), "-j", "1",
             "-q", "--cache", str(tmp_path / "c")]  # fmt: skip
@@ -97,7 +98,7 @@ def test_ctrl_c_prints_the_summary_keeps_the_maps_and_a_rerun_finishes(
     files = list(out.iterdir())
     assert len(files) == 1  # the finished map, whole; no temporary file
     np.testing.assert_array_equal(read_map(files[0], N, N), reference[files[0].name])
-    monkeypatch.setattr(hope_rs.batch, "match", real)
+    monkeypatch.setattr(hope_rs.batch.tasks, "match", real)
     assert main(args) == 0
     assert "3 pairs: 2 matched, 1 skipped, 0 failed" in capsys.readouterr().out
     for name, m in reference.items():
@@ -216,7 +217,7 @@ def test_a_damaged_cache_entry_is_recomputed_and_rewritten(folder, tmp_path, dam
     entries = _entries(tmp_path / "c", "shot")
     assert len(entries) == 2
     victim = next(e for e in entries if e.parent.name == cache._key(
-        hope_rs.cache.file_digest(srcs[0]), "shot", hope_rs.cache.descriptor_params("shot"))[0]
+        hope_rs.batch.cache.file_digest(srcs[0]), "shot", hope_rs.batch.cache.descriptor_params("shot"))[0]
         .parent.name)  # fmt: skip
     other = next(e for e in entries if e != victim)
     data = victim.read_bytes()

@@ -9,8 +9,8 @@ from meshes import bumpy_sphere, write_off
 
 import hope_rs
 from hope_rs.cli import main
-from hope_rs.datasets import Pair, datasets_in, pairs_of
-from hope_rs.methods import PairContext, check_methods, run_method
+from hope_rs.evaluation.datasets import Pair, datasets_in, pairs_of
+from hope_rs.evaluation.methods import PairContext, check_methods, run_method
 
 pytest.importorskip("potpourri3d")
 pytest.importorskip("matplotlib")
@@ -150,7 +150,7 @@ def test_bench_refuses_bad_arguments(identity_set, tmp_path, capsys):
 
 
 def test_colour_transfer_pulls_back_and_fills_gaps():
-    from hope_rs.show import pull_back_colours
+    from hope_rs.evaluation.show import pull_back_colours
 
     v, f = bumpy_sphere(100, 0)
     m = hope_rs.Mesh(v, f)

@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 from conftest import data_path
 
-from hope_rs.datasets import pairs_of
+from hope_rs.evaluation.datasets import pairs_of
 
 
 def load_bench_match():

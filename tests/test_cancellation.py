@@ -1,5 +1,6 @@
 """Background work of ``match`` (eigenbases, early ZoomOut) ends on every exit path."""
 
+import dataclasses
 import io
 import os
 import select
@@ -17,16 +18,19 @@ from meshes import write_off
 from threadpoolctl import threadpool_info
 
 import hope_rs
-from hope_rs import matching, spectral
+from hope_rs import MatchConfig
+from hope_rs.pipeline.config import SpectralConfig
+from hope_rs import matching
+from hope_rs.pipeline import spectral
 from hope_rs._cancel import Cancelled
-from hope_rs.demo import demo_pair
-from hope_rs.descriptors import (
+from hope_rs.evaluation.demo import demo_pair
+from hope_rs.features.descriptors import (
     _unit_area_laplacian,
     laplacian_basis_as_numbered,
     single_threaded_blas,
 )
-from hope_rs.numbering import canonical_mesh
-from hope_rs.progress import ProgressBar
+from hope_rs.geometry.numbering import canonical_mesh
+from hope_rs.pipeline.progress import ProgressBar
 
 PYTHON_DIR = Path(hope_rs.__file__).resolve().parents[1]
 
@@ -82,7 +86,8 @@ def test_a_raising_callback_ends_the_progress_line(pair, monkeypatch):
 def test_an_error_after_early_zoomout_started_stops_it(pair, monkeypatch):
     a, b = (hope_rs.Shape(m) for m in pair)
     # ZoomOut starts after the first step of the last pass; with one pass, that is the first.
-    monkeypatch.setattr(spectral, "EARLY_FROM_PASS", 0)
+    cfg = MatchConfig().with_options(max_passes=1)
+    cfg = dataclasses.replace(cfg, spectral=dataclasses.replace(cfg.spectral, early_from_pass=0))
     seen = []
 
     def callback(it):
@@ -91,21 +96,20 @@ def test_an_error_after_early_zoomout_started_stops_it(pair, monkeypatch):
             raise Stop("late")
 
     with pytest.raises(Stop):
-        spectral.refine_while_solving_bases(
-            a, b, a.map_in(b, np.arange(a.n_vertices)), max_passes=1, callback=callback
-        )
+        hope_rs.match(a, b, init=np.arange(a.n_vertices), config=cfg, callback=callback)
     assert "hope_rs-zoomout" in seen[-1]
     assert ours() == []
 
 
 def test_cancel_stops_the_eigensolve(pair):
     a, b = (hope_rs.Shape(m) for m in pair)
-    p = spectral.BasisPrefetch(a, b).start()
+    k = SpectralConfig().k_end
+    p = spectral.BasisPrefetch(a, b, k).start()
     p.cancel()  # before the solver's first step: nothing is solved
     assert not p.thread.is_alive()
     assert p.solved == []
     p.finish()
-    assert not a.has_spectral_basis(spectral.K_END)
+    assert not a.has_spectral_basis(k)
 
 
 def test_stop_event_raises_cancelled_in_the_solver(pair):

@@ -13,12 +13,12 @@ from meshes import bumpy_sphere_files
 from test_map_io import unwritable_folder
 
 import hope_rs
-import hope_rs.cli
+import hope_rs.cli.commands
 import hope_rs.matching
-import hope_rs.mesh
-from hope_rs.batch_cli import ENVIRONMENT, EXIT_STATUS
-from hope_rs.cli import build_parser, main
-from hope_rs.map_io import read_map
+import hope_rs.geometry.mesh
+from hope_rs.cli.batch_cli import ENVIRONMENT, EXIT_STATUS
+from hope_rs.cli.commands import build_parser, main
+from hope_rs.geometry.map_io import read_map
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 N = 300
@@ -67,7 +67,7 @@ def test_output_checks_come_before_any_work(meshes, tmp_path, monkeypatch, capsy
     def no_loading(*args, **kwargs):
         raise AssertionError("the meshes were loaded before the output was checked")
 
-    monkeypatch.setattr(hope_rs.mesh, "load_mesh", no_loading)
+    monkeypatch.setattr(hope_rs.geometry.mesh, "load_mesh", no_loading)
     a, b = meshes
     ro = unwritable_folder(tmp_path)
     cases = [
@@ -131,7 +131,7 @@ def test_unexpected_errors_runtime_failures_and_ctrl_c(meshes, tmp_path, monkeyp
     def boom(*args, **kwargs):
         raise RuntimeError("boom")
 
-    monkeypatch.setattr(hope_rs.cli, "match", boom)
+    monkeypatch.setattr(hope_rs.cli.commands, "match", boom)
     monkeypatch.delenv("HOPE_RS_DEBUG", raising=False)
     assert main(["match", a, b, "-q"]) == 1
     line = one_line_error(capsys.readouterr().err, "internal error")
@@ -145,7 +145,7 @@ def test_unexpected_errors_runtime_failures_and_ctrl_c(meshes, tmp_path, monkeyp
     def too_large(*args, **kwargs):
         raise MemoryError("the k-hop balls need 1.2 TiB")
 
-    monkeypatch.setattr(hope_rs.cli, "match", too_large)
+    monkeypatch.setattr(hope_rs.cli.commands, "match", too_large)
     assert main(["match", a, b, "-q"]) == 1
     assert (
         capsys.readouterr().err == "hope-rs: error: out of memory: the k-hop balls need 1.2 TiB\n"
@@ -154,7 +154,7 @@ def test_unexpected_errors_runtime_failures_and_ctrl_c(meshes, tmp_path, monkeyp
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(hope_rs.cli, "match", interrupted)
+    monkeypatch.setattr(hope_rs.cli.commands, "match", interrupted)
     assert main(["match", a, b, "-q"]) == 130
     assert capsys.readouterr().err == "hope-rs: interrupted\n"
     monkeypatch.undo()
@@ -162,7 +162,7 @@ def test_unexpected_errors_runtime_failures_and_ctrl_c(meshes, tmp_path, monkeyp
     def disk_full(path, mapping):
         raise OSError(28, "No space left on device", str(path))
 
-    monkeypatch.setattr(hope_rs.cli, "write_map", disk_full)
+    monkeypatch.setattr(hope_rs.cli.commands, "write_map", disk_full)
     assert main(["match", a, b, "-q", "-o", str(tmp_path / "m.txt")]) == 1
     assert "No space left on device" in one_line_error(capsys.readouterr().err)
 

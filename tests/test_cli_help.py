@@ -2,9 +2,9 @@
 
 import pytest
 
-from hope_rs.bench import methods_markdown
+from hope_rs.evaluation.bench import methods_markdown
 from hope_rs.cli import main
-from hope_rs.methods import ABLATIONS, METHODS
+from hope_rs.evaluation.methods import ABLATIONS, METHODS
 
 
 def test_bench_help_and_the_readme_table_list_every_method(capsys):

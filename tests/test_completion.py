@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hope_rs import _core
-from hope_rs.refine import injective_completion, nearest_unused
+from hope_rs.kernels.maps import injective_completion, nearest_unused
 
 
 def test_duplicates_take_the_unused_column_nearest_their_image():

@@ -9,7 +9,7 @@ from conftest import data_path
 
 import hope_rs
 from hope_rs.cli import main
-from hope_rs.demo import DEMO_PAIRS, demo_pair, demo_truth, run_demo
+from hope_rs.evaluation.demo import DEMO_PAIRS, demo_pair, demo_truth, run_demo
 
 
 def test_bundled_pairs_are_small_float32_files_inside_the_package():

@@ -5,7 +5,7 @@ import pytest
 from conftest import data_path
 
 import hope_rs
-from hope_rs.evaluate import (
+from hope_rs.evaluation.evaluate import (
     curve_auc,
     error_curve,
     geodesic_errors,

@@ -15,7 +15,7 @@ from conftest import DATA
 from test_sites import subdivided
 
 import hope_rs
-from hope_rs.demo import demo_pair
+from hope_rs.evaluation.demo import demo_pair
 
 #: case name -> SHA-256 of ``match(...).map`` as little-endian int64.
 GOLDEN = {

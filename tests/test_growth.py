@@ -1,4 +1,4 @@
-"""Growing the trusted part of a map (hope_rs.growth and _core.grow_across_faces)."""
+"""Growing the trusted part of a map (hope_rs.pipeline.growth and _core.grow_across_faces)."""
 
 import numpy as np
 import pytest
@@ -7,9 +7,11 @@ from meshes import bumpy_sphere, moved_copy
 from test_shared_faces import drifted
 
 import hope_rs
-from hope_rs import _core, growth
-from hope_rs import shared_faces as SF
-from hope_rs.handles import seed_handles
+from hope_rs import _core
+from hope_rs.pipeline import growth
+from hope_rs.pipeline import shared_faces as SF
+from hope_rs.pipeline.config import GrowthConfig
+from hope_rs.pipeline.handles import seed_handles
 
 
 def flip_edges(faces: np.ndarray, inside: np.ndarray, rng) -> np.ndarray:
@@ -80,7 +82,7 @@ def test_only_handle_patches_above_the_seed_share_seed():
     f = np.arange(s.n_vertices)
     f[band[0::2]], f[band[1::2]] = band[1::2], band[0::2]  # the ring's images swapped in pairs
     handles = SF.face_handles(s, s, f)
-    seeds = seed_handles(s, s, f)
+    seeds = seed_handles(s, s, f, GrowthConfig().seed_share)
     in_cap = np.zeros(s.n_vertices, dtype=bool)
     in_cap[cap] = True
     assert handles[cap].sum() >= 5 and not seeds[cap].any()  # 8 handles in the cap

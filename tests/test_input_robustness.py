@@ -29,7 +29,7 @@ from meshes import bumpy_sphere
 
 import hope_rs
 from hope_rs.cli import main
-from hope_rs.mesh import as_mesh, scale_exponent
+from hope_rs.geometry.mesh import as_mesh, scale_exponent
 
 TET_MESH = hope_rs.Mesh(TET_V, TET_F)
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -286,7 +286,7 @@ def test_trimesh_and_duck_typed_meshes_are_accepted_everywhere():
     assert hope_rs.Shape(tm).n_vertices == len(v)
     err = hope_rs.geodesic_errors(tm, want)
     assert err.shape == (len(v),)
-    from hope_rs.batch import _spec
+    from hope_rs.batch.driver import _spec
 
     assert _spec(tm)[0] == "mesh"
 

@@ -6,7 +6,7 @@ import scipy.sparse as sp
 from conftest import data_path, relabel
 
 import hope_rs
-from hope_rs.mesh import load_mesh
+from hope_rs.geometry.mesh import load_mesh
 
 
 def bfs_ball(adj: sp.csr_matrix, src: int, k: int) -> np.ndarray:

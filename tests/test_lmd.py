@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from hope_rs.lmd import LmdTracker, local_map_distortion, witnesses
+from hope_rs.pipeline.lmd import LmdTracker, local_map_distortion, witnesses
 from hope_rs.shape import Shape
 
 

@@ -12,10 +12,10 @@ import pytest
 from meshes import bumpy_sphere, write_off
 
 import hope_rs
-import hope_rs.multiscale as M
+import hope_rs.pipeline.multiscale as M
 from hope_rs.cli import main
-from hope_rs.progress import STAGES, ProgressBar, ProgressEvent
-from hope_rs.refine import Iteration
+from hope_rs.pipeline.progress import STAGES, ProgressBar, ProgressEvent
+from hope_rs.pipeline.refine import Iteration
 
 DEFAULT_STAGES = ["shapes", "descriptors", "init", "refine", "polish", "spectral", "faces"]
 
@@ -211,7 +211,7 @@ def test_cli_verbose_logs_stages_and_restores_the_logger(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err == (
         "hope-rs: note: --multiscale: multiscale not applied: A (300 vertices) is too sparse "
-        "to halve by vertex clustering (see hope_rs.multiscale.coarse_mesh)\n"
+        "to halve by vertex clustering (see hope_rs.geometry.coarsen.coarse_mesh)\n"
     )
 
 

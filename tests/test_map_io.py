@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import hope_rs
-from hope_rs.map_io import atomic_write, check_writable_folder, read_map, write_map
+from hope_rs.geometry.map_io import atomic_write, check_writable_folder, read_map, write_map
 
 MAP = np.array([3, 0, 2, 2, 1], dtype=np.int64)
 

@@ -143,7 +143,7 @@ def test_bad_init_name(faust_pair):
 
 
 def test_stay_keeps_witnesses_unless_the_overlap_clearly_gains():
-    from hope_rs.refine import assign_by_overlap
+    from hope_rs.pipeline.refine import assign_by_overlap
 
     # Two triangulations of one surface: no vertex bijection, so one-to-one steps trade
     # witnesses between near-equal overlaps; a large enough stay forbids every such trade.
@@ -163,7 +163,8 @@ def test_stay_keeps_witnesses_unless_the_overlap_clearly_gains():
 
 
 def test_refine_reports_a_settled_map_only_when_nothing_moves():
-    from hope_rs.refine import refine
+    from hope_rs.pipeline.config import RefineConfig
+    from hope_rs.pipeline.refine import refine
 
     s = hope_rs.Shape(hope_rs.Mesh(*bumpy_sphere(800, 3)))
     exact = np.arange(s.n_vertices)
@@ -172,7 +173,7 @@ def test_refine_reports_a_settled_map_only_when_nothing_moves():
     rng = np.random.default_rng(0)
     moved = rng.choice(s.n_vertices, s.n_vertices // 10, replace=False)
     wrong[moved] = rng.permutation(moved)
-    once = refine(s, s, wrong, max_passes=1)
+    once = refine(s, s, wrong, RefineConfig(max_passes=1))
     assert not once.settled  # its only pass moved vertices
     full = refine(s, s, wrong)
     np.testing.assert_array_equal(full.map, exact)

@@ -5,19 +5,22 @@ import json
 import numpy as np
 import pytest
 from conftest import data_path
-from meshes import bumpy_sphere
+from meshes import bumpy_sphere, write_off
 from test_numbering import renumbered
+from test_sites import subdivided
 
 import hope_rs
-from hope_rs import multiscale as M
+from hope_rs import MatchConfig
+from hope_rs.geometry.coarsen import CoarsenConfig, coarse_mesh
+from hope_rs.pipeline import multiscale as M
+from hope_rs.shape import ShapeConfig
 from hope_rs.cli import main
 
 
-@pytest.fixture
-def coarser(monkeypatch):
-    """Cells wide enough that the 6890-vertex FAUST meshes coarsen (to about 2.5k vertices);
-    at the default spacing only meshes of about 30k vertices and more do."""
-    monkeypatch.setattr(M, "COARSE_SPACING", 0.025)
+#: Cells wide enough that the 6890-vertex FAUST meshes coarsen (to about 2.5k vertices); at the
+#: default spacing only denser meshes do.
+COARSER_SHAPES = ShapeConfig(coarsen=CoarsenConfig(spacing=0.025))
+COARSER = MatchConfig(shape=COARSER_SHAPES).with_options(multiscale=True)
 
 
 def signed_volume(m: hope_rs.Mesh) -> float:
@@ -27,10 +30,10 @@ def signed_volume(m: hope_rs.Mesh) -> float:
 
 def test_coarse_mesh_clusters_vertices_and_keeps_the_surface(faust_pair):
     a, _ = faust_pair
-    assert M.coarse_mesh(a) is None  # 6890 vertices: not halved at the default spacing
-    c = M.coarse_mesh(a, 0.025)
+    assert coarse_mesh(a) is None  # 6890 vertices: not halved at the default spacing
+    c = coarse_mesh(a, CoarsenConfig(spacing=0.025))
     n = c.sites.size
-    assert 1500 < n < a.n_vertices / M.MIN_COARSENING
+    assert 1500 < n < a.n_vertices / CoarsenConfig().min_coarsening
     np.testing.assert_array_equal(c.mesh.vertices, a.vertices[c.sites])
     np.testing.assert_array_equal(c.owner[c.sites], np.arange(n))
     # Each fine vertex is within a cell's diagonal of its coarse vertex.
@@ -54,7 +57,7 @@ def test_lift_carries_a_similarity_to_the_exact_vertices(faust_pair):
     q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
     q *= np.sign(np.linalg.det(q))  # a rotation
     s, shift = 1.7, rng.normal(size=3)
-    c = M.coarse_mesh(a, 0.025)
+    c = coarse_mesh(a, CoarsenConfig(spacing=0.025))
     moved = hope_rs.Mesh(s * c.mesh.vertices @ q.T + shift, c.mesh.faces)
     perm = rng.permutation(a.n_vertices)  # B's vertex i is A's vertex perm[i]
     points_b = (s * a.vertices @ q.T + shift)[perm]
@@ -68,10 +71,10 @@ def test_lift_carries_a_similarity_to_the_exact_vertices(faust_pair):
 
 
 @pytest.mark.slow
-def test_multiscale_match_refines_a_lifted_coarse_match(faust_pair, coarser):
+def test_multiscale_match_refines_a_lifted_coarse_match(faust_pair):
     a, b = faust_pair
-    sa, sb = hope_rs.Shape(a), hope_rs.Shape(b)
-    res = hope_rs.match(sa, sb, multiscale=True)
+    sa, sb = hope_rs.Shape(a, config=COARSER_SHAPES), hope_rs.Shape(b, config=COARSER_SHAPES)
+    res = hope_rs.match(sa, sb, config=COARSER)
     ca, cb = sa.coarse_level()[0], sb.coarse_level()[0]
     assert res.coarse is not None and res.coarse.map.shape == (ca.sites.size,)
     assert res.coarse.map.max() < cb.sites.size
@@ -88,57 +91,76 @@ def test_multiscale_match_refines_a_lifted_coarse_match(faust_pair, coarser):
 
 
 @pytest.mark.slow
-def test_multiscale_match_does_not_depend_on_the_numbering(faust_pair, coarser):
+def test_multiscale_match_does_not_depend_on_the_numbering(faust_pair):
     a, b = faust_pair
     rng = np.random.default_rng(2)
     a2, pa = renumbered(a, rng)
     b2, pb = renumbered(b, rng)
-    base = hope_rs.match(a, b, multiscale=True)
-    other = hope_rs.match(a2, b2, multiscale=True)
+    base = hope_rs.match(a, b, config=COARSER)
+    other = hope_rs.match(a2, b2, config=COARSER)
     # a2's vertex i is a's vertex pa[i]; the map must follow both relabellings.
     np.testing.assert_array_equal(other.map, np.argsort(pb)[base.map[pa]])
 
 
-def test_multiscale_takes_an_initial_map(faust_pair, coarser):
+def test_multiscale_takes_an_initial_map(faust_pair):
     a, b = faust_pair
-    res = hope_rs.match(a, b, multiscale=True, init=np.arange(a.n_vertices))
+    res = hope_rs.match(a, b, config=COARSER, init=np.arange(a.n_vertices))
+    assert res.coarse is not None
     # The coarse copies are clustered differently, so even the true map comes back inexact
     # from the coarse level (measured 0.029), and the fine pass sharpens it (0.011).
     assert hope_rs.geodesic_errors(hope_rs.Shape(b), res.map).mean() < 0.02
     with pytest.raises(ValueError, match="init"):
-        hope_rs.match(a, b, multiscale=True, init=np.arange(5))
+        hope_rs.match(a, b, config=COARSER, init=np.arange(5))
     with pytest.raises(ValueError, match="unknown descriptor"):
-        hope_rs.match(a, b, multiscale=True, init="sift")
+        hope_rs.match(a, b, config=COARSER, init="sift")
 
 
 @pytest.mark.slow
-def test_unless_both_shapes_coarsen_match_takes_the_default_path(faust_pair, coarser):
+def test_unless_both_shapes_coarsen_match_takes_the_default_path(faust_pair):
     a, b = faust_pair
     sparse = hope_rs.Mesh(*bumpy_sphere(1500, seed=1))
-    assert hope_rs.Shape(sparse).coarse_level() is None
-    assert hope_rs.Shape(a).coarse_level() is not None
+    assert hope_rs.Shape(sparse, config=COARSER_SHAPES).coarse_level() is None
+    assert hope_rs.Shape(a, config=COARSER_SHAPES).coarse_level() is not None
+    plain_config = COARSER.with_options(multiscale=False)
     for x, y in ((sparse, hope_rs.Mesh(*bumpy_sphere(1500, seed=2))), (a, sparse), (sparse, b)):
-        plain = hope_rs.match(x, y)
-        multi = hope_rs.match(x, y, multiscale=True)
+        plain = hope_rs.match(x, y, config=plain_config)
+        multi = hope_rs.match(x, y, config=COARSER)
         assert multi.coarse is None and "coarse" not in multi.timings
         np.testing.assert_array_equal(multi.map, plain.map)
     with pytest.raises(ValueError, match="not dense enough"):
-        M.coarse_start(hope_rs.Shape(sparse), hope_rs.Shape(a), "shot")
+        M.coarse_level(hope_rs.Shape(sparse), "shot")
+
+
+@pytest.fixture(scope="module")
+def dense_pair_files(tmp_path_factory):
+    """A FAUST pair subdivided once (27k vertices, dense enough to coarsen by default), as OFF
+    files, with the map ``match(..., multiscale=True)`` gives."""
+    folder = tmp_path_factory.mktemp("dense")
+    paths, meshes = [], []
+    for name in ("tr_reg_012", "tr_reg_018"):
+        m = hope_rs.load_mesh(data_path("faust_reg", f"{name}.off"))
+        dense = hope_rs.Mesh(*subdivided(m.vertices, m.faces))
+        write_off(folder / f"{name}.off", dense.vertices, dense.faces)
+        paths.append(folder / f"{name}.off")
+        meshes.append(dense)
+    res = hope_rs.match(*meshes, multiscale=True)
+    assert res.coarse is not None
+    return paths, res.map
 
 
 @pytest.mark.slow
-def test_cli_multiscale_flag(tmp_path, capsys, faust_pair, coarser, monkeypatch):
-    import hope_rs.cli
+def test_cli_multiscale_flag(tmp_path, capsys, dense_pair_files, monkeypatch):
+    import hope_rs.cli.commands
 
-    a, b = data_path("faust_reg", "tr_reg_012.off"), data_path("faust_reg", "tr_reg_018.off")
+    (a, b), want = dense_pair_files
     out = tmp_path / "map.txt"
     assert main(["match", str(a), str(b), "-o", str(out), "--multiscale", "--json", "-q"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert "coarse" in summary["timings"]
-    want = hope_rs.match(*faust_pair, multiscale=True).map
     np.testing.assert_array_equal(np.loadtxt(out, dtype=np.int64), want)
     # Without the flag, large meshes get a hint on stderr (unless --quiet).
-    monkeypatch.setattr(hope_rs.cli, "HINT_VERTICES", 6890)
+    a, b = data_path("faust_reg", "tr_reg_012.off"), data_path("faust_reg", "tr_reg_018.off")
+    monkeypatch.setattr(hope_rs.cli.commands, "HINT_VERTICES", 6890)
     assert main(["match", str(a), str(b), "-o", str(tmp_path / "plain.txt")]) == 0
     assert "--multiscale is about 3x faster" in capsys.readouterr().err
     assert main(["match", str(a), str(b), "-o", str(tmp_path / "plain.txt"), "-q"]) == 0
@@ -146,8 +168,8 @@ def test_cli_multiscale_flag(tmp_path, capsys, faust_pair, coarser, monkeypatch)
 
 
 @pytest.mark.slow
-def test_batch_multiscale_flag_gives_the_maps_of_match(tmp_path, capsys, faust_pair, coarser):
-    a, b = data_path("faust_reg", "tr_reg_012.off"), data_path("faust_reg", "tr_reg_018.off")
+def test_batch_multiscale_flag_gives_the_maps_of_match(tmp_path, capsys, dense_pair_files):
+    (a, b), want = dense_pair_files
     pairs = tmp_path / "pairs.txt"
     pairs.write_text(f"{a} {b}\n")
     out = tmp_path / "out"
@@ -155,5 +177,4 @@ def test_batch_multiscale_flag_gives_the_maps_of_match(tmp_path, capsys, faust_p
     assert main(args + ["--cache", str(tmp_path / "c")]) == 0
     assert "1 matched" in capsys.readouterr().out
     (got,) = list(out.iterdir())
-    want = hope_rs.match(*faust_pair, multiscale=True).map
     np.testing.assert_array_equal(np.loadtxt(got, dtype=np.int64), want)

@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 from test_match import bumpy_sphere
 
 import hope_rs
-from hope_rs.numbering import (
+from hope_rs.geometry.numbering import (
     MORTON_BITS,
     canonical_faces,
     canonical_mesh,
@@ -130,7 +130,7 @@ def test_an_explicit_init_map_is_translated_both_ways(faust_pair):
 def test_descriptors_follow_a_relabelling_bit_for_bit(faust_pair, kind):
     # SHOT's sums run in neighbour order, and where a local frame is nearly degenerate the last
     # bits pick an axis: as numbered, one vertex of this mesh changed under this relabelling.
-    from hope_rs.descriptors import descriptors
+    from hope_rs.features.descriptors import descriptors
 
     mesh = faust_pair[0]
     other, perm = renumbered(mesh, np.random.default_rng(1))
@@ -138,7 +138,7 @@ def test_descriptors_follow_a_relabelling_bit_for_bit(faust_pair, kind):
 
 
 def test_a_shape_keeps_its_descriptors_internally_and_hands_them_out_as_numbered(faust_pair):
-    from hope_rs.descriptors import descriptors
+    from hope_rs.features.descriptors import descriptors
 
     mesh = faust_pair[0]
     shape = hope_rs.Shape(mesh)

@@ -7,9 +7,10 @@ import pytest
 from meshes import write_off
 
 import hope_rs
-import hope_rs.batch
+import hope_rs.batch.driver
+import hope_rs.batch.tasks
 from hope_rs import cli, matching
-from hope_rs.demo import demo_pair
+from hope_rs.evaluation.demo import demo_pair
 
 
 @pytest.fixture(scope="module")
@@ -63,7 +64,7 @@ BAD = [
     ({"k_max": True}, TypeError, r"k_max .*not a bool"),
     ({"k_max": 8.0}, TypeError, r"k_max must be an integer .*got float"),
     ({"init": "sift"}, ValueError, r"unknown descriptor 'sift'; choose 'shot', 'wks' or 'hks'"),
-    ({"init": None}, TypeError, r"init must be one of 'shot', 'wks', 'hks' or an \(n_a,\)"),
+    ({"init": 3}, TypeError, r"init must be one of 'shot', 'wks', 'hks' or an \(n_a,\)"),
     ({"init": 3}, TypeError, r"init must be one of .*got int"),
     ({"init": np.arange(5)}, ValueError, rf"init must be a 1-D array of length {N}"),
     ({"init": np.zeros((N, 2), int)}, ValueError, rf"init must be a 1-D array of length {N}"),
@@ -139,7 +140,7 @@ def test_a_batch_checks_match_options_before_any_work(
     def forbidden(*args, **kwargs):
         raise AssertionError("the batch prepared a shape before checking the match options")
 
-    monkeypatch.setattr(hope_rs.batch, "prepare_task", forbidden)
+    monkeypatch.setattr(hope_rs.batch.driver, "prepare_task", forbidden)
     with pytest.raises(exc, match=message):
         hope_rs.match_many(list(pair), out_dir=tmp_path / "maps", jobs=1, cache=False, **options)
     assert not (tmp_path / "maps").exists()

@@ -9,10 +9,10 @@ from hypothesis.extra.numpy import arrays
 from meshes import bumpy_sphere
 
 import hope_rs
-from hope_rs.demo import demo_pair
-from hope_rs.descriptors import shot
-from hope_rs.numbering import canonical_mesh
-from hope_rs.orientation import orient_faces
+from hope_rs.evaluation.demo import demo_pair
+from hope_rs.features.descriptors import shot
+from hope_rs.geometry.numbering import canonical_mesh
+from hope_rs.geometry.orientation import orient_faces
 
 SPHERE = bumpy_sphere(200, 1)
 

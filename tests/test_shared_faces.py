@@ -1,4 +1,4 @@
-"""The finishing rounds for shapes that share their triangulation (hope_rs.shared_faces)."""
+"""The finishing rounds for shapes that share their triangulation (hope_rs.pipeline.shared_faces)."""
 
 import numpy as np
 import pytest
@@ -6,9 +6,11 @@ from conftest import data_path
 from meshes import bumpy_sphere, moved_copy, random_rigid, write_off
 
 import hope_rs
-from hope_rs import _core, handles
-from hope_rs import shared_faces as SF
-from hope_rs.refine import refine
+from hope_rs import _core
+from hope_rs.pipeline import handles
+from hope_rs.pipeline import shared_faces as SF
+from hope_rs.pipeline.config import FinishConfig
+from hope_rs.pipeline.refine import refine
 
 
 def test_face_keys_ignore_rotation_but_not_orientation():
@@ -103,7 +105,7 @@ def test_finish_leaves_differently_triangulated_shapes_alone():
     b = hope_rs.Shape(hope_rs.load_mesh(data_path("faust_r", "tr_reg_001.off")))
     f = hope_rs.match(a, b, shared_faces=False).map
     fi = a.map_in(b, f)
-    assert SF.face_handles(a, b, fi).mean() < SF.MIN_HANDLES / 2
+    assert SF.face_handles(a, b, fi).mean() < FinishConfig().min_handles / 2
     g, rounds = SF.finish(a, b, fi)
     assert rounds == 0 and g is not None
     np.testing.assert_array_equal(g, fi)

@@ -7,7 +7,7 @@ from meshes import bumpy_sphere, write_off
 
 import hope_rs
 from hope_rs.cli import main
-from hope_rs.show import detect_up, position_colours, view_frame, write_ply_pair
+from hope_rs.evaluation.show import detect_up, position_colours, view_frame, write_ply_pair
 
 pytest.importorskip("matplotlib")
 
@@ -86,7 +86,7 @@ def test_error_and_confidence_panels(pair):
 
 
 def test_vertex_errors_are_zero_exactly_where_the_map_is_right(pair):
-    from hope_rs.show import vertex_errors
+    from hope_rs.evaluation.show import vertex_errors
 
     d, mapping, truth = pair
     a, b = hope_rs.load_mesh(d / "a.off"), hope_rs.load_mesh(d / "b.off")

@@ -5,10 +5,17 @@ import pytest
 from test_numbering import renumbered
 
 import hope_rs
+from hope_rs.pipeline.initial import initial_map, shapes_initial_map
 from hope_rs import _core
-from hope_rs import sites as S
-from hope_rs.descriptors import SHOT_RADIUS, shot
-from hope_rs.numbering import canonical_mesh
+from hope_rs.geometry import sites as S
+from hope_rs.features.descriptors import DescriptorConfig, shot
+from hope_rs.geometry.sites import SiteConfig
+from hope_rs.shape import ShapeConfig
+
+SHOT_RADIUS = DescriptorConfig().shot_radius
+#: Cells wide enough that the 6890-vertex FAUST meshes use sites (2.7 vertices each).
+COARSE_SITES = ShapeConfig(descriptors=DescriptorConfig(sites=SiteConfig(spacing=0.25)))
+from hope_rs.geometry.numbering import canonical_mesh
 
 
 def test_grid_cells_group_exactly_the_vertices_of_one_grid_cell():
@@ -51,30 +58,27 @@ def test_sparse_meshes_keep_one_descriptor_per_vertex(faust_pair):
     assert hope_rs.Shape(a).descriptor_sites("wks") is None
 
 
-@pytest.fixture
-def coarse_sites(monkeypatch):
-    """Cells wide enough that the 6890-vertex FAUST meshes use sites (2.7 vertices each)."""
-    monkeypatch.setattr(S, "SITE_SPACING", 0.25)
-
-
-def test_vertices_share_the_full_descriptor_of_their_site(faust_pair, coarse_sites):
+def test_vertices_share_the_full_descriptor_of_their_site(faust_pair):
     a, _ = faust_pair
-    shape = hope_rs.Shape(a)
+    shape = hope_rs.Shape(a, config=COARSE_SITES)
     sites, owner = shape.descriptor_sites("shot")
     assert 1000 < sites.size < a.n_vertices / 2
     m = shape.internal
     full = _core.shot_descriptors(m.vertices, m.faces, SHOT_RADIUS * m.scale).reshape(-1, 352)
     d = shape.internal_descriptors("shot")
     assert np.array_equal(d, full[sites][owner])
-    assert np.array_equal(shot(a), d[shape.rank])
+    site_config = COARSE_SITES.descriptors.sites
+    canon = shape.internal
+    assert np.array_equal(S.shot_sites(canon, SHOT_RADIUS, site_config)[0], sites)
     # The sites depend on the geometry only: a renumbered copy gets the same descriptors.
     b, perm = renumbered(a, np.random.default_rng(5))
-    assert np.array_equal(shot(b), shot(a)[perm])
+    renumbered_shape = hope_rs.Shape(b, config=COARSE_SITES)
+    assert np.array_equal(renumbered_shape.descriptors("shot"), shape.descriptors("shot")[perm])
 
 
-def test_match_from_sites_recovers_the_same_connectivity_pair(faust_pair, coarse_sites):
+def test_match_from_sites_recovers_the_same_connectivity_pair(faust_pair):
     a, b = faust_pair
-    sa, sb = hope_rs.Shape(a), hope_rs.Shape(b)
+    sa, sb = hope_rs.Shape(a, config=COARSE_SITES), hope_rs.Shape(b, config=COARSE_SITES)
     res = hope_rs.match(sa, sb)
     # Every vertex of A starts at a site of B, the same one as the rest of its cell.
     site_a, site_b = sa.descriptor_sites(), sb.descriptor_sites()
@@ -105,21 +109,17 @@ def test_sites_follow_the_density_not_the_scale(faust_pair):
     for scale in (1.0, 37.0):
         dense = canonical_mesh(hope_rs.Mesh(v * scale, f))[0]
         sites, owner = S.shot_sites(dense, SHOT_RADIUS)
-        assert sites.size < dense.n_vertices / S.MIN_VERTICES_PER_SITE
+        assert sites.size < dense.n_vertices / SiteConfig().min_vertices_per_site
         assert np.bincount(owner).min() >= 1
         counts.append(sites.size)
     assert counts[0] == counts[1]
 
 
-def test_initial_map_between_a_dense_and_a_sparse_shape(faust_pair, monkeypatch):
-    from hope_rs.initial import initial_map, shapes_initial_map
-
+def test_initial_map_between_a_dense_and_a_sparse_shape(faust_pair):
     a, b = faust_pair
-    monkeypatch.setattr(S, "SITE_SPACING", 0.25)
-    sa = hope_rs.Shape(a)  # sites and descriptors are computed on first use: use them now
+    sa = hope_rs.Shape(a, config=COARSE_SITES)
     sites, owner = sa.descriptor_sites()
     da = sa.internal_descriptors("shot")
-    monkeypatch.setattr(S, "SITE_SPACING", 1 / 16)
     sb = hope_rs.Shape(b)
     assert sb.descriptor_sites() is None
     db = sb.internal_descriptors("shot")

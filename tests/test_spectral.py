@@ -11,9 +11,16 @@ from meshes import bumpy_sphere, moved_copy, write_off
 from scipy.spatial.distance import cdist
 
 import hope_rs
-from hope_rs import spectral as S
+from hope_rs import MatchConfig
+from hope_rs.pipeline import spectral as S
+from hope_rs.pipeline.config import RefineConfig, SpectralConfig
 from hope_rs._blas import single_threaded_blas
-from hope_rs.datasets import Pair
+from hope_rs.evaluation.datasets import Pair
+
+
+def spectral_config(**fields) -> MatchConfig:
+    """The default settings with the spectral pass's ``fields`` changed."""
+    return MatchConfig(spectral=SpectralConfig(**fields))
 
 
 def corrupted(truth: np.ndarray, share: float, seed: int) -> np.ndarray:
@@ -92,7 +99,8 @@ def test_zoomout_repairs_a_corrupted_map_onto_a_moved_copy(faust_pair, max_sampl
     b, truth = moved_copy(a, 3)
     sa, sb = hope_rs.Shape(a), hope_rs.Shape(b)
     f = corrupted(truth, 0.3, 4)
-    z = sa.map_out(sb, S.zoomout(sa, sb, sa.map_in(sb, f), max_samples=max_samples))
+    cfg = SpectralConfig(max_samples=max_samples)
+    z = sa.map_out(sb, S.zoomout(sa, sb, sa.map_in(sb, f), cfg))
     assert np.mean(f == truth) < 0.72
     assert np.mean(z == truth) > 0.9
 
@@ -156,13 +164,11 @@ def test_match_halves_hope_error_on_a_remeshed_pair():
     np.testing.assert_array_equal(off.hope_map, off.map)
 
 
-def test_the_pass_is_skipped_on_shapes_too_large_or_too_small(monkeypatch):
+def test_the_pass_is_skipped_on_shapes_too_large_or_too_small():
     a = hope_rs.Mesh(*bumpy_sphere(400, 1))
     b = hope_rs.Mesh(*bumpy_sphere(300, 2))
-    monkeypatch.setattr(S, "MAX_VERTICES", 350)
-    res = hope_rs.match(a, b, max_passes=1)
+    res = hope_rs.match(a, b, max_passes=1, config=spectral_config(max_vertices=350))
     assert not res.stage("spectral").ran and "350" in res.stage("spectral").reason
-    monkeypatch.setattr(S, "MAX_VERTICES", 60_000)
     assert hope_rs.match(a, b, max_passes=1).stage("spectral").ran
     tiny = hope_rs.Mesh(
         np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float),
@@ -190,7 +196,7 @@ def test_a_failed_eigensolve_keeps_hope_map_with_a_warning(monkeypatch):
 class _NoPrefetch:
     """Stands in for BasisPrefetch: the bases are then solved after the refinement."""
 
-    def __init__(self, a, b):
+    def __init__(self, a, b, k):
         self.stop = threading.Event()
 
     def start(self):
@@ -223,12 +229,12 @@ def test_bases_solved_during_the_refinement_give_the_same_match(monkeypatch):
     res = hope_rs.match(sa, sb, max_passes=2)
     assert res.stage("spectral").ran
     # The thread stored both bases, and they are the bits a solve in this thread gives.
+    k = SpectralConfig().k_end
     for s in (sa, sb):
-        assert s.has_spectral_basis(S.K_END)
-        np.testing.assert_array_equal(
-            s.spectral_basis(S.K_END)[0], s.solve_spectral_basis(S.K_END)[0]
-        )
-    assert S.BasisPrefetch(sa, hope_rs.Shape(a)).shapes != S.BasisPrefetch(sa, sa).shapes == []
+        assert s.has_spectral_basis(k)
+        np.testing.assert_array_equal(s.spectral_basis(k)[0], s.solve_spectral_basis(k)[0])
+    fresh = hope_rs.Shape(a)
+    assert S.BasisPrefetch(sa, fresh, k).shapes != S.BasisPrefetch(sa, sa, k).shapes == []
     monkeypatch.setattr(S, "BasisPrefetch", _NoPrefetch)
     after = hope_rs.match(a, b, max_passes=2)
     np.testing.assert_array_equal(after.map, res.map)
@@ -240,7 +246,7 @@ def test_bases_solved_during_the_refinement_give_the_same_match(monkeypatch):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         again = hope_rs.match(a, b, max_passes=2)
-    assert off_main == [S.K_END]
+    assert off_main == [k]
     np.testing.assert_array_equal(again.map, res.map)
 
 
@@ -253,8 +259,8 @@ def test_spectral_basis_is_cached_and_mass_orthonormal(faust_pair):
 
 
 def test_a_dense_mesh_gets_its_basis_from_its_coarse_copy():
-    from hope_rs import descriptors as DS
-    from hope_rs.multiscale import coarse_mesh
+    from hope_rs.features import descriptors as DS
+    from hope_rs.geometry.coarsen import coarse_mesh
 
     mesh = hope_rs.Shape(hope_rs.Mesh(*bumpy_sphere(15000, 3))).internal
     coarse = coarse_mesh(mesh)
@@ -281,7 +287,7 @@ def test_a_dense_mesh_gets_its_basis_from_its_coarse_copy():
 
 
 def test_the_basis_falls_back_to_arpack_when_the_coarse_route_fails(monkeypatch):
-    from hope_rs import descriptors as DS
+    from hope_rs.features import descriptors as DS
 
     mesh = hope_rs.Shape(hope_rs.Mesh(*bumpy_sphere(15000, 3))).internal
 
@@ -347,9 +353,8 @@ def test_a_partial_shape_keeps_hope_map_when_the_spectral_one_bends_distances(
     # makes this pair exact: see test_shared_faces.py).
     res = hope_rs.match(sa, sb, shared_faces=False)
     np.testing.assert_array_equal(res.map, res.hope_map)
-    monkeypatch.setattr(S, "MAX_DISCREPANCY_RATIO", np.inf)
-    monkeypatch.setattr(S, "MAX_ZOOMOUT_DISCREPANCY_RATIO", np.inf)
-    unchecked = hope_rs.match(sa, sb, shared_faces=False).map
+    unguarded = spectral_config(max_discrepancy_ratio=np.inf, max_zoomout_discrepancy_ratio=np.inf)
+    unchecked = hope_rs.match(sa, sb, shared_faces=False, config=unguarded).map
     assert error(unchecked) > 1.5 * error(res.map)
 
 
@@ -370,16 +375,16 @@ def test_zoomout_started_during_the_last_pass_is_zoomout_from_that_map(monkeypat
     a = hope_rs.Mesh(*bumpy_sphere(1500, 1))
     b = hope_rs.Mesh(*bumpy_sphere(1400, 2))
     sa, sb = hope_rs.Shape(a), hope_rs.Shape(b)
-    monkeypatch.setattr(S, "EARLY_FROM_PASS", 0)  # the one pass of max_passes=1 is the last
+    early = spectral_config(early_from_pass=0)  # the one pass of max_passes=1 is the last
     on_main = _zoomout_spy(monkeypatch)
-    res = hope_rs.match(sa, sb, max_passes=1)
+    res = hope_rs.match(sa, sb, max_passes=1, config=early)
     assert on_main == [False]  # once, in the background thread
 
     # The same refinement again, keeping the map the hook saw, and ZoomOut from it afterwards.
     seen = []
     f0 = sa.map_in(sb, res.init_map)
-    again = hope_rs.refine.refine(
-        sa, sb, f0, max_passes=1, on_last_pass=lambda f, n: seen.append((f.copy(), n))
+    again = hope_rs.pipeline.refine.refine(
+        sa, sb, f0, RefineConfig(max_passes=1), on_last_pass=lambda f, n: seen.append((f.copy(), n))
     )
     assert len(seen) == 1 and seen[0][1] == 0
     # It saw the map after the first step, not the one the pass ended with.
@@ -394,8 +399,8 @@ def test_zoomout_waits_for_the_end_when_the_loop_stops_before_the_early_pass(mon
     a = hope_rs.Mesh(*bumpy_sphere(1500, 1))
     b = hope_rs.Mesh(*bumpy_sphere(1400, 2))
     on_main = _zoomout_spy(monkeypatch)
-    res = hope_rs.match(a, b, max_passes=2)  # passes 0 and 1, before EARLY_FROM_PASS
-    assert S.EARLY_FROM_PASS >= 2
+    res = hope_rs.match(a, b, max_passes=2)  # passes 0 and 1, before early_from_pass
+    assert SpectralConfig().early_from_pass >= 2
     assert on_main == [True] and res.stage("spectral").ran
 
 
@@ -403,14 +408,13 @@ def test_the_early_zoomout_leaves_a_failed_basis_to_the_main_thread(monkeypatch)
     a = hope_rs.Mesh(*bumpy_sphere(1500, 1))
     b = hope_rs.Mesh(*bumpy_sphere(1400, 2))
     want = hope_rs.match(a, b, max_passes=1)
-    monkeypatch.setattr(S, "EARLY_FROM_PASS", 0)
     off_main = _basis_solves_fail_off_the_main_thread(monkeypatch)
     on_main = _zoomout_spy(monkeypatch)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        got = hope_rs.match(a, b, max_passes=1)
+        got = hope_rs.match(a, b, max_passes=1, config=spectral_config(early_from_pass=0))
     # Only the prefetch tried off the main thread; ZoomOut then ran once, after the loop.
-    assert off_main == [S.K_END] and on_main == [True]
+    assert off_main == [SpectralConfig().k_end] and on_main == [True]
     np.testing.assert_array_equal(got.map, want.map)
 
 
@@ -422,7 +426,8 @@ def test_zoomout_stops_at_its_next_basis_size_when_told():
     assert S.zoomout(sa, sb, f, stop=stop) is not None
     stop.set()
     assert S.zoomout(sa, sb, f, stop=stop) is None
-    early = S.EarlyZoomOut(sa, sb, S.BasisPrefetch(sa, sb).start())
-    early.start(f, S.EARLY_FROM_PASS)
+    cfg = SpectralConfig()
+    early = S.EarlyZoomOut(sa, sb, S.BasisPrefetch(sa, sb, cfg.k_end).start(), cfg)
+    early.start(f, cfg.early_from_pass)
     early.join(cancel=True)
     assert early.result is None

@@ -7,16 +7,17 @@ other way: it lists, for each vertex of shape 2, a vertex of shape 1.)
 from . import _compat
 from ._version import __version__ as __version__
 from .batch.cache import ShapeCache
-from .batch.match_many import PairResult, match_many, read_pairs
+from .batch.driver import PairResult, match_many, read_pairs
 from .evaluation.evaluate import geodesic_errors, load_vts, score
 from .geometry.map_io import read_map, write_map
 from .geometry.mesh import Mesh, load_mesh
 from .kernels.assignment import auction_assignment
 from .kernels.khop import khop_neighbourhoods, overlap_cost
-from .matching import MatchResult, match
+from .matching import MatchConfig, MatchResult, match
 from .shape import Shape
 
 __all__ = [
+    "MatchConfig",
     "MatchResult",
     "Mesh",
     "PairResult",

@@ -7,7 +7,7 @@ import sys
 import textwrap
 import time
 
-from ..batch.match_many import imatch_many, read_pairs
+from ..batch.driver import imatch_many, read_pairs
 
 __all__ = ["ENVIRONMENT", "EXIT_STATUS", "add_batch_parser", "cmd_batch", "environment_help"]
 

@@ -13,7 +13,7 @@ import traceback
 import warnings
 
 from .._version import __version__
-from ..batch.match_many import one_line_warning
+from ..batch.driver import one_line_warning
 from ..evaluation import bench, show
 from ..evaluation.demo import run_demo
 from ..geometry.map_io import check_writable_folder, map_format, write_map
