@@ -5,8 +5,8 @@ import pytest
 from meshes import bumpy_sphere, write_off
 
 import hope_rs
-from hope_rs.batch.driver import imatch_many, map_name, read_pairs
 from hope_rs.batch.cache import ShapeCache, cached_shape, file_digest
+from hope_rs.batch.driver import imatch_many, map_name, read_pairs
 from hope_rs.cli import main
 
 

@@ -15,8 +15,8 @@ import hope_rs
 import hope_rs.batch.driver
 import hope_rs.batch.tasks
 import hope_rs.matching
-from hope_rs.batch.driver import imatch_many, map_name, read_pairs
 from hope_rs.batch.cache import ShapeCache, cached_shape
+from hope_rs.batch.driver import imatch_many, map_name, read_pairs
 from hope_rs.cli import main
 from hope_rs.geometry.map_io import read_map
 

@@ -18,10 +18,7 @@ from meshes import write_off
 from threadpoolctl import threadpool_info
 
 import hope_rs
-from hope_rs import MatchConfig
-from hope_rs.pipeline.config import SpectralConfig
-from hope_rs import matching
-from hope_rs.pipeline import spectral
+from hope_rs import MatchConfig, matching
 from hope_rs._cancel import Cancelled
 from hope_rs.evaluation.demo import demo_pair
 from hope_rs.features.descriptors import (
@@ -30,6 +27,8 @@ from hope_rs.features.descriptors import (
     single_threaded_blas,
 )
 from hope_rs.geometry.numbering import canonical_mesh
+from hope_rs.pipeline import spectral
+from hope_rs.pipeline.config import SpectralConfig
 from hope_rs.pipeline.progress import ProgressBar
 
 PYTHON_DIR = Path(hope_rs.__file__).resolve().parents[1]

@@ -14,8 +14,8 @@ from test_map_io import unwritable_folder
 
 import hope_rs
 import hope_rs.cli.commands
-import hope_rs.matching
 import hope_rs.geometry.mesh
+import hope_rs.matching
 from hope_rs.cli.batch_cli import ENVIRONMENT, EXIT_STATUS
 from hope_rs.cli.commands import build_parser, main
 from hope_rs.geometry.map_io import read_map

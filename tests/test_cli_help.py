@@ -2,8 +2,8 @@
 
 import pytest
 
-from hope_rs.evaluation.bench import methods_markdown
 from hope_rs.cli import main
+from hope_rs.evaluation.bench import methods_markdown
 from hope_rs.evaluation.methods import ABLATIONS, METHODS
 
 

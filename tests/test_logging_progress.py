@@ -12,10 +12,12 @@ import pytest
 from meshes import bumpy_sphere, write_off
 
 import hope_rs
-import hope_rs.pipeline.multiscale as M
+from hope_rs import MatchConfig
 from hope_rs.cli import main
+from hope_rs.geometry.coarsen import CoarsenConfig
 from hope_rs.pipeline.progress import STAGES, ProgressBar, ProgressEvent
 from hope_rs.pipeline.refine import Iteration
+from hope_rs.shape import ShapeConfig
 
 DEFAULT_STAGES = ["shapes", "descriptors", "init", "refine", "polish", "spectral", "faces"]
 
@@ -169,11 +171,12 @@ def test_multiscale_that_does_not_apply_says_so(spheres, caplog):
 
 
 @pytest.mark.slow
-def test_multiscale_stages_and_the_coarse_progress(faust_pair, monkeypatch, caplog):
-    monkeypatch.setattr(M, "COARSE_SPACING", 0.025)  # FAUST coarsens to about 2.5k vertices
+def test_multiscale_stages_and_the_coarse_progress(faust_pair, caplog):
+    # FAUST coarsens to about 2.5k vertices with these cells.
+    coarser = MatchConfig(shape=ShapeConfig(coarsen=CoarsenConfig(spacing=0.025)))
     caplog.set_level(logging.INFO, logger="hope_rs")
     events = []
-    res = hope_rs.match(*faust_pair, multiscale=True, progress=events.append)
+    res = hope_rs.match(*faust_pair, multiscale=True, progress=events.append, config=coarser)
     names = [s.name for s in res.stages]
     assert names[:3] == ["shapes", "coarse", "lift"] and names[-4:] == DEFAULT_STAGES[-4:]
     assert res.stage("coarse").ran and res.stage("lift").ran

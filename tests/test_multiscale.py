@@ -11,11 +11,10 @@ from test_sites import subdivided
 
 import hope_rs
 from hope_rs import MatchConfig
+from hope_rs.cli import main
 from hope_rs.geometry.coarsen import CoarsenConfig, coarse_mesh
 from hope_rs.pipeline import multiscale as M
 from hope_rs.shape import ShapeConfig
-from hope_rs.cli import main
-
 
 #: Cells wide enough that the 6890-vertex FAUST meshes coarsen (to about 2.5k vertices); at the
 #: default spacing only denser meshes do.

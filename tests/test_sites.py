@@ -1,15 +1,14 @@
 """SHOT on dense meshes: one descriptor per grid cell, computed at the cell's site."""
 
 import numpy as np
-import pytest
 from test_numbering import renumbered
 
 import hope_rs
-from hope_rs.pipeline.initial import initial_map, shapes_initial_map
 from hope_rs import _core
+from hope_rs.features.descriptors import DescriptorConfig
 from hope_rs.geometry import sites as S
-from hope_rs.features.descriptors import DescriptorConfig, shot
 from hope_rs.geometry.sites import SiteConfig
+from hope_rs.pipeline.initial import initial_map, shapes_initial_map
 from hope_rs.shape import ShapeConfig
 
 SHOT_RADIUS = DescriptorConfig().shot_radius

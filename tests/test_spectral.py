@@ -12,10 +12,10 @@ from scipy.spatial.distance import cdist
 
 import hope_rs
 from hope_rs import MatchConfig
-from hope_rs.pipeline import spectral as S
-from hope_rs.pipeline.config import RefineConfig, SpectralConfig
 from hope_rs._blas import single_threaded_blas
 from hope_rs.evaluation.datasets import Pair
+from hope_rs.pipeline import spectral as S
+from hope_rs.pipeline.config import RefineConfig, SpectralConfig
 
 
 def spectral_config(**fields) -> MatchConfig:
