@@ -4,7 +4,7 @@ use super::bind_graph::MeshGraph;
 use super::convert::{owned, pattern, plain_vec, u32_vec, PyCsr};
 use super::detached;
 use crate::overlap::{overlap_rows, BallsAt, OverlapOptions, OverlapRows};
-use crate::step::{best_overlap, overlap_assignment};
+use crate::step::{best_overlap, overlap_assignment, StepOptions};
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -126,8 +126,13 @@ pub(super) fn overlap_assignment_graphs<'py>(
     let (ra, rb, f, w) = step_inputs(a, b, k, &f, &witnesses)?;
     let keep = u32_vec(&keep, "keep")?;
     let hint = plain_vec(&hint);
+    let opts = StepOptions {
+        top_k,
+        floor_div,
+        stay,
+    };
     let g = detached(py, || {
-        overlap_assignment(&ra, &rb, &f, &w, top_k, &keep, &hint, floor_div, stay)
+        overlap_assignment(&ra, &rb, &f, &w, &keep, &hint, opts)
     })?;
     Ok(owned(py, &g))
 }
