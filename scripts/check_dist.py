@@ -26,7 +26,7 @@ SDIST_REQUIRED = (
     "LICENSE",
     "PKG-INFO",
     "src/lib.rs",
-    "src/python.rs",
+    "src/python/mod.rs",
     "python/hope_rs/__init__.py",
     "python/hope_rs/_core.pyi",
     "python/hope_rs/py.typed",

@@ -1,4 +1,4 @@
-//! The one error type of the core; `python.rs` maps it to Python exceptions in one place.
+//! The one error type of the core; `python/mod.rs` maps it to Python exceptions in one place.
 use std::fmt;
 
 #[derive(Debug, Clone, PartialEq, Eq)]

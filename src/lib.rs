@@ -1,6 +1,6 @@
 //! hope_rs core: the compute kernels of HOPE shape matching, free of Python.
 //!
-//! The `python` feature (enabled by maturin) adds the thin `_core` extension module in `python.rs`.
+//! The `python` feature (enabled by maturin) adds the thin `_core` extension module in `python/`.
 pub mod auction;
 pub mod csr;
 pub mod error;

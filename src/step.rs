@@ -49,22 +49,38 @@ pub fn best_in_row(c: &CsrView<i64>, r: usize) -> Option<u32> {
         .map(|a| c.indices[a])
 }
 
+/// The tuning of one [`overlap_assignment`] step; its inputs (graphs, map, witnesses, `keep`,
+/// `hint`) are the function's parameters.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StepOptions {
+    /// Keep only the `top_k` largest overlap counts of each row (see `OverlapOptions::top_k`);
+    /// `None` keeps every overlapping column.
+    pub top_k: Option<usize>,
+    /// The solver's first epsilon is at least the value range over this (see
+    /// `auction_assignment_int_with`).
+    pub floor_div: i64,
+    /// Extra overlap counts a witness's current match is worth (see [`bonus_cost`]).
+    pub stay: u32,
+}
+
 /// The map maximising the overlap cost one-to-one (see [`bonus_cost`]); rows the assignment
 /// leaves out (A larger than B) take their best column. `keep` (one column per row, e.g. an
 /// injective completion of `f`) is stored in every row, so a full assignment exists; `hint` is
-/// passed to the solver (see `auction_assignment_int_hinted`); `stay`: see [`bonus_cost`].
-#[allow(clippy::too_many_arguments)]
+/// passed to the solver (see `auction_assignment_int_hinted`); `opts`: see [`StepOptions`].
 pub fn overlap_assignment<A: Rows, B: Rows>(
     nbrs_a: &A,
     nbrs_b: &B,
     f: &[u32],
     witnesses: &[bool],
-    top_k: Option<usize>,
     keep: &[u32],
     hint: &[i64],
-    floor_div: i64,
-    stay: u32,
+    opts: StepOptions,
 ) -> Result<Vec<i64>> {
+    let StepOptions {
+        top_k,
+        floor_div,
+        stay,
+    } = opts;
     if hint.len() != nbrs_a.n_rows() {
         return invalid("hint must hold one entry per vertex of A");
     }
@@ -144,7 +160,12 @@ mod tests {
         let hint: Vec<i64> = keep.iter().map(|&q| q as i64).collect();
         for k in 1..=3 {
             let rows = BallsAt { balls: &balls, k };
-            let g = overlap_assignment(&rows, &rows, &f, &w, None, &keep, &hint, 16, 0).unwrap();
+            let opts = StepOptions {
+                top_k: None,
+                floor_div: 16,
+                stay: 0,
+            };
+            let g = overlap_assignment(&rows, &rows, &f, &w, &keep, &hint, opts).unwrap();
             let opts = OverlapOptions {
                 top_k: None,
                 keep: Some(&keep),

@@ -1,0 +1,78 @@
+//! Geometry and map helpers: closest rotations, growing a map across shared faces, and greedy
+//! pairing with row capacities.
+use super::convert::{faces_vec, owned, plain_vec, points_vec, u32_vec};
+use super::detached;
+use numpy::{
+    IntoPyArray, PyArray1, PyArray3, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
+};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+
+/// For each 3 × 3 matrix `M` of an (n, 3, 3) array, the rotation maximising `tr(R M)` (see
+/// `rotation.rs`).
+#[pyfunction]
+pub(super) fn closest_rotations<'py>(
+    py: Python<'py>,
+    m: PyReadonlyArray3<'py, f64>,
+) -> PyResult<Bound<'py, PyArray3<f64>>> {
+    let a = m.as_array();
+    if a.shape()[1..] != [3, 3] {
+        return Err(PyValueError::new_err(format!(
+            "closest_rotations needs an (n, 3, 3) array, got {:?}",
+            a.shape()
+        )));
+    }
+    let n = a.shape()[0];
+    let flat: Vec<f64> = match a.as_slice() {
+        Some(s) => s.to_vec(),
+        None => a.iter().copied().collect(),
+    };
+    let r = detached(py, || crate::rotation::closest_rotations(&flat))?;
+    Ok(numpy::ndarray::Array3::from_shape_vec((n, 3, 3), r)
+        .expect("n * 9 values")
+        .into_pyarray(py))
+}
+
+/// Grows a partial map (−1 where unknown) across the faces A and B share (see
+/// `face_growth.rs`).
+#[pyfunction]
+pub(super) fn grow_across_faces<'py>(
+    py: Python<'py>,
+    faces_a: PyReadonlyArray2<'py, i64>,
+    points_a: PyReadonlyArray2<'py, f64>,
+    faces_b: PyReadonlyArray2<'py, i64>,
+    points_b: PyReadonlyArray2<'py, f64>,
+    partial_map: PyReadonlyArray1<'py, i64>,
+    max_error: f64,
+) -> PyResult<Bound<'py, PyArray1<i64>>> {
+    let (fa, pa) = (faces_vec(&faces_a)?, points_vec(&points_a)?);
+    let (fb, pb) = (faces_vec(&faces_b)?, points_vec(&points_b)?);
+    let map = plain_vec(&partial_map);
+    let g = detached(py, || {
+        crate::face_growth::grow_across_faces(&fa, &pa, &fb, &pb, &map, max_error)
+    })?;
+    Ok(owned(py, &g))
+}
+
+/// Paired row and column indices.
+type PairsOut<'py> = (Bound<'py, PyArray1<i64>>, Bound<'py, PyArray1<i64>>);
+
+/// Greedy pairing from candidate pairs ranked best first, rows with capacities (see
+/// `pairing.rs`).
+#[pyfunction]
+pub(super) fn greedy_pairs<'py>(
+    py: Python<'py>,
+    rows: PyReadonlyArray1<'py, i64>,
+    cols: PyReadonlyArray1<'py, i64>,
+    capacity: PyReadonlyArray1<'py, i64>,
+    n_cols: usize,
+) -> PyResult<PairsOut<'py>> {
+    let rows = u32_vec(&rows, "rows")?;
+    let cols = u32_vec(&cols, "cols")?;
+    let capacity = u32_vec(&capacity, "capacity")?;
+    let (r, c) = detached(py, || {
+        crate::pairing::greedy_pairs(&rows, &cols, &capacity, n_cols)
+    })?;
+    let widen = |v: Vec<u32>| v.into_iter().map(i64::from).collect::<Vec<i64>>();
+    Ok((owned(py, &widen(r)), owned(py, &widen(c))))
+}
