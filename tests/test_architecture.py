@@ -42,7 +42,7 @@ def modules() -> list[tuple[str, Path]]:
 
 def first_party_imports(name: str, path: Path) -> list[tuple[str, ast.AST]]:
     """Every import of a hope_rs module by ``name``: (imported dotted name, node)."""
-    package = name.split(".")[:-1] if not name.endswith("__init__") else name.split(".")[:-1]
+    package = name.split(".")[:-1]
     found = []
     for node in ast.walk(ast.parse(path.read_text())):
         if isinstance(node, ast.ImportFrom):
@@ -88,7 +88,9 @@ def test_no_first_party_import_inside_a_function(name, path):
             if isinstance(node, ast.ImportFrom) and (
                 node.level or (node.module or "").startswith("hope_rs")
             ):
-                pytest.fail(f"{name}.{fn.name} imports {node.module!r} inside it, line {node.lineno}")
+                pytest.fail(
+                    f"{name}.{fn.name} imports {node.module!r} inside it, line {node.lineno}"
+                )
             if isinstance(node, ast.Import) and any(
                 a.name.split(".")[0] == "hope_rs" for a in node.names
             ):

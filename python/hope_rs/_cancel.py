@@ -1,6 +1,6 @@
 """Stopping background work early: a flag the worker checks, and the exception that unwinds it.
 
-The eigensolves of :class:`~hope_rs.spectral.BasisPrefetch` run in a thread that Python cannot
+The eigensolves of :class:`~hope_rs.pipeline.spectral.BasisPrefetch` run in a thread that Python cannot
 interrupt; they check a :class:`threading.Event` at every step of the solver instead, so that
 :func:`hope_rs.match` can stop them on any exit path (an error, Ctrl-C, a raising callback).
 """

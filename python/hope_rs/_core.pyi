@@ -1,4 +1,4 @@
-"""Type stubs of the private native module (see src/python.rs).
+"""Type stubs of the private native module (see src/python/).
 
 Every function raises ValueError on malformed input and MemoryError when a size it is given
 (a vertex count, a column count, an output's size) needs more than the machine's physical

@@ -47,16 +47,16 @@ class Shape:
     Build one per mesh and pass it to :func:`hope_rs.match` as often as you like: the
     neighbourhoods and descriptors are computed once.
 
-    Internally the shape numbers its vertices by position (see :mod:`hope_rs.numbering`), so
+    Internally the shape numbers its vertices by position (see :mod:`hope_rs.geometry.numbering`), so
     that no result depends on how the input happens to be numbered. ``mesh`` and
     :meth:`descriptors` keep the input's numbering; ``graph`` and ``points``, which the
     refinement works on, use the internal one: internal vertex ``i`` is input vertex
     ``order[i]``, and input vertex ``v`` is internal vertex ``rank[v]``.
 
     The internal mesh's faces are oriented consistently and outward
-    (:mod:`hope_rs.orientation`), so a mesh whose faces wind the other way is matched like the
+    (:mod:`hope_rs.geometry.orientation`), so a mesh whose faces wind the other way is matched like the
     mesh itself, not like its mirror image; and its coordinates are the input's times
-    ``4**scale_exponent`` (:func:`hope_rs.mesh.scale_exponent`: 0 for meshes of ordinary size),
+    ``4**scale_exponent`` (:func:`hope_rs.geometry.mesh.scale_exponent`: 0 for meshes of ordinary size),
     so that coordinates near the limits of double precision match like ordinary ones.
 
     Parameters
@@ -137,7 +137,7 @@ class Shape:
     def descriptor_sites(self, kind: str = "shot") -> tuple[np.ndarray, np.ndarray] | None:
         """(``sites``, ``owner``) in the internal numbering when the descriptors of ``kind``
         are shared by the vertices of grid cells (SHOT on dense meshes, see
-        :mod:`hope_rs.sites`): internal vertex ``i`` has the descriptor of ``sites[owner[i]]``.
+        :mod:`hope_rs.geometry.sites`): internal vertex ``i`` has the descriptor of ``sites[owner[i]]``.
         ``None`` when every vertex has its own."""
         if kind != "shot":
             return None

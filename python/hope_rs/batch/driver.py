@@ -1,7 +1,7 @@
 """Matching whole collections: ``match_many`` and the pair files of ``hope-rs batch``.
 
 A batch runs in two kinds of tasks. *Prepare* tasks, one per shape, parse the mesh and compute
-its descriptors into the on-disk :class:`~hope_rs.cache.ShapeCache` (a temporary one when caching
+its descriptors into the on-disk :class:`~hope_rs.batch.cache.ShapeCache` (a temporary one when caching
 is off), so every shape is precomputed once however many pairs it is in. *Pair* tasks load both
 shapes from there, rebuild the k-hop neighbourhoods (cheap) and run
 :func:`hope_rs.match`. A pair starts as soon as its two shapes are ready. The parent process
@@ -582,9 +582,9 @@ def match_many(shapes, pairs=None, **kwargs) -> list[PairResult]:
         cores / jobs Rust threads); 1 runs in this process.
     backend : {"local", "ray"}
         ``"ray"`` runs the tasks on the Ray cluster ``ray.init()`` connects to (``pip install
-        'hope-rs[ray]'``); ``ray_options`` are passed to :class:`hope_rs.ray_backend.RayBackend`.
+        'hope-rs[ray]'``); ``ray_options`` are passed to :class:`hope_rs.batch.ray_backend.RayBackend`.
     cache : ShapeCache, path, True or False
-        Per-shape cache (default :func:`hope_rs.cache.default_cache_dir`); False keeps it in a
+        Per-shape cache (default :func:`hope_rs.batch.cache.default_cache_dir`); False keeps it in a
         temporary folder for this batch only.
     init, k_max, **match_options
         As for :func:`hope_rs.match` (``init`` must name descriptors).

@@ -1,5 +1,5 @@
 """The ``hope-rs`` command line: ``match`` two mesh files, run the bundled ``demo``, ``bench``
-methods on data sets (:mod:`hope_rs.bench`), ``show`` a map (:mod:`hope_rs.show`) or match a
+methods on data sets (:mod:`hope_rs.evaluation.bench`), ``show`` a map (:mod:`hope_rs.evaluation.show`) or match a
 ``batch`` of pairs (:mod:`hope_rs.batch`)."""
 
 from __future__ import annotations

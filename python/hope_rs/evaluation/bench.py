@@ -9,7 +9,7 @@ Writes to the results folder, per data set ``SET``:
 
 and ``summary.md``, every data set's table in one file (rebuilt from all ``*.csv`` present, so
 separate runs into one folder add up). Errors use surface geodesics (``method="surface"`` of
-:func:`hope_rs.evaluate.geodesic_errors`), normalised by sqrt(area) of the target.
+:func:`hope_rs.evaluation.evaluate.geodesic_errors`), normalised by sqrt(area) of the target.
 """
 
 from __future__ import annotations
@@ -303,7 +303,7 @@ def _render_extremes(name, shown, method, ups, out: Path) -> None:
 
 def methods_help() -> str:
     """The method list of ``hope-rs bench --help``: one line per entry of
-    :data:`hope_rs.methods.METHODS`, ablations marked."""
+    :data:`hope_rs.evaluation.methods.METHODS`, ablations marked."""
     width = max(map(len, METHODS)) + 2
     lines = [
         f"  {name:<{width}}{'ablation: ' if name in ABLATIONS else ''}{what}"

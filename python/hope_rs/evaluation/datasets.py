@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..geometry.mesh import load_mesh
 from .evaluate import load_vts
 
 MESH_SUFFIXES = (".off", ".obj", ".ply")
@@ -89,8 +90,6 @@ def _vertex_count(path: Path) -> int:
             return int(tokens[1])  # "OFF" (or "COFF", "NOFF") then the vertex count
         except (IndexError, ValueError):
             raise ValueError(f"cannot read the OFF header of {str(path)!r}") from None
-    from ..geometry.mesh import load_mesh
-
     return load_mesh(path).n_vertices
 
 

@@ -28,7 +28,11 @@ from typing import Callable
 
 import numpy as np
 
+from ..features.descriptors import descriptors
 from ..geometry.mesh import Mesh
+from ..matching import match
+from ..pipeline.initial import initial_map
+from ..shape import Shape
 
 #: ZoomOut settings: functional map size at the start, steps and increment per step.
 ZOOMOUT_K_INIT, ZOOMOUT_STEPS, ZOOMOUT_STEP = 20, 16, 5
@@ -54,9 +58,6 @@ class PairContext:
     def initial(self, kind: str = "shot") -> tuple[np.ndarray, float]:
         """Initial map from ``kind`` descriptors and the seconds to compute it from the meshes."""
         if kind not in self._init:
-            from ..features.descriptors import descriptors
-            from ..pipeline.initial import initial_map
-
             t = time.perf_counter()
             f0 = initial_map(descriptors(self.a, kind), descriptors(self.b, kind))
             self._init[kind] = (f0, time.perf_counter() - t)
@@ -66,8 +67,6 @@ class PairContext:
     def shapes(self, k_max: int):
         """HOPE's per-shape precomputation for ``k_max``: (Shape A, Shape B, seconds)."""
         if k_max not in self._shapes:
-            from ..shape import Shape
-
             t = time.perf_counter()
             sa, sb = Shape(self.a, k_max=k_max), Shape(self.b, k_max=k_max)
             self._shapes[k_max] = (sa, sb, time.perf_counter() - t)
@@ -101,8 +100,6 @@ def _init(kind: str) -> Callable[[PairContext], MethodResult]:
 
 def _hope(*, kind: str = "shot", k_max: int = 8, degrade: float = 0.0, **kw):
     def run(ctx: PairContext) -> MethodResult:
-        from ..matching import match
-
         if degrade:
             key, f0, t_init = ctx.degraded(degrade, kind)
         else:

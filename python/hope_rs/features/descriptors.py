@@ -74,7 +74,7 @@ def shot(mesh: Mesh, *, radius: float = DescriptorConfig.shot_radius) -> np.ndar
     what lets the initial map tell left from right, which the intrinsic HKS/WKS cannot.
 
     On meshes much denser than the support radius needs, the vertices of each small grid cell
-    share the descriptor of one of them (:mod:`hope_rs.sites`), which keeps the cost linear
+    share the descriptor of one of them (:mod:`hope_rs.geometry.sites`), which keeps the cost linear
     in the vertex count instead of quadratic.
     """
     if not (np.isfinite(radius) and radius > 0):
@@ -92,16 +92,16 @@ def shot_as_numbered(
     """:func:`shot` in ``mesh``'s own numbering."""
     # Computed in the numbering given: its sums run in neighbour order, and where a local frame
     # is nearly degenerate the last bits decide an axis. The public functions pass the
-    # position-fixed numbering (hope_rs.numbering), so relabelling a mesh relabels its
+    # position-fixed numbering (hope_rs.geometry.numbering), so relabelling a mesh relabels its
     # descriptors bit for bit. The same holds for every `_as_numbered` function below.
-    # ``sites``: those of hope_rs.sites.shot_sites for this mesh and radius if the caller has
+    # ``sites``: those of hope_rs.geometry.sites.shot_sites for this mesh and radius if the caller has
     # them (None: every vertex is described); False: find them here (``site_config``).
     if sites is False:
         sites = shot_sites(mesh, radius, site_config)
     if sites is None:
         r = float(radius) * mesh.scale
         return _core.shot_descriptors(mesh.vertices, mesh.faces, r).reshape(mesh.n_vertices, -1)
-    # A dense mesh: one descriptor per grid cell, shared by its vertices (see hope_rs.sites).
+    # A dense mesh: one descriptor per grid cell, shared by its vertices (see hope_rs.geometry.sites).
     at, owner = sites
     return shot_at(mesh, at, radius)[owner]
 
@@ -243,7 +243,7 @@ def spectral_basis_of(
 
     Solved on one BLAS thread, so that the bits do not depend on who asks: :func:`hope_rs.match`
     solves in a background thread while HOPE refines (see
-    :class:`~hope_rs.spectral.BasisPrefetch`), the batch cache ahead of the pairs (alone, one
+    :class:`~hope_rs.pipeline.spectral.BasisPrefetch`), the batch cache ahead of the pairs (alone, one
     thread is slower). ``stop``: when set, the solve raises
     :class:`~hope_rs._cancel.Cancelled` at its next step."""
     with single_threaded_blas():
@@ -291,7 +291,7 @@ def wks(evals: np.ndarray, evecs: np.ndarray, n_energies: int = 100) -> np.ndarr
 
 def descriptors(mesh: Mesh, kind: str = "shot", *, n_eigen: int = 100) -> np.ndarray:
     """Descriptors of ``kind`` in {"shot", "wks", "hks"} for every vertex of ``mesh``, computed
-    in the position-fixed numbering (:mod:`hope_rs.numbering`) and returned in ``mesh``'s."""
+    in the position-fixed numbering (:mod:`hope_rs.geometry.numbering`) and returned in ``mesh``'s."""
     check_kind(kind)
     canon, _, rank = canonical_mesh(mesh)
     return descriptors_as_numbered(canon, kind, n_eigen=n_eigen)[rank]
@@ -317,7 +317,7 @@ def check_kind(kind: str) -> None:
 def spectral_descriptors(kind: str, evals: np.ndarray, evecs: np.ndarray, mesh: Mesh) -> np.ndarray:
     """WKS or HKS of ``mesh`` from its eigenpairs (eigenvectors in the mesh's numbering).
 
-    Computed with the rows in the position-fixed numbering (:mod:`hope_rs.numbering`): the
+    Computed with the rows in the position-fixed numbering (:mod:`hope_rs.geometry.numbering`): the
     column norms sum over every row, and the matrix product's last bits can depend on a row's
     position, so this is what makes relabelling the mesh relabel the result bit for bit.
     """

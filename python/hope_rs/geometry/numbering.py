@@ -90,8 +90,8 @@ def canonical_mesh(mesh: Mesh, *, orient: bool = True) -> tuple[Mesh, np.ndarray
     internal vertex ``i`` is ``mesh``'s vertex ``order[i]`` and ``rank`` is the inverse.
 
     The renumbered mesh is also scaled by ``4**scale_exponent(mesh.vertices)`` (exact; a no-op
-    for meshes of ordinary size, see :func:`hope_rs.mesh.scale_exponent`) and its faces are
-    oriented consistently and outward (:func:`hope_rs.orientation.orient_faces`; ``orient=False``
+    for meshes of ordinary size, see :func:`hope_rs.geometry.mesh.scale_exponent`) and its faces are
+    oriented consistently and outward (:func:`hope_rs.geometry.orientation.orient_faces`; ``orient=False``
     keeps them as given, for meshes derived from an oriented one), so that neither the size of
     the coordinates nor the winding of the input's faces changes a result.
     """

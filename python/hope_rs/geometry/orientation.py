@@ -2,7 +2,7 @@
 
 A mesh whose faces all wind the other way is the mirror image of itself to SHOT's right-handed
 local frames, so it would be matched left to right. :class:`~hope_rs.Shape` therefore orients
-the faces of its internal mesh (:func:`hope_rs.numbering.canonical_mesh`) with
+the faces of its internal mesh (:func:`hope_rs.geometry.numbering.canonical_mesh`) with
 :func:`orient_faces`; the user's :class:`~hope_rs.Mesh` keeps its arrays as given.
 
 The rule, per connected component (faces linked through edges that exactly two faces share):

@@ -12,7 +12,7 @@ Wider cells left a worse start, so the spacing stays at a sixteenth of the radiu
 (docs/decisions.md#descriptors); meshes with fewer than two vertices per cell (the usual
 benchmark shapes) keep one descriptor per vertex.
 
-The grid is the Morton grid of :mod:`hope_rs.numbering`: cells are aligned with the bounding
+The grid is the Morton grid of :mod:`hope_rs.geometry.numbering`: cells are aligned with the bounding
 box, so the sites depend on the geometry only, not on the numbering.
 """
 

@@ -1,6 +1,6 @@
 """Growing the trusted part of a map over shapes that share most of their triangulation.
 
-The last step of the shared-face finish (:mod:`hope_rs.shared_faces`). It keeps only the part
+The last step of the shared-face finish (:mod:`hope_rs.pipeline.shared_faces`). It keeps only the part
 of the map it can trust and rebuilds the rest outward from it, vertex by vertex:
 
 - **Seeds**: handles (vertices whose faces all map onto faces of B) in connected patches of at
@@ -91,7 +91,7 @@ class _Growth:
 
     def regrow(self, g: np.ndarray) -> np.ndarray:
         """``g`` cleared but for the handle patches that could seed it (see
-        :func:`~hope_rs.handles.seed_handles`), less their edge vertices, and grown again
+        :func:`~hope_rs.pipeline.handles.seed_handles`), less their edge vertices, and grown again
         affine first."""
         # Small handle patches go too: a region grown through a narrow neck one vertex off
         # is face-consistent in places, and those places would seed the same error again.

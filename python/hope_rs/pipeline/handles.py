@@ -3,8 +3,8 @@
 A vertex of A is a handle of a map ``f`` when every face around it maps onto a face of B with
 the same orientation and no other vertex shares its image. On shapes that are one
 triangulation in two poses, the true map makes almost every vertex a handle; on shapes
-remeshed independently few vertices are. The shared-face finish (:mod:`hope_rs.shared_faces`)
-deforms towards them, and the growth (:mod:`hope_rs.growth`) starts from those in large
+remeshed independently few vertices are. The shared-face finish (:mod:`hope_rs.pipeline.shared_faces`)
+deforms towards them, and the growth (:mod:`hope_rs.pipeline.growth`) starts from those in large
 connected patches.
 """
 

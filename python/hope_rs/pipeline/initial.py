@@ -61,7 +61,7 @@ def shapes_initial_map(
     """:func:`initial_map` between two :class:`~hope_rs.Shape` objects, from their descriptors
     ``da``, ``db`` of ``kind`` in the internal numbering (the map is in it too). Where the
     vertices of a grid cell share one descriptor (SHOT on dense meshes, see
-    :mod:`hope_rs.sites`), only the cells' sites are searched and each vertex of A follows
+    :mod:`hope_rs.geometry.sites`), only the cells' sites are searched and each vertex of A follows
     its site."""
     site_a, site_b = sa.descriptor_sites(kind), sb.descriptor_sites(kind)
     rows_a = site_a[0] if site_a is not None else slice(None)

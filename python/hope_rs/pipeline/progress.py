@@ -93,7 +93,7 @@ class ProgressEvent:
     detail : str
         One line for people: the step ("pass 2/4 k=5 witnesses 93.1% changed 120"), or when
         done the stage's :attr:`StageInfo.reason`.
-    iteration : hope_rs.refine.Iteration or None
+    iteration : hope_rs.pipeline.state.Iteration or None
         For refinement and polish steps, the record ``callback`` also receives.
     seconds : float
         On a done event of a stage that ran, the stage's wall time.
@@ -111,7 +111,7 @@ class ProgressEvent:
 
 
 def step_detail(it, n_passes: int) -> str:
-    """One line about a refinement step (an :class:`~hope_rs.refine.Iteration`)."""
+    """One line about a refinement step (an :class:`~hope_rs.pipeline.state.Iteration`)."""
     what = "polish" if it.polish else f"pass {it.n_pass + 1}/{n_passes}"
     kind = "repair" if it.k == 0 and not it.polish else f"k={it.k}"
     return f"{what} {kind} witnesses {100 * it.witness_fraction:4.1f}% changed {it.changed:6d}"

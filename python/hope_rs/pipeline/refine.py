@@ -187,10 +187,10 @@ def global_repair(
     lmd: LmdTracker | None = None,
     config: RepairConfig = RepairConfig(),
 ) -> np.ndarray:
-    """:func:`~hope_rs.anchors.anchor_step` on ``w``, the LMD witnesses of ``f``, keeping a moved
+    """:func:`~hope_rs.pipeline.anchors.anchor_step` on ``w``, the LMD witnesses of ``f``, keeping a moved
     vertex only where it then passes LMD itself (the anchor coordinates are coarser than a k-hop
     step, so elsewhere the old match is at least as good). ``global_check``: see
-    :func:`~hope_rs.anchors.anchor_step`; ``lmd``: the tracker of the caller's maps, if any."""
+    :func:`~hope_rs.pipeline.anchors.anchor_step`; ``lmd``: the tracker of the caller's maps, if any."""
     g = anchor_step(a, b, f, w, global_check=global_check, config=config)
     if g is f:
         return f

@@ -29,7 +29,7 @@ class MatchResult:
     timings : dict
         Seconds per stage ("shapes", "descriptors", "init" or, with ``multiscale``,
         "coarse"; "refine", "spectral", "faces" (the finishing rounds of
-        :mod:`hope_rs.shared_faces`, when they ran), "total"). The spectral pass's eigenbases are solved
+        :mod:`hope_rs.pipeline.shared_faces`, when they ran), "total"). The spectral pass's eigenbases are solved
         in a background thread during "refine" and count there, as does its ZoomOut when the
         refinement reaches its last pass (:class:`~hope_rs.pipeline.spectral.EarlyZoomOut`).
     coarse : MatchResult or None

@@ -11,7 +11,7 @@ Sorkine and Alexa 2007) so that the handles sit on their images, moves every oth
 the vertex of B nearest its deformed position, and then runs a few HOPE steps at a fixed hop
 radius with every vertex voting, which pull the moved vertices onto a one-to-one map. Rounds
 repeat while the handle patches that can seed the growth grow. Last,
-:func:`hope_rs.growth.grow` rebuilds the map from its trusted patches outward. See
+:func:`hope_rs.pipeline.growth.grow` rebuilds the map from its trusted patches outward. See
 docs/decisions.md#shared-faces and docs/decisions.md#growth for the variants measured.
 
 Shapes without shared faces (independently remeshed shapes have few handles) do not qualify
