@@ -177,3 +177,16 @@ def test_batch_multiscale_flag_gives_the_maps_of_match(tmp_path, capsys, dense_p
     assert "1 matched" in capsys.readouterr().out
     (got,) = list(out.iterdir())
     np.testing.assert_array_equal(np.loadtxt(got, dtype=np.int64), want)
+
+
+@pytest.mark.slow
+def test_the_coarse_match_runs_with_the_callers_settings(faust_pair):
+    """The coarse copies are matched with the caller's config (bar multiscale itself and a
+    spectral pass the fine level runs): ``shared_faces=False`` holds there too."""
+    a, b = faust_pair
+    res = hope_rs.match(a, b, config=COARSER.with_options(shared_faces=False, top_k=24))
+    assert res.coarse is not None
+    assert res.coarse.stage("faces").reason == "turned off (shared_faces=False)"
+    assert res.coarse.config.refine.top_k == 24 and not res.coarse.config.multiscale.enabled
+    assert not res.coarse.config.spectral.enabled  # the fine shapes take the spectral pass
+    assert res.config.refine.max_passes == M.fine_passes(a.n_vertices, b.n_vertices)

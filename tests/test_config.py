@@ -1,0 +1,133 @@
+"""Settings as data: MatchConfig and the stage configs, the keyword options, the stage runner."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from test_shared_faces import legless
+
+import hope_rs
+from hope_rs import MatchConfig
+from hope_rs.batch.cache import basis_params, descriptor_params
+from hope_rs.evaluation.demo import demo_pair
+from hope_rs.features.descriptors import DescriptorConfig
+from hope_rs.pipeline import refine as refine_module
+from hope_rs.pipeline import shared_faces as finish_module
+from hope_rs.pipeline.config import KEYWORDS, RefineConfig, SpectralConfig
+from hope_rs.pipeline.runner import run_match
+from hope_rs.pipeline.stages import default_stages
+from hope_rs.pipeline.state import Stage
+from hope_rs.shape import ShapeConfig
+
+
+@pytest.fixture(scope="module")
+def bundled():
+    return demo_pair()
+
+
+def test_the_default_config_is_the_default_match(bundled):
+    a, b = bundled
+    plain = hope_rs.match(a, b)
+    given = hope_rs.match(a, b, config=MatchConfig())
+    np.testing.assert_array_equal(plain.map, given.map)
+    assert plain.config == given.config == MatchConfig()
+
+
+def test_configs_are_printable_comparable_and_hashable():
+    cfg = MatchConfig()
+    assert "top_k=48" in repr(cfg) and "RefineConfig(" in repr(cfg)
+    other = cfg.with_options(top_k=32)
+    assert other != cfg and other.refine.top_k == 32 and cfg.refine.top_k == 48
+    assert len({MatchConfig(), MatchConfig(), other}) == 2
+    assert MatchConfig().key() == cfg.key() != other.key()
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        cfg.refine.top_k = 1  # type: ignore[misc]
+
+
+def test_every_keyword_option_round_trips():
+    values = {
+        "k_max": 6, "schedule": [3, 2, 1], "max_passes": 2, "min_consistent": 0.4, "top_k": 7,
+        "polish_k": None, "global_step": False, "multiscale": True, "spectral": False,
+        "shared_faces": False,
+    }  # fmt: skip
+    assert set(values) == set(KEYWORDS)
+    cfg = MatchConfig().with_options(**values)
+    got = cfg.options()
+    assert got == {**values, "schedule": (3, 2, 1)}
+    # A different key for every option changed alone.
+    keys = {MatchConfig().with_options(**{k: v}).key() for k, v in values.items()}
+    assert len(keys) == len(values) and MatchConfig().key() not in keys
+
+
+def test_bad_config_and_unknown_options_are_rejected_before_any_work(bundled):
+    a, b = bundled
+    with pytest.raises(TypeError, match="config must be a hope_rs.MatchConfig"):
+        hope_rs.match(a, b, config={"top_k": 3})
+    with pytest.raises(TypeError, match="unexpected keyword argument 'topk'.*top_k"):
+        hope_rs.match(a, b, topk=3)
+    bad = MatchConfig(refine=RefineConfig(top_k=0))
+    with pytest.raises(ValueError, match="top_k must be an integer in"):
+        hope_rs.match(a, b, config=bad)
+
+
+@pytest.mark.slow
+def test_the_polish_and_the_finish_use_the_configured_top_k(monkeypatch):
+    """``top_k`` reaches every overlap cost: the polish's and the finish's HOPE steps too."""
+    seen = {"polish": [], "finish": []}
+    polish, step = refine_module.best_overlap, finish_module.assign_by_overlap
+
+    def spy_polish(*args, top_k, **kw):
+        seen["polish"].append(top_k)
+        return polish(*args, top_k=top_k, **kw)
+
+    def spy_step(*args, config, **kw):
+        seen["finish"].append(config.top_k)
+        return step(*args, config=config, **kw)
+
+    monkeypatch.setattr(refine_module, "best_overlap", spy_polish)
+    monkeypatch.setattr(finish_module, "assign_by_overlap", spy_step)
+    # A = FAUST 012 without its legs, B = the whole 018: the finish runs on this pair.
+    a, b = demo_pair()
+    part, _ = legless(a)
+    res = hope_rs.match(part, b, top_k=20)
+    assert res.stage("faces").ran, "the finish must run for this test to see its steps"
+    assert seen["polish"] == [20] and seen["finish"] and set(seen["finish"]) == {20}
+
+
+def test_descriptor_and_basis_settings_key_the_cache():
+    assert descriptor_params("shot") == descriptor_params("shot", DescriptorConfig())
+    assert descriptor_params("shot") != descriptor_params("shot", DescriptorConfig(shot_radius=0.2))
+    assert basis_params(120) != basis_params(100)
+    cfg = ShapeConfig()
+    changed = dataclasses.replace(cfg, basis=dataclasses.replace(cfg.basis, coarse_iterations=3))
+    assert basis_params(120, cfg) != basis_params(120, changed)
+
+
+def test_a_stage_is_added_by_a_list_entry(bundled):
+    """The runner runs any Stage: a stage appended to the list sees the final map and can
+    change it; its record joins the others."""
+    a, b = bundled
+    sa, sb = hope_rs.Shape(a), hope_rs.Shape(b)
+
+    class Shift(Stage):
+        name = "faces"  # reuses a known stage name for the record
+
+        def run(self, state):
+            state.f = np.roll(state.f, 1)
+            state.log.ran(self.name, 0.0, "rolled")
+
+    base = run_match(sa, sb, "shot", MatchConfig())
+    rolled = run_match(sa, sb, "shot", MatchConfig(), stages=[*default_stages(), Shift()])
+    internal = sa.map_in(sb, base.map)
+    np.testing.assert_array_equal(rolled.map, sa.map_out(sb, np.roll(internal, 1)))
+    assert rolled.stages[-1].reason == "rolled"
+
+
+def test_spectral_settings_reach_the_pass(bundled):
+    a, b = bundled
+    cfg = MatchConfig(spectral=SpectralConfig(max_vertices=100))
+    res = hope_rs.match(a, b, config=cfg, init=np.roll(np.arange(a.n_vertices), 5))
+    assert not res.stage("spectral").ran
