@@ -94,9 +94,7 @@ def run_case(name: str, data: Path, multiscale: bool = False, spectral: bool = T
     With ``multiscale``, the "descriptors" stage is the whole coarse match and its lift (as in
     ``match(..., multiscale=True)``), and "init" is empty. ``spectral``: as in ``match``."""
     import hope_rs
-    from hope_rs.pipeline.initial import shapes_initial_map
-    from hope_rs.matching import refine_spectral_finish
-    from hope_rs.pipeline.spectral import applies
+    from hope_rs.pipeline.runner import run_match
 
     folder, a, b, target = CASES[name]
     ma = hope_rs.load_mesh(data / folder / f"{a}.off")
@@ -113,40 +111,29 @@ def run_case(name: str, data: Path, multiscale: bool = False, spectral: bool = T
     sampler = PeakSampler()
     sampler.start()
     sampler.mark("before")
-    t = {}
     t0 = time.perf_counter()
     sa, sb = hope_rs.Shape(ma), hope_rs.Shape(mb)
-    t["shapes"] = time.perf_counter() - t0
+    t = {"shapes": time.perf_counter() - t0}
     sampler.mark("shapes")
-    t1 = time.perf_counter()
-    # As in match: shapes too coarse to halve take the default path.
-    if multiscale and sa.coarse_level() is not None and sb.coarse_level() is not None:
-        from hope_rs.pipeline.multiscale import coarse_start, fine_passes
+    config = hope_rs.MatchConfig().with_options(multiscale=multiscale, spectral=spectral)
 
-        coarse_spectral = spectral and not applies(sa, sb)  # as in match
-        f0 = coarse_start(sa, sb, "shot", spectral=coarse_spectral)[1]  # internal numbering
-        t["descriptors"] = time.perf_counter() - t1
-        sampler.mark("descriptors")
-        t["init"] = 0.0
-        sampler.mark("init")
-        options = {"max_passes": fine_passes(sa.n_vertices, sb.n_vertices)}
-    else:
-        da, db = sa.internal_descriptors("shot"), sb.internal_descriptors("shot")
-        t["descriptors"] = time.perf_counter() - t1
-        sampler.mark("descriptors")
-        t1 = time.perf_counter()
-        f0 = shapes_initial_map(sa, sb, da, db, "shot")  # the shapes' internal numbering
-        t["init"] = time.perf_counter() - t1
-        sampler.mark("init")
-        options = {}
-    # As in match, stage by stage; a stage that did not run takes 0 s.
-    f, res = refine_spectral_finish(
-        sa, sb, f0, spectral=spectral, timings=t, on_stage=sampler.mark, **options
-    )
-    t.setdefault("spectral", 0.0)
-    t.setdefault("faces", 0.0)
-    f0, f, res.map = sa.map_out(sb, f0), sa.map_out(sb, f), sa.map_out(sb, res.map)
+    def on_stage(state, stage: str) -> None:
+        # The multiscale stage (coarse match and lift) fills the "descriptors" column.
+        if stage == "coarse":
+            if state.coarse is not None:
+                sampler.mark("descriptors")
+            return
+        sampler.mark(stage)
+
+    # The stages of match, with a memory mark after each.
+    res = run_match(sa, sb, "shot", config, on_stage=on_stage, timings=t)
+    if "coarse" in t:
+        t["descriptors"], t["init"] = t.pop("coarse"), 0.0
+    for stage in ("descriptors", "init", "spectral", "faces"):
+        t.setdefault(stage, 0.0)
     t["total"] = time.perf_counter() - t0
+    f0, f = res.init_map, res.map
+    res.map = res.hope_map
     init = hope_rs.score(hope_rs.geodesic_errors(sb, f0, a_idx=ai, b_idx=bi))
     hope = hope_rs.score(hope_rs.geodesic_errors(sb, res.map, a_idx=ai, b_idx=bi))
     final = hope_rs.score(hope_rs.geodesic_errors(sb, f, a_idx=ai, b_idx=bi))
