@@ -6,7 +6,6 @@ import dataclasses
 
 import numpy as np
 import pytest
-
 from test_shared_faces import legless
 
 import hope_rs
