@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 from conftest import data_path
-from meshes import bumpy_sphere, moved_copy, random_rigid, write_off
+from meshes import bumpy_sphere, drifted, moved_copy, random_rigid, write_off
 
 import hope_rs
 from hope_rs import _core, handles
@@ -74,17 +74,6 @@ def test_closest_rotations_match_the_svd_and_reject_bad_input():
     bad[7, 1, 1] = np.nan
     with pytest.raises(ValueError, match="finite"):
         _core.closest_rotations(bad)
-
-
-def drifted(a: hope_rs.Mesh, truth: np.ndarray, centre: int, radius: float) -> np.ndarray:
-    """``truth`` with a ball around vertex ``centre`` mapped one vertex along (each vertex to
-    the image of the next vertex of one of its faces): a patch the overlaps cannot see."""
-    region = np.linalg.norm(a.vertices - a.vertices[centre], axis=1) < radius * a.scale
-    step = np.arange(a.n_vertices)
-    step[a.faces[:, 0]] = a.faces[:, 1]
-    f = truth.copy()
-    f[region] = truth[step[region]]
-    return f
 
 
 def test_finish_puts_a_drifted_patch_back_on_a_scaled_relabelled_copy(faust_pair):

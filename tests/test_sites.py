@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from test_numbering import renumbered
+from meshes import renumbered
 
 import hope_rs
 from hope_rs import _core

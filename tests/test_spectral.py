@@ -7,21 +7,13 @@ import numpy as np
 import pytest
 import scipy.linalg
 from conftest import data_path
-from meshes import bumpy_sphere, moved_copy, write_off
+from meshes import bumpy_sphere, corrupted, moved_copy, write_off
 from scipy.spatial.distance import cdist
 
 import hope_rs
 from hope_rs import spectral as S
 from hope_rs._blas import single_threaded_blas
 from hope_rs.datasets import Pair
-
-
-def corrupted(truth: np.ndarray, share: float, seed: int) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    f = truth.copy()
-    bad = rng.random(f.size) < share
-    f[bad] = rng.integers(0, truth.size, bad.sum())
-    return f
 
 
 def test_nearest_rows_is_the_exhaustive_nearest_neighbour():
@@ -91,7 +83,7 @@ def test_zoomout_repairs_a_corrupted_map_onto_a_moved_copy(faust_pair, max_sampl
     a = faust_pair[0]
     b, truth = moved_copy(a, 3)
     sa, sb = hope_rs.Shape(a), hope_rs.Shape(b)
-    f = corrupted(truth, 0.3, 4)
+    f, _ = corrupted(truth, 0.3, truth.size, np.random.default_rng(4))
     z = sa.map_out(sb, S.zoomout(sa, sb, sa.map_in(sb, f), max_samples=max_samples))
     assert np.mean(f == truth) < 0.72
     assert np.mean(z == truth) > 0.9
