@@ -1,4 +1,4 @@
-"""Generated test meshes."""
+"""Generated test meshes and maps, and the helpers that build, move, write or read them."""
 
 from pathlib import Path
 
@@ -6,6 +6,7 @@ import numpy as np
 from scipy.spatial import ConvexHull
 
 import hope_rs
+from hope_rs.cli import main
 
 
 def bumped(p: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -140,3 +141,18 @@ def bumpy_sphere_files(folder, count: int, n: int) -> list[Path]:
     for s, path in enumerate(paths):
         write_off(path, *bumpy_sphere(n, s))
     return paths
+
+
+def cli_maps(folder, pa, pb, *flags: str) -> tuple[np.ndarray, np.ndarray]:
+    """The maps that ``hope-rs match`` and ``hope-rs batch`` (one job, no cache) write for the
+    pair of mesh files (pa, pb) given the extra command-line ``flags``; files go in ``folder``."""
+    tag = "".join(flags) or "default"
+    out = Path(folder) / f"match{tag}.txt"
+    assert main(["match", str(pa), str(pb), "-o", str(out), "-q", *flags]) == 0
+    pairs = Path(folder) / f"pairs{tag}.txt"
+    pairs.write_text(f"{pa} {pb}\n")
+    batch = Path(folder) / f"batch{tag}"
+    args = ["batch", str(pairs), "--out", str(batch), "-q", "-j", "1", "--no-cache", *flags]
+    assert main(args) == 0
+    (got,) = list(batch.iterdir())
+    return np.loadtxt(out, dtype=np.int64), np.loadtxt(got, dtype=np.int64)
