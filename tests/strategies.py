@@ -11,8 +11,8 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from meshes import bumped, isometric_copy, sphere_points
 
-# Largest n drawn as one st.permutations(range(n)): Hypothesis stops generating an example
-# after about 8 KB of choices, which a permutation of a few thousand items exceeds.
+# Largest n drawn as one st.permutations(range(n)): Hypothesis gives up on an example after
+# about 8 KB of drawn data, which a permutation of a few thousand items exceeds.
 FULL_PERMUTATION = 1000
 
 
