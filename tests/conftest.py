@@ -1,7 +1,6 @@
 import os
 from pathlib import Path
 
-import numpy as np
 import pytest
 from hypothesis import settings
 
@@ -34,13 +33,6 @@ def faust_pair():
     if a.exists() and b.exists():
         return load_mesh(a), load_mesh(b)
     return demo_pair()
-
-
-def relabel(faces: np.ndarray, perm: np.ndarray) -> np.ndarray:
-    """Faces of the mesh whose new vertex i is old vertex perm[i]."""
-    inv = np.empty_like(perm)
-    inv[perm] = np.arange(perm.size)
-    return inv[faces]
 
 
 def pytest_configure(config):

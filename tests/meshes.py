@@ -1,9 +1,25 @@
-"""Generated test meshes."""
+"""Generated test meshes and maps, and the helpers that build, move, write or read them."""
 
 from pathlib import Path
 
 import numpy as np
 from scipy.spatial import ConvexHull
+
+import hope_rs
+from hope_rs.cli import main
+
+
+def bumped(p: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The convex-hull triangulation of the unit vectors ``p``, faces oriented outwards, with
+    the sphere bent by the smooth field of the 6 x 3 frequencies ``w`` and stretched along y
+    and z; returns vertices and faces."""
+    faces = ConvexHull(p).simplices.astype(np.int64)
+    c = p[faces].mean(axis=1)
+    nrm = np.cross(p[faces[:, 1]] - p[faces[:, 0]], p[faces[:, 2]] - p[faces[:, 0]])
+    flip = np.einsum("ij,ij->i", nrm, c) < 0
+    faces[flip] = faces[flip][:, ::-1]
+    r = 1.0 + 0.25 * np.tanh(np.sin(p @ w.T * 2.0).sum(axis=1) / 2)
+    return p * r[:, None] * np.array([1.0, 1.3, 0.8]), faces
 
 
 def bumpy_sphere(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -12,15 +28,34 @@ def bumpy_sphere(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     rng = np.random.default_rng(seed)
     p = rng.normal(size=(n, 3))
     p /= np.linalg.norm(p, axis=1, keepdims=True)
-    faces = ConvexHull(p).simplices.astype(np.int64)
-    # Orient faces outwards, then bend the sphere with a smooth random field.
-    c = p[faces].mean(axis=1)
-    nrm = np.cross(p[faces[:, 1]] - p[faces[:, 0]], p[faces[:, 2]] - p[faces[:, 0]])
-    flip = np.einsum("ij,ij->i", nrm, c) < 0
-    faces[flip] = faces[flip][:, ::-1]
-    w = rng.normal(size=(6, 3))
-    r = 1.0 + 0.25 * np.tanh(np.sin(p @ w.T * 2.0).sum(axis=1) / 2)
-    return p * r[:, None] * np.array([1.0, 1.3, 0.8]), faces
+    return bumped(p, rng.normal(size=(6, 3)))
+
+
+def sphere_points(n: int) -> np.ndarray:
+    """``n`` unit vectors spread evenly on the sphere (a Fibonacci spiral), no two alike."""
+    i = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * i / n
+    phi = np.pi * (3.0 - np.sqrt(5.0)) * i
+    rho = np.sqrt(1.0 - z * z)
+    return np.c_[rho * np.cos(phi), rho * np.sin(phi), z]
+
+
+def inverse(perm: np.ndarray) -> np.ndarray:
+    """The inverse permutation: ``inverse(perm)[perm[i]] == i``."""
+    inv = np.empty_like(perm)
+    inv[perm] = np.arange(perm.size)
+    return inv
+
+
+def relabel(faces: np.ndarray, perm: np.ndarray) -> np.ndarray:
+    """Faces of the mesh whose new vertex i is old vertex perm[i]."""
+    return inverse(perm)[faces]
+
+
+def signed_volume(v: np.ndarray, f: np.ndarray) -> float:
+    """Volume enclosed by the triangles ``f`` (positive when they face outwards)."""
+    p = v[f]
+    return float(np.einsum("ij,ij->i", p[:, 0], np.cross(p[:, 1], p[:, 2])).sum() / 6)
 
 
 def random_rigid(rng) -> tuple[np.ndarray, np.ndarray]:
@@ -30,21 +65,66 @@ def random_rigid(rng) -> tuple[np.ndarray, np.ndarray]:
     return q, rng.normal(size=3) * 5
 
 
+def isometric_copy(v, f, perm, rot, scale: float, shift):
+    """B = the mesh (v, f) relabelled (B's vertex i is vertex ``perm[i]``), rotated by ``rot``,
+    scaled and shifted; returns B and the true map A -> B."""
+    vb = scale * v[perm] @ np.asarray(rot).T + shift
+    return hope_rs.Mesh(vb, relabel(f, perm)), inverse(perm)
+
+
+def random_isometric_copy(v, f, rng):
+    """:func:`isometric_copy` with a random relabelling, rigid motion and scale in [0.5, 2]."""
+    perm = rng.permutation(v.shape[0])
+    rot, shift = random_rigid(rng)
+    return isometric_copy(v, f, perm, rot, rng.uniform(0.5, 2.0), shift)
+
+
 def moved_copy(a, seed: int):
     """B = the hope_rs.Mesh A relabelled, rotated, scaled by 1.7 and shifted; returns B and A's
     vertex v's image in B."""
-    from conftest import relabel
-
-    import hope_rs
-
     rng = np.random.default_rng(seed)
     perm = rng.permutation(a.n_vertices)  # B's vertex i is A's vertex perm[i]
     q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
     q *= np.sign(np.linalg.det(q))
-    b = hope_rs.Mesh(1.7 * a.vertices[perm] @ q.T + 1.0, relabel(a.faces, perm))
-    truth = np.empty_like(perm)
-    truth[perm] = np.arange(perm.size)
-    return b, truth
+    return isometric_copy(a.vertices, a.faces, perm, q, 1.7, 1.0)
+
+
+def corrupted(truth: np.ndarray, share: float, n_b: int, rng) -> tuple[np.ndarray, np.ndarray]:
+    """``truth`` with a random ``share`` of its vertices (returned as the mask ``bad``) sent to
+    random vertices of B (``n_b`` of them); returns the map and ``bad``."""
+    bad = rng.random(truth.size) < share
+    f = truth.copy()
+    f[bad] = rng.integers(0, n_b, bad.sum())
+    return f, bad
+
+
+def renumber(mesh, perm, face_order, turn):
+    """The same mesh with its vertices relabelled (new vertex i = old vertex ``perm[i]``), its
+    faces reordered (new face j = old face ``face_order[j]``) and face j's corners rotated
+    ``turn[j]`` places (orientation kept)."""
+    f = relabel(mesh.faces, np.asarray(perm))[np.asarray(face_order)]
+    f = np.take_along_axis(f, (np.asarray(turn)[:, None] + np.arange(3)) % 3, axis=1)
+    return hope_rs.Mesh(mesh.vertices[perm], f)
+
+
+def renumbered(mesh, rng) -> tuple:
+    """:func:`renumber` with a random vertex relabelling, face order and rotations; returns the
+    new mesh and ``perm``."""
+    perm = rng.permutation(mesh.n_vertices)
+    face_order = rng.permutation(mesh.n_faces)
+    turn = rng.integers(0, 3, mesh.n_faces)
+    return renumber(mesh, perm, face_order, turn), perm
+
+
+def drifted(a, truth: np.ndarray, centre: int, radius: float) -> np.ndarray:
+    """``truth`` with a ball around vertex ``centre`` mapped one vertex along (each vertex to
+    the image of the next vertex of one of its faces): a patch the overlaps cannot see."""
+    region = np.linalg.norm(a.vertices - a.vertices[centre], axis=1) < radius * a.scale
+    step = np.arange(a.n_vertices)
+    step[a.faces[:, 0]] = a.faces[:, 1]
+    f = truth.copy()
+    f[region] = truth[step[region]]
+    return f
 
 
 def write_off(path, v, f) -> None:
@@ -61,3 +141,18 @@ def bumpy_sphere_files(folder, count: int, n: int) -> list[Path]:
     for s, path in enumerate(paths):
         write_off(path, *bumpy_sphere(n, s))
     return paths
+
+
+def cli_maps(folder, pa, pb, *flags: str) -> tuple[np.ndarray, np.ndarray]:
+    """The maps that ``hope-rs match`` and ``hope-rs batch`` (one job, no cache) write for the
+    pair of mesh files (pa, pb) given the extra command-line ``flags``; files go in ``folder``."""
+    tag = "".join(flags) or "default"
+    out = Path(folder) / f"match{tag}.txt"
+    assert main(["match", str(pa), str(pb), "-o", str(out), "-q", *flags]) == 0
+    pairs = Path(folder) / f"pairs{tag}.txt"
+    pairs.write_text(f"{pa} {pb}\n")
+    batch = Path(folder) / f"batch{tag}"
+    args = ["batch", str(pairs), "--out", str(batch), "-q", "-j", "1", "--no-cache", *flags]
+    assert main(args) == 0
+    (got,) = list(batch.iterdir())
+    return np.loadtxt(out, dtype=np.int64), np.loadtxt(got, dtype=np.int64)

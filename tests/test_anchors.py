@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 from conftest import data_path
+from meshes import corrupted, random_isometric_copy
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
-from test_match import isometric_copy
 
 import hope_rs
 from hope_rs import MatchConfig
@@ -47,12 +47,10 @@ def scrambled_copy(mesh, seed: int, share: float):
     """Shapes A and B (A relabelled, moved and scaled), the true map, a random ``share`` of
     vertices ``bad`` and the true map with those vertices sent to random partners."""
     rng = np.random.default_rng(seed)
-    b_mesh, truth = isometric_copy(mesh.vertices, mesh.faces, rng)
+    b_mesh, truth = random_isometric_copy(mesh.vertices, mesh.faces, rng)
     a, b = Shape(mesh, k_max=2), Shape(b_mesh, k_max=2)
     truth = a.map_in(b, truth)  # the anchor step works in the shapes' internal numbering
-    bad = rng.random(a.n_vertices) < share
-    f = truth.copy()
-    f[bad] = rng.integers(0, b.n_vertices, bad.sum())
+    f, bad = corrupted(truth, share, b.n_vertices, rng)
     return a, b, truth, bad, f
 
 
@@ -117,7 +115,7 @@ def test_swapped_ends_move_back_and_a_right_map_stays():
     """Both ends of a tube carried onto each other, as hands that touch in one pose get
     swapped: each end keeps its 2-rings, so LMD trusts it, and its anchor distances expose it."""
     mesh, mirror = tube()
-    b_mesh, truth_in = isometric_copy(mesh.vertices, mesh.faces, np.random.default_rng(1))
+    b_mesh, truth_in = random_isometric_copy(mesh.vertices, mesh.faces, np.random.default_rng(1))
     a, b = Shape(mesh, k_max=2), Shape(b_mesh, k_max=2)
     ends = np.abs(mesh.vertices[:, 0]) > 0.9
     f_in = truth_in.copy()

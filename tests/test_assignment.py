@@ -5,6 +5,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import linear_sum_assignment
 from scipy.sparse.csgraph import min_weight_full_bipartite_matching
+from strategies import dense_costs, sparse_costs
 
 import hope_rs
 
@@ -24,24 +25,8 @@ def check_valid(g, n_rows, n_cols):
     assert np.all(used < n_cols)
 
 
-@st.composite
-def dense_problem(draw):
-    n_rows = draw(st.integers(1, 12))
-    n_cols = draw(st.integers(1, 12))
-    kind = draw(st.sampled_from(["int-ties", "int-wide", "float"]))
-    seed = draw(st.integers(0, 2**32 - 1))
-    rng = np.random.default_rng(seed)
-    if kind == "int-ties":
-        c = rng.integers(0, 3, (n_rows, n_cols))
-    elif kind == "int-wide":
-        c = rng.integers(-(10**6), 10**6, (n_rows, n_cols))
-    else:
-        c = rng.normal(size=(n_rows, n_cols)) * 10 ** rng.uniform(-3, 3)
-    return c
-
-
 @settings(max_examples=300, deadline=None)
-@given(dense_problem(), st.booleans())
+@given(dense_costs(), st.booleans())
 def test_dense_value_equals_scipy(cost, maximize):
     g = hope_rs.auction_assignment(cost, maximize=maximize)
     check_valid(g, *cost.shape)
@@ -51,28 +36,8 @@ def test_dense_value_equals_scipy(cost, maximize):
     assert value(cost, g) == pytest.approx(want, abs=tol)
 
 
-@st.composite
-def sparse_problem(draw):
-    n_rows = draw(st.integers(1, 25))
-    n_cols = draw(st.integers(n_rows, 30))
-    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
-    density = draw(st.floats(0.05, 0.5))
-    mask = rng.random((n_rows, n_cols)) < density
-    # A hidden perfect matching keeps most instances feasible; single-candidate rows are common.
-    mask[np.arange(n_rows), rng.permutation(n_cols)[:n_rows]] = True
-    if draw(st.booleans()):
-        mask[0] = False
-        mask[0, rng.integers(n_cols)] = True
-    ints = draw(st.booleans())
-    vals = rng.integers(0, 4, mask.shape) if ints else rng.uniform(-5, 5, mask.shape)
-    r, c = np.nonzero(mask)
-    m = sp.csr_matrix((vals[r, c], (r, c)), shape=mask.shape)
-    transpose = draw(st.booleans())
-    return m.T.tocsr() if transpose else m
-
-
 @settings(max_examples=300, deadline=None)
-@given(sparse_problem())
+@given(sparse_costs())
 def test_sparse_value_equals_scipy(cost):
     n_rows, n_cols = cost.shape
     small_is_rows = n_rows <= n_cols

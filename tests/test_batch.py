@@ -2,7 +2,7 @@ import os
 
 import numpy as np
 import pytest
-from meshes import bumpy_sphere, write_off
+from meshes import bumpy_sphere, bumpy_sphere_files, write_off
 
 import hope_rs
 from hope_rs.batch.cache import ShapeCache, cached_shape, file_digest
@@ -15,8 +15,7 @@ def folder(tmp_path_factory):
     """Three small generated meshes, a broken one and a pairs file naming them without suffix."""
     d = tmp_path_factory.mktemp("batch")
     (d / "m").mkdir()
-    for s in range(3):
-        write_off(d / "m" / f"s{s}.off", *bumpy_sphere(300, s))
+    bumpy_sphere_files(d / "m", 3, 300)
     (d / "m" / "bad.off").write_text("OFF\n3 1 0\n0 0 0\n")
     (d / "m" / "pairs.txt").write_text("s0 s1\n# a comment\n\ns1 s2\ns2 s0  # trailing\n")
     (d / "m" / "with_bad.txt").write_text("s0 s1\ns0 bad\nbad s2\ns1 s2\n")

@@ -4,8 +4,8 @@ import csv
 
 import numpy as np
 import pytest
-from conftest import data_path, relabel
-from meshes import bumpy_sphere, write_off
+from conftest import data_path
+from meshes import bumpy_sphere, relabel, write_off
 
 import hope_rs
 from hope_rs.cli import main

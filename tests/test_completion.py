@@ -4,6 +4,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from meshes import inverse
+from strategies import generic_points, maps, permutations
 
 from hope_rs import _core
 from hope_rs.kernels.maps import injective_completion, nearest_unused
@@ -24,21 +26,18 @@ def test_duplicates_take_the_unused_column_nearest_their_image():
 
 
 @settings(max_examples=25, deadline=None)
-@given(st.integers(0, 10**6), st.integers(2, 60), st.integers(2, 60))
-def test_completion_is_one_to_one_and_ignores_how_b_is_numbered(seed, n_a, n_b):
-    rng = np.random.default_rng(seed)
-    points = rng.normal(size=(n_b, 3))
-    f = rng.integers(0, max(1, n_b // 3), n_a)  # crowded: many duplicates per column
+@given(data=st.data(), n_a=st.integers(2, 60), n_b=st.integers(2, 60))
+def test_completion_is_one_to_one_and_ignores_how_b_is_numbered(data, n_a, n_b):
+    points = data.draw(generic_points(n_b), label="points")
+    f = data.draw(maps(n_a, max(1, n_b // 3)), label="f")  # crowded: many duplicates per column
     g = injective_completion(f, n_b, points)
     first = np.zeros(n_a, dtype=bool)
     first[np.unique(f, return_index=True)[1]] = True
     np.testing.assert_array_equal(g[first], f[first])  # first users keep their column
     assert np.unique(g).size == min(n_a, n_b)
     # Relabel B: the same vertices must be chosen (the old index rule fails this).
-    perm = rng.permutation(n_b)  # new column j is old column perm[j]
-    inv = np.empty_like(perm)
-    inv[perm] = np.arange(n_b)
-    g2 = injective_completion(inv[f], n_b, points[perm])
+    perm = data.draw(permutations(n_b), label="perm")  # new column j is old column perm[j]
+    g2 = injective_completion(inverse(perm)[f], n_b, points[perm])
     np.testing.assert_array_equal(perm[g2], g)
 
 

@@ -3,8 +3,7 @@
 import numpy as np
 import pytest
 from conftest import data_path
-from meshes import bumpy_sphere, moved_copy
-from test_shared_faces import drifted
+from meshes import bumpy_sphere, drifted, moved_copy
 
 import hope_rs
 from hope_rs import _core

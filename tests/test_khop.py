@@ -3,7 +3,8 @@ from collections import deque
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from conftest import data_path, relabel
+from conftest import data_path
+from meshes import relabel
 
 import hope_rs
 from hope_rs.geometry.mesh import load_mesh

@@ -6,7 +6,7 @@ from conftest import data_path
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
-from meshes import bumpy_sphere
+from meshes import bumpy_sphere, signed_volume
 
 import hope_rs
 from hope_rs.evaluation.demo import demo_pair
@@ -15,11 +15,6 @@ from hope_rs.geometry.numbering import canonical_mesh
 from hope_rs.geometry.orientation import orient_faces
 
 SPHERE = bumpy_sphere(200, 1)
-
-
-def signed_volume(v, f):
-    p = v[f]
-    return np.einsum("ij,ij->i", p[:, 0], np.cross(p[:, 1], p[:, 2])).sum() / 6
 
 
 def directed_edge_conflicts(f):

@@ -1,9 +1,10 @@
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from conftest import relabel
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from meshes import inverse, relabel
+from strategies import maps, symmetric_patterns
 
 import hope_rs
 
@@ -38,20 +39,12 @@ def test_exact_against_sparse_product_on_faust(faust_pair, k):
     assert (got.astype(np.int64) != want).nnz == 0
 
 
-def random_pattern(draw, n):
-    density = draw(st.floats(0.0, 0.6))
-    seed = draw(st.integers(0, 2**31))
-    m = sp.random(n, n, density=density, format="csr", random_state=seed)
-    m = ((m + m.T + sp.identity(n)) != 0).astype(np.uint8)
-    return sp.csr_matrix(m)
-
-
 @st.composite
 def overlap_problem(draw):
     n_a = draw(st.integers(1, 30))
     n_b = draw(st.integers(1, 30))
-    na, nb = random_pattern(draw, n_a), random_pattern(draw, n_b)
-    f = np.array(draw(st.lists(st.integers(0, n_b - 1), min_size=n_a, max_size=n_a)))
+    na, nb = draw(symmetric_patterns(n_a)), draw(symmetric_patterns(n_b))
+    f = draw(maps(n_a, n_b))
     w = np.array(draw(st.lists(st.booleans(), min_size=n_a, max_size=n_a)))
     return na, nb, f, w
 
@@ -88,9 +81,7 @@ def test_relabelling_both_shapes_permutes_the_cost(faust_pair):
     cost = hope_rs.overlap_cost(
         hope_rs.khop_neighbourhoods(a.faces, k), hope_rs.khop_neighbourhoods(b.faces, k), f, w
     )
-    inv_b = np.empty_like(pb)
-    inv_b[pb] = np.arange(pb.size)
-    f_new = inv_b[f[pa]]
+    f_new = inverse(pb)[f[pa]]
     cost_new = hope_rs.overlap_cost(
         hope_rs.khop_neighbourhoods(relabel(a.faces, pa), k),
         hope_rs.khop_neighbourhoods(relabel(b.faces, pb), k),

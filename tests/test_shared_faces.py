@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 from conftest import data_path
-from meshes import bumpy_sphere, moved_copy, random_rigid, write_off
+from meshes import bumpy_sphere, cli_maps, drifted, moved_copy, random_rigid, write_off
 
 import hope_rs
 from hope_rs import _core
@@ -78,17 +78,6 @@ def test_closest_rotations_match_the_svd_and_reject_bad_input():
         _core.closest_rotations(bad)
 
 
-def drifted(a: hope_rs.Mesh, truth: np.ndarray, centre: int, radius: float) -> np.ndarray:
-    """``truth`` with a ball around vertex ``centre`` mapped one vertex along (each vertex to
-    the image of the next vertex of one of its faces): a patch the overlaps cannot see."""
-    region = np.linalg.norm(a.vertices - a.vertices[centre], axis=1) < radius * a.scale
-    step = np.arange(a.n_vertices)
-    step[a.faces[:, 0]] = a.faces[:, 1]
-    f = truth.copy()
-    f[region] = truth[step[region]]
-    return f
-
-
 def test_finish_puts_a_drifted_patch_back_on_a_scaled_relabelled_copy(faust_pair):
     a = faust_pair[0]
     b, truth = moved_copy(a, 4)  # relabelled, rotated, scaled by 1.7
@@ -136,7 +125,6 @@ def test_a_partial_shape_of_the_same_triangulation_becomes_exact(faust_pair):
 
 @pytest.mark.slow
 def test_cli_and_batch_no_shared_faces_flags(faust_pair, tmp_path, capsys):
-    from hope_rs.cli import main
 
     part, _ = legless(faust_pair[0])
     pa, pb = tmp_path / "a.off", tmp_path / "b.off"
@@ -145,15 +133,8 @@ def test_cli_and_batch_no_shared_faces_flags(faust_pair, tmp_path, capsys):
     a, b = hope_rs.load_mesh(pa), hope_rs.load_mesh(pb)
     for flag, kw in [([], {}), (["--no-shared-faces"], {"shared_faces": False})]:
         want = hope_rs.match(a, b, **kw).map
-        out = tmp_path / "map.txt"
-        assert main(["match", str(pa), str(pb), "-o", str(out), "-q", *flag]) == 0
-        np.testing.assert_array_equal(np.loadtxt(out, dtype=np.int64), want)
-    pairs = tmp_path / "pairs.txt"
-    pairs.write_text(f"{pa} {pb}\n")
-    args = ["batch", str(pairs), "--out", str(tmp_path / "o"), "-q", "-j", "1", "--no-cache"]
-    assert main(args + ["--no-shared-faces"]) == 0
-    (got,) = list((tmp_path / "o").iterdir())
-    np.testing.assert_array_equal(np.loadtxt(got, dtype=np.int64), want)
+        for got in cli_maps(tmp_path, pa, pb, *flag):
+            np.testing.assert_array_equal(got, want)
     capsys.readouterr()
 
 

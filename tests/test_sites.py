@@ -1,7 +1,7 @@
 """SHOT on dense meshes: one descriptor per grid cell, computed at the cell's site."""
 
 import numpy as np
-from test_numbering import renumbered
+from meshes import renumbered
 
 import hope_rs
 from hope_rs import _core

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 from conftest import data_path
-from meshes import bumpy_sphere, moved_copy, write_off
+from meshes import bumpy_sphere, cli_maps, corrupted, moved_copy, write_off
 from scipy.spatial.distance import cdist
 
 import hope_rs
@@ -21,14 +21,6 @@ from hope_rs.pipeline.config import RefineConfig, SpectralConfig
 def spectral_config(**fields) -> MatchConfig:
     """The default settings with the spectral pass's ``fields`` changed."""
     return MatchConfig(spectral=SpectralConfig(**fields))
-
-
-def corrupted(truth: np.ndarray, share: float, seed: int) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    f = truth.copy()
-    bad = rng.random(f.size) < share
-    f[bad] = rng.integers(0, truth.size, bad.sum())
-    return f
 
 
 def test_nearest_rows_is_the_exhaustive_nearest_neighbour():
@@ -98,7 +90,7 @@ def test_zoomout_repairs_a_corrupted_map_onto_a_moved_copy(faust_pair, max_sampl
     a = faust_pair[0]
     b, truth = moved_copy(a, 3)
     sa, sb = hope_rs.Shape(a), hope_rs.Shape(b)
-    f = corrupted(truth, 0.3, 4)
+    f, _ = corrupted(truth, 0.3, truth.size, np.random.default_rng(4))
     cfg = SpectralConfig(max_samples=max_samples)
     z = sa.map_out(sb, S.zoomout(sa, sb, sa.map_in(sb, f), cfg))
     assert np.mean(f == truth) < 0.72
@@ -308,7 +300,6 @@ def test_the_basis_falls_back_to_arpack_when_the_coarse_route_fails(monkeypatch)
 
 
 def test_cli_and_batch_no_spectral_flags(tmp_path, capsys):
-    from hope_rs.cli import main
 
     a = hope_rs.Mesh(*bumpy_sphere(600, 1))
     b = hope_rs.Mesh(*bumpy_sphere(500, 2))
@@ -319,16 +310,8 @@ def test_cli_and_batch_no_spectral_flags(tmp_path, capsys):
     res = hope_rs.match(a, b)
     assert not np.array_equal(res.map, res.hope_map)  # the flag must make a difference here
     for flag, want in [([], res.map), (["--no-spectral"], res.hope_map)]:
-        out = tmp_path / "map.txt"
-        assert main(["match", str(pa), str(pb), "-o", str(out), "-q", *flag]) == 0
-        np.testing.assert_array_equal(np.loadtxt(out, dtype=np.int64), want)
-        pairs = tmp_path / "pairs.txt"
-        pairs.write_text(f"{pa} {pb}\n")
-        folder = tmp_path / ("batch" + "".join(flag))
-        args = ["batch", str(pairs), "--out", str(folder), "-q", "-j", "1", "--no-cache"]
-        assert main(args + flag) == 0
-        (got,) = list(folder.iterdir())
-        np.testing.assert_array_equal(np.loadtxt(got, dtype=np.int64), want)
+        for got in cli_maps(tmp_path, pa, pb, *flag):
+            np.testing.assert_array_equal(got, want)
     capsys.readouterr()
 
 
