@@ -1,4 +1,5 @@
-"""Batch throughput: every pair of the 10 FAUST remeshes (45 pairs), cold and warm cache.
+"""Batch throughput: every pair of the 10 FAUST remeshes (45 pairs), or one template against
+many shapes (``--template N``), cold and warm cache.
 
 A *cold* run starts from an empty per-shape cache (each mesh is parsed and its SHOT descriptors
 computed once, then shared by its 9 pairs); a *warm* run finds them on disk. Both pay the full
@@ -7,6 +8,11 @@ per-shape costs (parse, neighbourhoods, SHOT; and the cache's load) are measured
 
     python benches/bench_batch.py                       # 45 pairs cold, then warm
     python benches/bench_batch.py --compare-jobs 6      # also 1 vs 2 processes on 6 pairs
+    python benches/bench_batch.py --template 20         # tr_reg_000 against 20 shapes
+
+One-to-many (``--template N``): the set's first shape against N others, its other shapes and,
+to reach N, copies of them with their vertices relabelled (a fixed permutation per copy, so
+each copy is a new shape to the cache and its ground truth is known).
 """
 
 from __future__ import annotations
@@ -56,16 +62,44 @@ def run(shapes, pairs, *, cache, jobs, out) -> tuple[float, list]:
     return time.perf_counter() - t0, res
 
 
-def accuracy(shapes: list[Path], pairs, results) -> tuple[float, float]:
+def relabelled_copies(shapes: list[Path], n: int, folder: Path) -> tuple[list[Path], dict]:
+    """``n`` shapes: ``shapes`` and, to reach ``n``, copies with relabelled vertices written to
+    ``folder``; returns them and, per copy, (original path, permutation: copy vertex i is
+    original vertex perm[i])."""
+    out, origin = [], {}
+    for c in range(n):
+        src = shapes[c % len(shapes)]
+        if c < len(shapes):
+            out.append(src)
+            continue
+        m = hope_rs.load_mesh(src)
+        perm = np.random.default_rng(c).permutation(m.n_vertices)
+        rank = np.argsort(perm)
+        path = folder / f"{src.stem}_copy{c}.off"
+        lines = [f"OFF\n{m.n_vertices} {len(m.faces)} 0\n"]
+        lines += [f"{x!r} {y!r} {z!r}\n" for x, y, z in m.vertices[perm].tolist()]
+        lines += [f"3 {i} {j} {k}\n" for i, j, k in rank[m.faces].tolist()]
+        path.write_text("".join(lines))
+        out.append(path)
+        origin[path] = (src, perm)
+    return out, origin
+
+
+def accuracy(shapes: list[Path], pairs, results, origin=None) -> tuple[float, float]:
     """Mean over pairs of the fraction exact and mean geodesic error on the .vts landmarks."""
+    origin = origin or {}
     exact, mean = [], []
     for (i, j), r in zip(pairs, results):
         a, b = shapes[i], shapes[j]
+        b_src, perm = origin.get(b, (b, None))
         vts = a.parent / "corres"
+        b_idx = hope_rs.load_vts(vts / f"{b_src.stem}.vts")
+        if perm is not None:  # the copy's vertex for each ground-truth vertex of the original
+            b_idx = np.argsort(perm)[b_idx]
         e = hope_rs.geodesic_errors(
             hope_rs.load_mesh(b), r.map,
             a_idx=hope_rs.load_vts(vts / f"{a.stem}.vts"),
-            b_idx=hope_rs.load_vts(vts / f"{b.stem}.vts"),
+            b_idx=b_idx,
         )  # fmt: skip
         s = hope_rs.score(e)
         exact.append(s.exact)
@@ -84,12 +118,23 @@ def main() -> None:
     p.add_argument("--ray-check", type=int, default=0, metavar="N",
                    help="also run the first N pairs on a local Ray instance and compare the maps")  # fmt: skip
     p.add_argument("--skip-full", action="store_true", help="only the per-shape and jobs parts")
+    p.add_argument("--template", type=int, default=0, metavar="N",
+                   help="one-to-many: the first shape against N others")  # fmt: skip
     args = p.parse_args()
     shapes = sorted((args.data / args.set).glob("*.off"))
-    pairs = list(itertools.combinations(range(len(shapes)), 2))[: args.max_pairs]
+    copies = tempfile.TemporaryDirectory(prefix="hope_rs-bench-")
+    origin = {}
+    if args.template:
+        originals = shapes
+        others, origin = relabelled_copies(shapes[1:], args.template, Path(copies.name))
+        shapes = [shapes[0], *others]
+        pairs = [(0, j) for j in range(1, len(shapes))]
+    else:
+        originals = shapes
+        pairs = list(itertools.combinations(range(len(shapes)), 2))[: args.max_pairs]
     print(f"load average: {os.getloadavg()}; {len(shapes)} shapes, {len(pairs)} pairs", flush=True)
 
-    costs = per_shape_costs(shapes)
+    costs = per_shape_costs(originals)
     print("\n| per shape (mean s) | " + " | ".join(costs) + " |")
     print("|---" * (len(costs) + 1) + "|")
     print("| " + args.set + " | " + " | ".join(f"{v:.3f}" for v in costs.values()) + " |\n")
@@ -102,7 +147,7 @@ def main() -> None:
                 secs, res = run(shapes, pairs, cache=cache, jobs=args.jobs, out=Path(d) / label)
                 ok = [r for r in res if r.ok]
                 assert len(ok) == len(pairs), [r.error for r in res if not r.ok]
-                ex, me = accuracy(shapes, pairs, res)
+                ex, me = accuracy(shapes, pairs, res, origin)
                 rows.append((label, secs, 60 * len(pairs) / secs, ex, me))
                 print(f"{label}: {secs:.1f} s, {60 * len(pairs) / secs:.2f} pairs/min", flush=True)
         if args.compare_jobs:
