@@ -35,7 +35,7 @@ from ..pipeline.config import KEYWORDS, MatchConfig
 from ..shape import Shape, ShapeConfig
 from .cache import ShapeCache
 from .ray_backend import RayBackend
-from .tasks import _error, limit_threads, pair_task, prepare_task
+from .tasks import error_text, limit_threads, pair_task, prepare_task
 
 
 @dataclass
@@ -301,7 +301,7 @@ class _Pool:
             try:
                 out.append((h, h.result()))
             except Exception as e:  # noqa: BLE001 - a worker died (e.g. out of memory)
-                out.append((h, {"error": f"worker process failed: {_error(e)}"}))
+                out.append((h, {"error": f"worker process failed: {error_text(e)}"}))
         return out
 
     def close(self, abort: bool = False):

@@ -15,7 +15,7 @@ from ..pipeline.spectral import applies_to_size
 from ..shape import Shape
 from .cache import ShapeCache, cached_shape, descriptor_params, file_digest, mesh_digest
 
-__all__ = ["limit_threads", "pair_task", "prepare_task"]
+__all__ = ["error_text", "limit_threads", "pair_task", "prepare_task"]
 
 #: Shapes a worker keeps built between pairs, counted in vertices.
 SHAPE_BUDGET = 300_000
@@ -28,7 +28,8 @@ def limit_threads(n: int | None) -> None:
         os.environ["RAYON_NUM_THREADS"] = str(n)
 
 
-def _error(e: BaseException) -> str:
+def error_text(e: BaseException) -> str:
+    """A failure as one line: its type and message."""
     return f"{type(e).__name__}: {e}"
 
 
@@ -67,7 +68,7 @@ def prepare_task(
             }  # fmt: skip
         return out
     except Exception as e:  # noqa: BLE001 - reported per shape, the batch goes on
-        return {"error": _error(e)}
+        return {"error": error_text(e)}
 
 
 _SHAPES: OrderedDict = OrderedDict()
@@ -117,4 +118,4 @@ def pair_task(job: dict, a, b) -> dict:
         res = match(sa, sb, init=job["init"], k_max=job["k_max"], **job["options"])
         return {"map": res.map, "timings": {"load": load, **res.timings}}
     except Exception as e:  # noqa: BLE001 - reported per pair, the batch goes on
-        return {"error": _error(e)}
+        return {"error": error_text(e)}
