@@ -13,7 +13,7 @@ import re
 import sys
 import tarfile
 import zipfile
-from pathlib import PurePosixPath
+from pathlib import Path, PurePosixPath
 
 __all__ = ["main", "sdist_problems", "wheel_problems"]
 
@@ -36,14 +36,21 @@ SDIST_FORBIDDEN_DIRS = (".ci", "benches", "docs", "target", "bench-results", ".g
 # File suffixes that never belong in a source release: plots and compiled objects.
 FORBIDDEN_SUFFIXES = (".png", ".jpg", ".so", ".pyc")
 
+# Besides every module of the source tree (see ``source_modules``).
 WHEEL_REQUIRED = (
     "hope_rs/__init__.py",
-    "hope_rs/cli.py",
+    "hope_rs/cli/__main__.py",
     "hope_rs/_core.pyi",
     "hope_rs/py.typed",
     "hope_rs/data/faust_012_018.npz",
     "hope_rs/data/faust_r_000_001.npz",
 )
+
+
+def source_modules() -> tuple[str, ...]:
+    """Every module of the package in this checkout, as wheel member paths."""
+    root = Path(__file__).resolve().parents[1] / "python"
+    return tuple(sorted(p.relative_to(root).as_posix() for p in (root / "hope_rs").rglob("*.py")))
 
 
 def sdist_problems(names: list[str]) -> list[str]:
@@ -97,7 +104,8 @@ def wheel_problems(
     list of str
         One message per problem; empty when fine.
     """
-    problems = [f"wheel lacks {r}" for r in WHEEL_REQUIRED if r not in names]
+    required = dict.fromkeys((*WHEEL_REQUIRED, *source_modules()))
+    problems = [f"wheel lacks {r}" for r in required if r not in names]
     if not any(re.fullmatch(r"hope_rs/_core\.abi3\.so", n) for n in names):
         problems.append("wheel lacks the compiled extension hope_rs/_core.abi3.so")
     if not any(re.fullmatch(r"[^/]+\.dist-info/licenses/LICENSE", n) for n in names):

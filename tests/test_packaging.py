@@ -138,7 +138,7 @@ _MANYLINUX = "Tag: cp39-abi3-manylinux_2_17_x86_64\nTag: cp39-abi3-manylinux2014
 
 
 def _wheel(drop: str = "") -> list[str]:
-    names = [*check_dist.WHEEL_REQUIRED, "hope_rs/_core.abi3.so"]
+    names = [*check_dist.WHEEL_REQUIRED, *check_dist.source_modules(), "hope_rs/_core.abi3.so"]
     names += ["hope_rs-0.1.0.dist-info/licenses/LICENSE", "hope_rs-0.1.0.dist-info/METADATA"]
     return [n for n in names if n != drop]
 
@@ -147,6 +147,12 @@ def test_wheel_check_wants_stub_marker_licence_and_manylinux_tag():
     assert check_dist.wheel_problems(_wheel(), _METADATA, _MANYLINUX) == []
     assert check_dist.wheel_problems(_wheel("hope_rs/py.typed"), _METADATA, _MANYLINUX) == [
         "wheel lacks hope_rs/py.typed"
+    ]
+    # Every module of the source tree must be packed.
+    runner = "hope_rs/pipeline/runner.py"
+    assert runner in check_dist.source_modules()
+    assert check_dist.wheel_problems(_wheel(runner), _METADATA, _MANYLINUX) == [
+        f"wheel lacks {runner}"
     ]
     no_licence = check_dist.wheel_problems(
         _wheel("hope_rs-0.1.0.dist-info/licenses/LICENSE"),
