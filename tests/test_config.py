@@ -42,6 +42,8 @@ def test_configs_are_printable_comparable_and_hashable():
     assert other != cfg and other.refine.top_k == 32 and cfg.refine.top_k == 48
     assert len({MatchConfig(), MatchConfig(), other}) == 2
     assert MatchConfig().key() == cfg.key() != other.key()
+    listed = MatchConfig(refine=RefineConfig(schedule=[3, 2, 1]))
+    assert listed.refine.schedule == (3, 2, 1) and hash(listed) == hash(listed.with_options())
     with pytest.raises(dataclasses.FrozenInstanceError):
         cfg.refine.top_k = 1  # type: ignore[misc]
 

@@ -159,6 +159,14 @@ class RefineConfig:
     nearest_unused_k: int = 16
     repair: RepairConfig = field(default_factory=RepairConfig)
 
+    def __post_init__(self):
+        # A tuple, so that the config stays hashable whatever sequence was given.
+        if self.schedule is not None and not isinstance(self.schedule, tuple):
+            try:
+                object.__setattr__(self, "schedule", tuple(self.schedule))
+            except TypeError:
+                pass  # not a sequence: match's option check says so
+
 
 @dataclass(frozen=True)
 class SpectralConfig:
