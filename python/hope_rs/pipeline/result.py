@@ -6,11 +6,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .confidence import MatchQuality
 from .config import MatchConfig
 from .progress import StageInfo
 from .state import Iteration
 
-__all__ = ["MatchResult"]
+__all__ = ["MatchQuality", "MatchResult"]
 
 
 @dataclass
@@ -45,6 +46,14 @@ class MatchResult:
         entry reads "spectral: skipped (HOPE's map settled: ...)".
     config : MatchConfig
         The settings the match ran with.
+    confidence : (n_a,) float64 or None
+        Per vertex of A, how far to trust its match, in [0, 1]: a calibrated estimate of the
+        probability that ``map[i]`` lies within 0.05 sqrt(area) of the right vertex
+        (docs/confidence.md). Low over a region the map placed wrongly. ``None`` with
+        ``confidence=False``.
+    quality : MatchQuality or None
+        The pair-level summary of ``confidence`` (``quality.likely_failed``: look at the
+        pair before using its map).
     """
 
     map: np.ndarray
@@ -58,6 +67,37 @@ class MatchResult:
     stages: list[StageInfo] = field(default_factory=list)
     #: The settings the match ran with.
     config: MatchConfig | None = None
+    confidence: np.ndarray | None = None
+    quality: MatchQuality | None = None
+
+    def map_or_unmatched(self, threshold: float = 0.5) -> np.ndarray:
+        """The map with -1 where the confidence is below ``threshold``.
+
+        Parameters
+        ----------
+        threshold : float
+            In [0, 1]; 0 keeps every match, 1 only those at confidence 1.
+
+        Returns
+        -------
+        (n_a,) int64
+            ``map[i]``, or -1 where ``confidence[i] < threshold`` (a new array).
+
+        Raises
+        ------
+        ValueError
+            When the match ran with ``confidence=False`` or ``threshold`` is not in [0, 1].
+        """
+        if self.confidence is None:
+            raise ValueError(
+                "this match has no confidence (it ran with confidence=False); "
+                "match again with confidence=True"
+            )
+        if isinstance(threshold, bool) or not (0.0 <= float(threshold) <= 1.0):
+            raise ValueError(f"threshold must be a number in [0, 1], got {threshold!r}")
+        out = np.array(self.map, dtype=np.int64)
+        out[self.confidence < threshold] = -1
+        return out
 
     def stage(self, name: str) -> StageInfo:
         """The :class:`~hope_rs.pipeline.progress.StageInfo` of the stage ``name`` (e.g. "spectral").
