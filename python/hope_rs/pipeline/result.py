@@ -30,7 +30,7 @@ class MatchResult:
     timings : dict
         Seconds per stage ("shapes", "descriptors", "init" or, with ``multiscale``,
         "coarse"; "refine", "spectral", "faces" (the finishing rounds of
-        :mod:`hope_rs.pipeline.shared_faces`, when they ran), "total"). The spectral pass's eigenbases are solved
+        :mod:`hope_rs.pipeline.shared_faces`, when they ran), "confidence", "total"). The spectral pass's eigenbases are solved
         in a background thread during "refine" and count there, as does its ZoomOut when the
         refinement reaches its last pass (:class:`~hope_rs.pipeline.spectral.EarlyZoomOut`).
     coarse : MatchResult or None
@@ -42,7 +42,7 @@ class MatchResult:
     stages : list of StageInfo
         Every stage in the order it ran, with whether it ran, why (or why not) and its seconds:
         "shapes", "descriptors", "init" ("coarse" and "lift" with ``multiscale``), "refine",
-        "polish", "spectral", "faces" (see :data:`hope_rs.pipeline.progress.STAGES`). ``str()`` of an
+        "polish", "spectral", "faces", "confidence" (see :data:`hope_rs.pipeline.progress.STAGES`). ``str()`` of an
         entry reads "spectral: skipped (HOPE's map settled: ...)".
     config : MatchConfig
         The settings the match ran with.
