@@ -14,6 +14,7 @@ features) of "right" (geodesic error <= 0.05) on the features of
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import itertools
 import sys
 
@@ -49,9 +50,14 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--pairs", type=int, default=12, help="training pairs per variant")
     p.add_argument("--C", type=float, default=1.0, help="inverse L2 strength")
+    p.add_argument("--rings", type=int, default=None, help="ConfidenceConfig.rings to fit for")
     args = p.parse_args(argv)
     cache = default_cache()
     base = MatchConfig()
+    if args.rings is not None:
+        base = dataclasses.replace(
+            base, confidence=dataclasses.replace(base.confidence, rings=args.rings)
+        )
     variants = [
         ("default", base, "shot"),
         ("short", base.with_options(max_passes=1, spectral=False), "shot"),
@@ -71,14 +77,23 @@ def main(argv=None) -> int:
     x, y = np.concatenate(xs), np.concatenate(ys)
     mu, sd = x.mean(axis=0), x.std(axis=0)
     sd[sd == 0] = 1.0
-    model = LogisticRegression(C=args.C, max_iter=1000).fit((x - mu) / sd, y)
+    # Each variant weighs as much as the default matches in total.
+    n_of = {g: sum(len(yy) for yy, gg in zip(ys, groups) if gg == g) for g in set(groups)}
+    weight = np.concatenate([np.full(len(yy), 1.0 / n_of[g]) for yy, g in zip(ys, groups)])
+    weight *= weight.size / weight.sum()
+    model = LogisticRegression(C=args.C, max_iter=1000)
+    model.fit((x - mu) / sd, y, sample_weight=weight)
     w = model.coef_[0] / sd
     b = float(model.intercept_[0] - (model.coef_[0] * mu / sd).sum())
     score = x @ w + b
     print(f"training AUROC {auroc(score, y):.3f} over {y.size} vertices, wrong {1 - y.mean():.3f}")
     for g in dict.fromkeys(groups):
         sel = np.concatenate([np.full(len(yy), gg == g) for yy, gg in zip(ys, groups)])
-        print(f"  {g}: AUROC {auroc(score[sel], y[sel]):.3f}")
+        prob = 1 / (1 + np.exp(-score[sel]))
+        print(
+            f"  {g}: AUROC {auroc(score[sel], y[sel]):.3f}, right {y[sel].mean():.3f}, "
+            f"mean confidence {prob.mean():.3f}"
+        )
     for name, wi in zip(CONFIDENCE_FEATURES, w):
         print(f"  {name:28s} {wi:+.4f}")
     print("weights: tuple[float, ...] = (" + ", ".join(f"{v:.4g}" for v in w) + ")")

@@ -5,7 +5,7 @@ import pytest
 from conftest import data_path
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from meshes import bumpy_sphere_files, inverse, relabel
+from meshes import bumpy_sphere, bumpy_sphere_files, inverse, relabel
 from strategies import bumpy_surfaces, half_corrupted, isometric_copies, permutations
 
 import hope_rs
@@ -19,12 +19,12 @@ from hope_rs.pipeline.progress import STAGES
 
 @pytest.fixture(scope="module")
 def broken_and_good(faust_pair):
-    """FAUST 012 -> 018 matched from a random initial map with one pass and no spectral pass
-    (a broken map), and with the defaults."""
+    """FAUST 012 -> 018 matched from a scrambled initial map with one pass and no spectral
+    pass (a broken map), and from the right map (a good one)."""
     a, b = faust_pair
     order = np.argsort(np.sin(np.arange(a.n_vertices) * 12.9898) * 43758.5453 % 1.0)
     broken = hope_rs.match(a, b, init=order, max_passes=1, spectral=False)
-    good = hope_rs.match(a, b)
+    good = hope_rs.match(a, b, init=np.arange(a.n_vertices), max_passes=1, spectral=False)
     return a, b, broken, good
 
 
@@ -49,13 +49,6 @@ def test_quality_flags_a_broken_match_and_not_a_good_one(broken_and_good):
     assert good.quality == match_quality(good.confidence, good.config.confidence)
 
 
-def test_confidence_ranks_right_matches_above_wrong_ones(broken_and_good):
-    _, b, broken, _ = broken_and_good
-    errors = hope_rs.geodesic_errors(b, broken.map)
-    assert 0.1 < np.mean(errors <= 0.05) < 0.9
-    assert confidence_auroc(broken.confidence, errors) > 0.85
-
-
 def test_map_or_unmatched(broken_and_good):
     _, _, broken, _ = broken_and_good
     for t in (0.0, 0.3, 0.5, 0.9, 1.0):
@@ -72,8 +65,8 @@ def test_map_or_unmatched(broken_and_good):
         broken.map_or_unmatched(1.5)
 
 
-def test_turned_off_the_stage_is_skipped_and_the_map_unchanged(faust_pair):
-    a, b = faust_pair
+def test_turned_off_the_stage_is_skipped_and_the_map_unchanged():
+    a, b = (hope_rs.Mesh(*bumpy_sphere(600, s)) for s in (0, 1))
     init = np.arange(a.n_vertices)
     on = hope_rs.match(a, b, init=init, max_passes=1, spectral=False)
     off = hope_rs.match(a, b, init=init, max_passes=1, spectral=False, confidence=False)

@@ -356,10 +356,20 @@ class ConfidenceConfig:
 
     enabled: bool = True
     n_anchors: int = 32
-    rings: int = 4
+    rings: int = 16
     floor: float = 0.01
-    weights: tuple[float, ...] = (0.0, 4.0, -1.0, 4.0, -1.0, -0.5, -0.5, 0.0, 2.0)
-    intercept: float = 0.0
+    weights: tuple[float, ...] = (
+        0.5473,
+        0.2841,
+        -2.205,
+        1.969,
+        -0.6086,
+        -0.3411,
+        0.09902,
+        0.8701,
+        5.369,
+    )
+    intercept: float = -9.623
     threshold: float = 0.5
     failed_mean: float = 0.5
     failed_share: float = 0.5
