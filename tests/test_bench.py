@@ -134,7 +134,15 @@ def test_bench_command_writes_tables_plots_and_renders(identity_set, tmp_path, c
     for r in rows:
         assert 0 <= float(r["exact"]) <= 1 and float(r["seconds"]) > 0
         assert float(r["mean_x100"]) == pytest.approx(100 * float(r["mean"]), rel=1e-4)
+        # HOPE's methods report how well their confidence ranks right above wrong matches
+        # (NaN when a pair has no wrong match); the initial map has no confidence.
+        auroc = r["confidence_auroc"]
+        if r["method"] == "init":
+            assert auroc == ""
+        else:
+            assert auroc == "nan" or 0 <= float(auroc) <= 1
     md = (out / "spheres.md").read_text()
+    assert "| confidence AUROC |" in md
     assert "| hope | 2 |" in md and "Ablations" in md and "| hope-k4 | 1 |" in md
     assert (out / "spheres_curves.png").read_bytes()[:4] == b"\x89PNG"
     assert "5 results written" in capsys.readouterr().out

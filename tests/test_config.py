@@ -52,7 +52,7 @@ def test_every_keyword_option_round_trips():
     values = {
         "k_max": 6, "schedule": [3, 2, 1], "max_passes": 2, "min_consistent": 0.4, "top_k": 7,
         "polish_k": None, "global_step": False, "multiscale": True, "spectral": False,
-        "shared_faces": False,
+        "shared_faces": False, "confidence": False,
     }  # fmt: skip
     assert set(values) == set(KEYWORDS)
     cfg = MatchConfig().with_options(**values)

@@ -91,6 +91,8 @@ def match(
         - ``shared_faces`` (bool, True): on shapes that share most of their triangulation,
           finish with ARAP rounds and a growth from trusted patches; independently remeshed
           shapes never qualify (docs/decisions.md#shared-faces).
+        - ``confidence`` (bool, True): compute ``MatchResult.confidence`` (per vertex of A,
+          in [0, 1]) and ``MatchResult.quality`` (docs/confidence.md); the map is the same.
 
     Returns
     -------

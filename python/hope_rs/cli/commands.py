@@ -12,11 +12,13 @@ import sys
 import traceback
 import warnings
 
+import numpy as np
+
 from .._version import __version__
 from ..batch.driver import one_line_warning
 from ..evaluation import bench, show
 from ..evaluation.demo import run_demo
-from ..geometry.map_io import check_writable_folder, map_format, write_map
+from ..geometry.map_io import atomic_write, check_writable_folder, map_format, write_map
 from ..geometry.mesh import load_mesh
 from ..matching import check_match_options, match
 from ..pipeline.progress import ProgressBar
@@ -39,6 +41,7 @@ def _summary(res) -> dict:
         ],
         "timings": res.timings,
         "stages": [vars(s) for s in res.stages],
+        "quality": None if res.quality is None else vars(res.quality),
     }
 
 
@@ -57,6 +60,12 @@ def cmd_match(args) -> int:
             raise ValueError(f"output {args.output!r} is a folder; give a file name")
         map_format(args.output)
         check_writable_folder(os.path.dirname(os.path.abspath(args.output)))
+    if args.confidence_out:
+        if not args.confidence_out.endswith(".npy"):
+            raise ValueError(
+                f"--confidence-out {args.confidence_out!r} must end in .npy (a NumPy float array)"
+            )
+        check_writable_folder(os.path.dirname(os.path.abspath(args.confidence_out)))
     a, b = load_mesh(args.a), load_mesh(args.b)
     if not args.multiscale and not args.quiet and min(a.n_vertices, b.n_vertices) >= HINT_VERTICES:
         print(
@@ -74,6 +83,16 @@ def cmd_match(args) -> int:
     coarse = next((s for s in res.stages if s.name == "coarse"), None)
     if coarse is not None and not coarse.ran and not args.quiet and not args.verbose:
         print(f"hope-rs: note: --multiscale: {coarse.reason}", file=sys.stderr)
+    if args.confidence_out:
+        conf = res.confidence
+        atomic_write(args.confidence_out, lambda fh: np.save(fh, conf, allow_pickle=False))
+    if res.quality is not None and res.quality.likely_failed and not args.quiet:
+        print(
+            f"hope-rs: warning: this match likely failed (mean confidence "
+            f"{res.quality.mean_confidence:.2f}, {res.quality.share_confident:.0%} of A's "
+            "vertices confident); look at it with hope-rs show --color-by confidence",
+            file=sys.stderr,
+        )
     if args.output:
         write_map(args.output, res.map)
     elif not args.json:
@@ -134,6 +153,11 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="skip the finishing rounds for shapes that share their triangulation",
     )
+    m.add_argument(
+        "--confidence-out", metavar="FILE.npy",
+        help="write the per-vertex confidence of the map (float64 in [0, 1], one per vertex of "
+        "A) for hope-rs show --color-by confidence --confidence FILE.npy",
+    )  # fmt: skip
     m.add_argument("--json", action="store_true", help="print timings and a summary as JSON")
     m.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     m.add_argument(

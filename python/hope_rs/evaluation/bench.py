@@ -24,13 +24,14 @@ import numpy as np
 
 from ..geometry.mesh import load_mesh
 from .datasets import Pair, datasets_in, pairs_of
-from .evaluate import error_curve, geodesic_errors, score, smoothness
+from .evaluate import confidence_auroc, error_curve, geodesic_errors, score, smoothness
 from .methods import ABLATIONS, DEFAULT_METHODS, METHODS, PairContext, check_methods, run_method
 from .show import render_pair
 
 FIELDS = [
     "dataset", "pair", "method", "n_a", "n_b", "n_scored", "exact", "mean", "mean_x100", "auc",
     "auc_010", "edge_stretch", "coverage", "seconds", "start", "start_exact", "start_mean",
+    "confidence_auroc",
 ]  # fmt: skip
 
 
@@ -77,6 +78,9 @@ def _score_row(pair: Pair, name: str, res, ctx, ai, bi, starts: dict) -> tuple[d
             )
             starts[res.start] = score(se)
         row["start_exact"], row["start_mean"] = starts[res.start].exact, starts[res.start].mean
+    if res.confidence is not None:
+        # How well MatchResult.confidence tells right (error <= 0.05) from wrong matches.
+        row["confidence_auroc"] = confidence_auroc(res.confidence[ai], e)
     return row, e
 
 
@@ -99,7 +103,8 @@ def _table(rows: list[dict], methods: list[str]) -> str:
     """Markdown table: one line per method, figures averaged over its pairs."""
     head = (
         "| method | pairs | exact % | mean err | mean ×100 | AUC 0.25 | AUC 0.10 | edge stretch "
-        "| coverage % | start mean ×100 | s / pair |\n|---|---|---|---|---|---|---|---|---|---|---|\n"
+        "| coverage % | start mean ×100 | confidence AUROC | s / pair |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|---|\n"
     )
     lines = []
     for m in methods:
@@ -112,11 +117,15 @@ def _table(rows: list[dict], methods: list[str]) -> str:
             return float(np.mean(vals)) if vals else float("nan")
 
         start = avg("start_mean")
+        # Mean over the pairs where it is defined (a pair with no wrong match has none).
+        aurocs = [float(r.get("confidence_auroc") or "nan") for r in rs]
+        conf = float(np.nanmean(aurocs)) if not np.isnan(aurocs).all() else float("nan")
         lines.append(
             f"| {m} | {len(rs)} | {100 * avg('exact'):.1f} | {avg('mean'):.4f} "
             f"| {avg('mean_x100'):.2f} | {avg('auc'):.3f} | {avg('auc_010'):.3f} "
             f"| {avg('edge_stretch'):.2f} | {100 * avg('coverage'):.1f} "
-            f"| {'' if np.isnan(start) else f'{100 * start:.2f}'} | {avg('seconds'):.1f} |"
+            f"| {'' if np.isnan(start) else f'{100 * start:.2f}'} "
+            f"| {'' if np.isnan(conf) else f'{conf:.3f}'} | {avg('seconds'):.1f} |"
         )
     return head + "\n".join(lines) + "\n"
 
@@ -133,7 +142,9 @@ def _set_markdown(name: str, rows: list[dict], methods: list[str]) -> str:
         (
             f"{len(pairs)} pairs: {', '.join(pairs)}. Scored correspondences per pair: "
             f"{'/'.join(map(str, n_scored))}. Errors: surface geodesic / sqrt(area of target); "
-            "figures are means over pairs; seconds are wall time from meshes to map.\n"
+            "figures are means over pairs; seconds are wall time from meshes to map; confidence "
+            "AUROC: how well MatchResult.confidence ranks right matches (error <= 0.05) above "
+            "wrong ones (0.5: not at all), over the pairs with both.\n"
         ),
         _table(rows, main),
     ]

@@ -227,3 +227,33 @@ def smoothness(a, b, mapping) -> Smoothness:
     ratio = np.where(np.isfinite(mapped), mapped, 1.0) / length
     coverage = np.unique(f).size / mesh_b.n_vertices
     return Smoothness(float(ratio.mean()), float(coverage))
+
+
+def confidence_auroc(confidence, errors, *, wrong_above: float = 0.05) -> float:
+    """How well a per-vertex ``confidence`` ranks right matches above wrong ones: the area
+    under the ROC curve, i.e. the chance that a right match (``errors <= wrong_above``,
+    sqrt(area) units) has a higher confidence than a wrong one (ties count half).
+
+    Parameters
+    ----------
+    confidence, errors : (n,) array_like
+        The confidence and the geodesic error of the same scored vertices (e.g.
+        ``res.confidence[a_idx]`` and :func:`geodesic_errors` at ``a_idx``).
+    wrong_above : float
+
+    Returns
+    -------
+    float
+        In [0, 1]; 0.5 for a confidence that tells nothing. NaN when every match is right, or
+        every match wrong.
+    """
+    c = np.asarray(confidence, dtype=np.float64)
+    right = np.asarray(errors, dtype=np.float64) <= wrong_above
+    if c.shape != right.shape:
+        raise ValueError(f"confidence {c.shape} and errors {right.shape} must have one shape")
+    pos, neg = c[right], np.sort(c[~right])
+    if pos.size == 0 or neg.size == 0:
+        return float("nan")
+    below = np.searchsorted(neg, pos, side="left")
+    ties = np.searchsorted(neg, pos, side="right") - below
+    return float((below + 0.5 * ties).sum() / (pos.size * neg.size))

@@ -43,6 +43,7 @@ class MethodResult:
     map: np.ndarray  #: (n_a,) vertex of B for each vertex of A
     seconds: float  #: wall time from meshes to map
     start: str | None = None  #: key of the initial map it refined (see PairContext.start_map)
+    confidence: np.ndarray | None = None  #: (n_a,) MatchResult.confidence, for HOPE's methods
 
 
 class PairContext:
@@ -107,7 +108,8 @@ def _hope(*, kind: str = "shot", k_max: int = 8, degrade: float = 0.0, **kw):
         sa, sb, t_shapes = ctx.shapes(k_max)
         t = time.perf_counter()
         res = match(sa, sb, init=f0, k_max=k_max, **kw)
-        return MethodResult(res.map, t_init + t_shapes + time.perf_counter() - t, key)
+        seconds = t_init + t_shapes + time.perf_counter() - t
+        return MethodResult(res.map, seconds, key, res.confidence)
 
     return run
 

@@ -293,7 +293,11 @@ def add_parser(sub) -> None:
         help="third panel: 'error' (needs --truth; the default with it) or 'confidence' "
         "(needs --confidence)",
     )  # fmt: skip
-    p.add_argument("--confidence", help=".npy of per-vertex confidence values of A (0..1)")
+    p.add_argument(
+        "--confidence",
+        help=".npy of per-vertex confidence values of A (0..1), as hope-rs match "
+        "--confidence-out writes it",
+    )
     p.set_defaults(func=cmd_show)
 
 
@@ -346,7 +350,10 @@ def cmd_show(args) -> int:
     if color_by == "error" and not args.truth:
         raise ValueError("--color-by error needs --truth ('identity' or A.vts B.vts)")
     if color_by == "confidence" and not args.confidence:
-        raise ValueError("--color-by confidence needs --confidence FILE.npy")
+        raise ValueError(
+            "--color-by confidence needs --confidence FILE.npy (hope-rs match A B -o MAP "
+            "--confidence-out FILE.npy writes it)"
+        )
     if args.png:
         require_matplotlib()
     for out in (args.png, args.ply):  # before any work

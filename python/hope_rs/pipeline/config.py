@@ -24,7 +24,9 @@ from ..kernels.search import SearchConfig
 from ..shape import ShapeConfig
 
 __all__ = [
+    "CONFIDENCE_FEATURES",
     "KEYWORDS",
+    "ConfidenceConfig",
     "FinishConfig",
     "GrowthConfig",
     "InitialConfig",
@@ -314,6 +316,73 @@ class MultiscaleConfig:
     lift_ridge: float = 1e-3
 
 
+#: The features of :class:`ConfidenceConfig`, in the order of its ``weights``.
+CONFIDENCE_FEATURES = (
+    "consistent",  # LMD's consistent share of the 2-ring under the final map
+    "consistent_smooth",  # the same, averaged over the rings of ``rings``
+    "log_distortion_smooth",  # log(floor + LMD's mean distortion), averaged (mean edges)
+    "anchor_agreement",  # share of anchors whose geodesic distance the map keeps
+    "log_anchor_error_smooth",  # log(floor + mean |d_A - d_B| to the anchors), averaged
+    "log_hope_shift_smooth",  # log(floor + distance on B between HOPE's and the final image)
+    "log_zoomout_shift_smooth",  # log(floor + the same for ZoomOut's map; 0 without one)
+    "log_stretch_smooth",  # log(floor + mean B/A edge-length ratio under the map), averaged
+    "pair_consistent",  # the mean of "consistent" over A: how well the whole pair went
+)
+
+
+@dataclass(frozen=True)
+class ConfidenceConfig:
+    """The per-vertex confidence of the final map (:mod:`hope_rs.pipeline.confidence`).
+
+    A logistic model of the features of :data:`CONFIDENCE_FEATURES`: ``confidence =
+    1 / (1 + exp(-(intercept + weights · features)))``. The coefficients are fitted by
+    ``scripts/confidence_fit.py`` on matches of training pairs (remeshed FAUST pairs outside
+    the benchmark's ``pairs.txt``), "right" meaning a geodesic error of at most 0.05 sqrt(area).
+
+    Attributes
+    ----------
+    enabled : bool
+        Compute ``MatchResult.confidence`` and ``MatchResult.quality``.
+    n_anchors : int
+        Farthest-point anchors among the LMD-consistent vertices for the long-range features.
+    rings : int
+        Rounds of 1-ring averaging of the regional features, so that regions, not single
+        vertices, lose confidence.
+    floor : float
+        Added before the logarithm of a distance feature (sqrt(area) units, or A's mean edge
+        length for the distortion), so that a zero distance is finite.
+    weights : tuple of float
+        One coefficient per feature of :data:`CONFIDENCE_FEATURES`.
+    intercept : float
+    threshold : float
+        A vertex counts as confident at this confidence (``MatchQuality.share_confident``).
+    failed_mean : float
+        ``MatchQuality.likely_failed`` when the mean confidence is below this ...
+    failed_share : float
+        ... or when fewer than this share of A's vertices are confident.
+    """
+
+    enabled: bool = True
+    n_anchors: int = 32
+    rings: int = 16
+    floor: float = 0.01
+    weights: tuple[float, ...] = (
+        0.5473,
+        0.2841,
+        -2.205,
+        1.969,
+        -0.6086,
+        -0.3411,
+        0.09902,
+        0.8701,
+        5.369,
+    )
+    intercept: float = -9.623
+    threshold: float = 0.5
+    failed_mean: float = 0.5
+    failed_share: float = 0.5
+
+
 #: ``match``'s keyword options → (stage field of :class:`MatchConfig`, field of that stage).
 KEYWORDS: dict[str, tuple[str | None, str]] = {
     "k_max": (None, "k_max"),
@@ -326,6 +395,7 @@ KEYWORDS: dict[str, tuple[str | None, str]] = {
     "multiscale": ("multiscale", "enabled"),
     "spectral": ("spectral", "enabled"),
     "shared_faces": ("finish", "enabled"),
+    "confidence": ("confidence", "enabled"),
 }
 
 
@@ -340,7 +410,7 @@ class MatchConfig:
     shape : ShapeConfig
         Per-shape precomputation (descriptors, eigenbases, coarse copies) of shapes built
         from meshes; a :class:`~hope_rs.Shape` passed in keeps its own.
-    initial, refine, spectral, finish, multiscale
+    initial, refine, spectral, finish, multiscale, confidence
         The stages' settings.
 
     Examples
@@ -360,6 +430,7 @@ class MatchConfig:
     spectral: SpectralConfig = field(default_factory=SpectralConfig)
     finish: FinishConfig = field(default_factory=FinishConfig)
     multiscale: MultiscaleConfig = field(default_factory=MultiscaleConfig)
+    confidence: ConfidenceConfig = field(default_factory=ConfidenceConfig)
 
     def with_options(self, **options) -> MatchConfig:
         """A copy with ``match``'s keyword options (see :data:`KEYWORDS`) set."""

@@ -35,6 +35,7 @@ def check_options(
     shared_faces,
     callback,
     progress=None,
+    confidence=True,
 ) -> None:
     """Raise ``TypeError`` (wrong kind of value) or ``ValueError`` (out of range) for the first
     bad option of :func:`hope_rs.match`; the values themselves are left as given. An ``init``
@@ -61,6 +62,7 @@ def check_options(
         ("multiscale", multiscale),
         ("spectral", spectral),
         ("shared_faces", shared_faces),
+        ("confidence", confidence),
     ]:
         if not isinstance(value, (bool, np.bool_)):
             raise TypeError(f"{name} must be True or False, got {value!r}")

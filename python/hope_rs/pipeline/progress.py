@@ -37,6 +37,7 @@ STAGES = (
     "polish",
     "spectral",
     "faces",
+    "confidence",
 )
 
 

@@ -6,11 +6,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .confidence import MatchQuality
 from .config import MatchConfig
 from .progress import StageInfo
 from .state import Iteration
 
-__all__ = ["MatchResult"]
+__all__ = ["MatchQuality", "MatchResult"]
 
 
 @dataclass
@@ -29,7 +30,7 @@ class MatchResult:
     timings : dict
         Seconds per stage ("shapes", "descriptors", "init" or, with ``multiscale``,
         "coarse"; "refine", "spectral", "faces" (the finishing rounds of
-        :mod:`hope_rs.pipeline.shared_faces`, when they ran), "total"). The spectral pass's eigenbases are solved
+        :mod:`hope_rs.pipeline.shared_faces`, when they ran), "confidence", "total"). The spectral pass's eigenbases are solved
         in a background thread during "refine" and count there, as does its ZoomOut when the
         refinement reaches its last pass (:class:`~hope_rs.pipeline.spectral.EarlyZoomOut`).
     coarse : MatchResult or None
@@ -41,10 +42,18 @@ class MatchResult:
     stages : list of StageInfo
         Every stage in the order it ran, with whether it ran, why (or why not) and its seconds:
         "shapes", "descriptors", "init" ("coarse" and "lift" with ``multiscale``), "refine",
-        "polish", "spectral", "faces" (see :data:`hope_rs.pipeline.progress.STAGES`). ``str()`` of an
+        "polish", "spectral", "faces", "confidence" (see :data:`hope_rs.pipeline.progress.STAGES`). ``str()`` of an
         entry reads "spectral: skipped (HOPE's map settled: ...)".
     config : MatchConfig
         The settings the match ran with.
+    confidence : (n_a,) float64 or None
+        Per vertex of A, how far to trust its match, in [0, 1]: a calibrated estimate of the
+        probability that ``map[i]`` lies within 0.05 sqrt(area) of the right vertex
+        (docs/confidence.md). Low over a region the map placed wrongly. ``None`` with
+        ``confidence=False``.
+    quality : MatchQuality or None
+        The pair-level summary of ``confidence`` (``quality.likely_failed``: look at the
+        pair before using its map).
     """
 
     map: np.ndarray
@@ -58,6 +67,37 @@ class MatchResult:
     stages: list[StageInfo] = field(default_factory=list)
     #: The settings the match ran with.
     config: MatchConfig | None = None
+    confidence: np.ndarray | None = None
+    quality: MatchQuality | None = None
+
+    def map_or_unmatched(self, threshold: float = 0.5) -> np.ndarray:
+        """The map with -1 where the confidence is below ``threshold``.
+
+        Parameters
+        ----------
+        threshold : float
+            In [0, 1]; 0 keeps every match, 1 only those at confidence 1.
+
+        Returns
+        -------
+        (n_a,) int64
+            ``map[i]``, or -1 where ``confidence[i] < threshold`` (a new array).
+
+        Raises
+        ------
+        ValueError
+            When the match ran with ``confidence=False`` or ``threshold`` is not in [0, 1].
+        """
+        if self.confidence is None:
+            raise ValueError(
+                "this match has no confidence (it ran with confidence=False); "
+                "match again with confidence=True"
+            )
+        if isinstance(threshold, bool) or not (0.0 <= float(threshold) <= 1.0):
+            raise ValueError(f"threshold must be a number in [0, 1], got {threshold!r}")
+        out = np.array(self.map, dtype=np.int64)
+        out[self.confidence < threshold] = -1
+        return out
 
     def stage(self, name: str) -> StageInfo:
         """The :class:`~hope_rs.pipeline.progress.StageInfo` of the stage ``name`` (e.g. "spectral").

@@ -15,6 +15,7 @@ from typing import Callable
 import numpy as np
 
 from ..shape import Shape
+from .confidence import match_quality
 from .config import MatchConfig
 from .progress import StageLog
 from .result import MatchResult
@@ -71,6 +72,10 @@ def run_match(
         state.hooks.on("stage_end", on_stage)
     run_stages(state, default_stages() if stages is None else stages)
     state.timings["total"] = time.perf_counter() - t0
+    confidence = quality = None
+    if state.confidence is not None:
+        confidence = state.confidence[a.rank]
+        quality = match_quality(confidence, config.confidence)
     return MatchResult(
         a.map_out(b, state.f).astype(np.int64),
         a.map_out(b, state.f0).astype(np.int64),
@@ -80,6 +85,8 @@ def run_match(
         a.map_out(b, state.hope_map).astype(np.int64),
         log.stages,
         state.config,
+        confidence,
+        quality,
     )
 
 

@@ -478,6 +478,7 @@ class SpectralStage(Stage):
                 reason = "an eigenbasis could not be computed (see the warning)"
             state.log.skipped("spectral", reason)
             return
+        state.zoomout = z
         state.timings["spectral"] = time.perf_counter() - t
         changed = int(np.count_nonzero(f != h))
         state.log.ran(

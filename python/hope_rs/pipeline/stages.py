@@ -6,6 +6,7 @@ Adding or removing a stage touches its own module, this list and its field of
 
 from __future__ import annotations
 
+from .confidence import ConfidenceStage
 from .initial import DescriptorStage, InitialStage
 from .multiscale import MultiscaleStage
 from .refine import RefineStage
@@ -26,4 +27,5 @@ def default_stages() -> list[Stage]:
         RefineStage(),  # "refine", "polish"
         SpectralStage(),  # "spectral"
         FinishStage(),  # "faces"
+        ConfidenceStage(),  # "confidence"
     ]

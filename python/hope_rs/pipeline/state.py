@@ -107,6 +107,10 @@ class MatchState:
         Why the map needs no further stage, once a stage found that out.
     coarse : MatchResult or None
         The multiscale stage's match of the coarse copies.
+    zoomout : ndarray or None
+        The spectral pass's ZoomOut map, when it computed one.
+    confidence : ndarray or None
+        Per vertex of A, the confidence in the final map (the confidence stage).
     """
 
     a: Shape
@@ -125,6 +129,8 @@ class MatchState:
     settled: bool = False
     done: str | None = None
     coarse: Any = None
+    zoomout: np.ndarray | None = None
+    confidence: np.ndarray | None = None
 
 
 class Stage:

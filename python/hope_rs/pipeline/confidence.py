@@ -1,0 +1,196 @@
+"""How far to trust each vertex's match: the "confidence" stage.
+
+A wrong region of a map is often consistent locally (a limb carried onto its mirror image
+keeps its 2-rings), so no one feature tells. The confidence combines what the pipeline knows
+about the final map ``f``, each in the shapes' internal numbering (see
+:data:`~hope_rs.pipeline.config.CONFIDENCE_FEATURES`):
+
+* LMD of ``f`` (:mod:`hope_rs.pipeline.lmd`): its consistent share and mean distortion;
+* long-range agreement: geodesic distances to farthest-point anchors among the consistent
+  vertices (:mod:`hope_rs.pipeline.anchors`) kept or bent by ``f``;
+* agreement between stages: how far on B HOPE's map and ZoomOut's land from ``f`` (a lower
+  bound of the geodesic distance, from the anchors' distance fields);
+* smoothness: the B/A ratio of edge lengths under ``f``;
+* the pair's mean consistent share (a pair that went wrong as a whole);
+
+averaged over a few rings so that regions, not single vertices, lose confidence, and combined
+by a logistic model (:class:`~hope_rs.pipeline.config.ConfidenceConfig`). The stage reads the
+maps only: ``MatchResult.map`` is the same with or without it.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..shape import Shape
+from .anchors import (
+    agree,
+    distance_fields,
+    drop_disagreeing_anchors,
+    farthest_witnesses,
+    reachable,
+    shift_lower_bound,
+)
+from .config import CONFIDENCE_FEATURES, ConfidenceConfig, RefineConfig, RepairConfig
+from .lmd import local_map_distortion
+from .state import MatchState, Stage
+
+__all__ = [
+    "ConfidenceStage",
+    "MatchQuality",
+    "confidence_features",
+    "match_quality",
+    "predict_confidence",
+]
+
+
+@dataclass(frozen=True)
+class MatchQuality:
+    """A pair-level summary of :attr:`MatchResult.confidence`.
+
+    Attributes
+    ----------
+    mean_confidence : float
+        The mean confidence over A's vertices.
+    share_confident : float
+        The share of A's vertices with confidence at least ``ConfidenceConfig.threshold``.
+    likely_failed : bool
+        ``mean_confidence < ConfidenceConfig.failed_mean`` or ``share_confident <
+        ConfidenceConfig.failed_share``: much of the map is probably wrong; look at the pair
+        (``hope-rs show --color-by confidence``) before using it.
+    """
+
+    mean_confidence: float
+    share_confident: float
+    likely_failed: bool
+
+
+def match_quality(confidence: np.ndarray, config: ConfidenceConfig = ConfidenceConfig()):
+    """The :class:`MatchQuality` of a per-vertex ``confidence`` under ``config``'s rule."""
+    c = np.asarray(confidence, dtype=np.float64)
+    mean = float(c.mean()) if c.size else 0.0
+    share = float((c >= config.threshold).mean()) if c.size else 0.0
+    failed = mean < config.failed_mean or share < config.failed_share
+    return MatchQuality(mean, share, bool(failed))
+
+
+def confidence_features(
+    a: Shape,
+    b: Shape,
+    f: np.ndarray,
+    hope: np.ndarray | None = None,
+    zoomout: np.ndarray | None = None,
+    config: ConfidenceConfig = ConfidenceConfig(),
+    *,
+    min_consistent: float = RefineConfig.min_consistent,
+    repair: RepairConfig = RepairConfig(),
+) -> np.ndarray:
+    """The features of :data:`~hope_rs.pipeline.config.CONFIDENCE_FEATURES` per vertex of A,
+    (n_a, n_features) float64, for the map ``f`` and the stages' maps ``hope`` and ``zoomout``
+    (internal numbering; ``None``: not available). ``repair`` says when two geodesic
+    distances agree; ``min_consistent`` which vertices can be anchors."""
+    f = np.asarray(f, dtype=np.int64)
+    n = a.n_vertices
+    mean, consistent = local_map_distortion(a, b, f)
+    mean = mean.astype(np.float64)
+    consistent = consistent.astype(np.float64)
+    # Anchors among the consistent vertices; the anchors whose own images are wrong drop out.
+    cand = np.flatnonzero(consistent >= min_consistent)
+    if cand.size < 4:
+        cand = np.arange(n)
+    anchors, da = farthest_witnesses(a, cand, config.n_anchors)
+    db = distance_fields(b, f[anchors])
+    anchors, da, db = drop_disagreeing_anchors(f, anchors, da, db, repair)
+    da, db = reachable(da, repair), reachable(db, repair)
+    dbf = db[:, f]
+    anchor_agreement = agree(da, dbf, repair).mean(axis=0)
+    anchor_error = np.abs(da - dbf).mean(axis=0)
+    hope_shift = np.zeros(n) if hope is None else shift_lower_bound(db, f, hope)
+    zoom_shift = np.zeros(n) if zoomout is None else shift_lower_bound(db, f, zoomout)
+    # Edge stretch: |f(i) f(j)| on B over |i j| on A, both in sqrt(area) units.
+    e = a.edges
+    la = np.linalg.norm(a.points[e[:, 0]] - a.points[e[:, 1]], axis=1) / a.scale
+    lb = np.linalg.norm(b.points[f[e[:, 0]]] - b.points[f[e[:, 1]]], axis=1) / b.scale
+    ratio = lb / np.maximum(la, 1e-12)
+    deg = np.bincount(e.ravel(), minlength=n).astype(np.float64)
+    stretch = np.bincount(e.ravel(), weights=np.repeat(ratio, 2), minlength=n)
+    stretch = stretch / np.maximum(deg, 1.0)
+
+    ring = _ring_average(a.edges, n)
+
+    def smooth(x):
+        for _ in range(config.rings):
+            x = ring @ x
+        return x
+
+    fl = config.floor
+    cols = {
+        "consistent": consistent,
+        "consistent_smooth": smooth(consistent),
+        "log_distortion_smooth": smooth(np.log(fl + mean)),
+        "anchor_agreement": anchor_agreement,
+        "log_anchor_error_smooth": smooth(np.log(fl + anchor_error)),
+        "log_hope_shift_smooth": smooth(np.log(fl + hope_shift)),
+        "log_zoomout_shift_smooth": smooth(np.log(fl + zoom_shift)),
+        "log_stretch_smooth": smooth(np.log(fl + stretch)),
+        "pair_consistent": np.full(n, consistent.mean()),
+    }
+    return np.column_stack([cols[name] for name in CONFIDENCE_FEATURES])
+
+
+def predict_confidence(features: np.ndarray, config: ConfidenceConfig = ConfidenceConfig()):
+    """The logistic model of ``config`` on ``features`` (n, n_features): (n,) in [0, 1]."""
+    w = np.asarray(config.weights, dtype=np.float64)
+    if w.size != features.shape[1]:
+        raise ValueError(
+            f"ConfidenceConfig.weights must have one entry per feature "
+            f"({', '.join(CONFIDENCE_FEATURES)}), got {w.size}"
+        )
+    z = features @ w + config.intercept
+    return 1.0 / (1.0 + np.exp(-np.clip(z, -60.0, 60.0)))
+
+
+def _ring_average(e: np.ndarray, n: int) -> sp.csr_matrix:
+    """The operator averaging a vertex function over each closed 1-ring (edges ``e``)."""
+    rows = np.concatenate([e[:, 0], e[:, 1], np.arange(n)])
+    cols = np.concatenate([e[:, 1], e[:, 0], np.arange(n)])
+    m = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n, n))
+    return sp.diags(1.0 / np.asarray(m.sum(axis=1)).ravel()) @ m
+
+
+class ConfidenceStage(Stage):
+    """The "confidence" stage: ``state.confidence`` from :func:`confidence_features` of the
+    final map, HOPE's and ZoomOut's (``state.zoomout``), by :func:`predict_confidence`."""
+
+    name = "confidence"
+
+    def skip_reason(self, state: MatchState):
+        if not state.config.confidence.enabled:
+            return "turned off (confidence=False)"
+        return None
+
+    def run(self, state: MatchState) -> None:
+        cfg = state.config.confidence
+        t = state.log.start("confidence", detail="per-vertex confidence of the final map")
+        x = confidence_features(
+            state.a,
+            state.b,
+            state.f,
+            state.hope_map,
+            state.zoomout,
+            cfg,
+            min_consistent=state.config.refine.min_consistent,
+            repair=state.config.refine.repair,
+        )
+        state.confidence = predict_confidence(x, cfg)
+        state.timings["confidence"] = time.perf_counter() - t
+        share = float((state.confidence >= cfg.threshold).mean())
+        state.log.ran(
+            "confidence",
+            state.timings["confidence"],
+            f"{share:.0%} of the vertices at confidence >= {cfg.threshold}",
+        )

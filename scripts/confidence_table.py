@@ -1,0 +1,263 @@
+"""Write docs/confidence.md: how well ``MatchResult.confidence`` separates right from wrong
+matches on the held-out remeshed pairs (the ``pairs.txt`` pairs of faust_r, tosca_r and
+tosca_nonisometric_r).
+
+Each pair is matched once with the default settings; its maps (final, HOPE's, ZoomOut's) and
+per-vertex geodesic errors (edge-graph geodesics / sqrt(area), ``hope_rs.geodesic_errors``)
+are cached under ``--cache`` (default: a folder in the system's temp directory), so a rerun,
+or a rerun with other confidence coefficients, takes seconds. The confidence is computed from
+the cached maps by the same functions the pipeline's confidence stage runs. A match is "right"
+when its error is at most 0.05.
+
+    python scripts/confidence_table.py                 # match (or reuse), write docs/confidence.md
+    python scripts/confidence_table.py --max-pairs 4   # at most 4 pairs per set (faster)
+
+Needs ../shared/data (or HOPE_DATA). ``scripts/confidence_fit.py`` fits the coefficients on
+training pairs with the same helpers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import datetime
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+import hope_rs
+from hope_rs import MatchConfig, Shape
+from hope_rs.evaluation.datasets import Pair, pairs_of
+from hope_rs.evaluation.evaluate import confidence_auroc
+from hope_rs.pipeline.confidence import confidence_features, predict_confidence
+from hope_rs.pipeline.config import ConfidenceConfig
+from hope_rs.pipeline.runner import run_match
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = Path(os.environ.get("HOPE_DATA", ROOT.parent / "shared" / "data"))
+HELD_OUT = ["faust_r", "tosca_r", "tosca_nonisometric_r"]
+#: A match is right when its geodesic error (sqrt(area) units) is at most this.
+WRONG_ABOVE = 0.05
+LEVELS = (0.1, 0.3, 0.5, 0.7, 0.9)
+
+
+def default_cache() -> Path:
+    return Path(tempfile.gettempdir()) / "hope_rs_confidence_cache"
+
+
+def matched(pair: Pair, config: MatchConfig, init: str, cache: Path) -> dict:
+    """The pair's cached maps (input numbering) and scored errors: keys ``map``, ``hope``,
+    ``zoomout`` (all -1 without one), ``a_idx``, ``errors``, ``seconds``. The cache is keyed
+    by the settings that change the maps (the confidence's are not among them)."""
+    cfg = dataclasses.replace(config, confidence=ConfidenceConfig(enabled=False))
+    path = cache / cfg.key()[:16] / init / pair.dataset / f"{pair.name}.npz"
+    if path.exists():
+        with np.load(path) as z:
+            return {**z, "cached": True}
+    ma, mb = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
+    a = Shape(ma, k_max=cfg.k_max, config=cfg.shape)
+    b = Shape(mb, k_max=cfg.k_max, config=cfg.shape)
+    seen = {}
+
+    def grab(state, name):
+        if name == "spectral" and state.zoomout is not None:
+            seen["zoomout"] = a.map_out(b, state.zoomout)
+
+    t = time.perf_counter()
+    res = run_match(a, b, init, cfg, on_stage=grab)
+    seconds = time.perf_counter() - t
+    a_idx, b_idx = pair.ground_truth(ma.n_vertices, mb.n_vertices)
+    out = {
+        "map": res.map,
+        "hope": res.hope_map,
+        "zoomout": seen.get("zoomout", np.full(ma.n_vertices, -1, dtype=np.int64)),
+        "a_idx": np.asarray(a_idx, dtype=np.int64),
+        "errors": hope_rs.geodesic_errors(mb, res.map, a_idx=a_idx, b_idx=b_idx),
+        "seconds": np.float64(seconds),
+    }
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp.npz")
+    np.savez(tmp, **out)
+    os.replace(tmp, path)
+    return {**out, "cached": False}
+
+
+def features_of(pair: Pair, m: dict, config: MatchConfig) -> np.ndarray:
+    """:func:`confidence_features` of the cached maps, rows in A's input numbering."""
+    a = Shape(hope_rs.load_mesh(pair.a), k_max=config.k_max, config=config.shape)
+    b = Shape(hope_rs.load_mesh(pair.b), k_max=config.k_max, config=config.shape)
+    z = None if (m["zoomout"] < 0).any() else a.map_in(b, m["zoomout"])
+    x = confidence_features(
+        a,
+        b,
+        a.map_in(b, m["map"]),
+        a.map_in(b, m["hope"]),
+        z,
+        config.confidence,
+        min_consistent=config.refine.min_consistent,
+        repair=config.refine.repair,
+    )
+    return x[a.rank]
+
+
+def auroc(score: np.ndarray, right: np.ndarray) -> float:
+    """:func:`hope_rs.evaluation.evaluate.confidence_auroc` of ``score`` for right/wrong labels."""
+    return confidence_auroc(score, np.where(right, 0.0, 1.0), wrong_above=0.5)
+
+
+def scored(pair: Pair, m: dict, config: MatchConfig) -> tuple[np.ndarray, np.ndarray, float]:
+    """(confidence at the scored vertices, right or not, the pair's mean confidence)."""
+    c = predict_confidence(features_of(pair, m, config), config.confidence)
+    return c[m["a_idx"]], m["errors"] <= WRONG_ABOVE, float(c.mean())
+
+
+def pairs(names: list[str], max_pairs: int | None) -> dict[str, list[Pair]]:
+    out = {}
+    for name in names:
+        ps = pairs_of(DATA / name)
+        if max_pairs is not None and len(ps) > max_pairs:
+            # Evenly spaced, always the same ones.
+            ps = [ps[i] for i in np.linspace(0, len(ps) - 1, max_pairs).round().astype(int)]
+        out[name] = ps
+    return out
+
+
+def _git(*args: str) -> str:
+    try:
+        return subprocess.run(
+            ["git", *args], cwd=ROOT, capture_output=True, text=True, check=True
+        ).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def render(
+    rows: dict, per_pair: list, sampled: bool, seconds: float, matched_now: int, match_s: float
+) -> str:
+    config = MatchConfig()
+    lines = [
+        "# Per-vertex confidence: calibration on held-out pairs",
+        "",
+        "Generated by `python scripts/confidence_table.py`; do not edit by hand.",
+        "",
+        (
+            f"- commit `{_git('rev-parse', '--short', 'HEAD')}`, "
+            f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC"
+        ),
+        f"- machine: {platform.machine()}, {os.cpu_count()} cores, {platform.platform()}",
+        f"- data: the `pairs.txt` pairs of {', '.join(HELD_OUT)} "
+        + ("(sampled: `--max-pairs`)" if sampled else "(all of them)")
+        + "; none of them is a training pair of `scripts/confidence_fit.py`",
+        (
+            f"- a match is right when its geodesic error is at most {WRONG_ABOVE} sqrt(area) "
+            "(edge-graph geodesics, at the vertices with ground truth)"
+        ),
+        (
+            f"- default settings; the table took {seconds:.0f} s, {matched_now} of "
+            f"{len(per_pair)} pairs matched in this run, the others' maps from the cache; the "
+            f"matches took {match_s:.0f} s in all when they ran"
+        ),
+        "",
+        "`MatchResult.confidence[i]` estimates the probability that `map[i]` is right. For each",
+        "level c: of the vertices with confidence >= c, the share that is right (precision), and",
+        "their share of all scored vertices (coverage). AUROC: how well the confidence ranks",
+        "right above wrong matches (1 = perfectly, 0.5 = not at all), all vertices of the set's",
+        "pairs pooled; `n/a` when the set has no wrong match.",
+        "",
+    ]
+    head = "| set | pairs | wrong | AUROC | " + " | ".join(f"c={c}" for c in LEVELS) + " |"
+    lines += [head, "|" + "---|" * (4 + len(LEVELS))]
+    for name, (conf, right, n_pairs) in rows.items():
+        cells = []
+        for c in LEVELS:
+            keep = conf >= c
+            prec = f"{right[keep].mean():.3f}" if keep.any() else "-"
+            cells.append(f"{prec} / {keep.mean():.2f}")
+        a = auroc(conf, right)
+        lines.append(
+            f"| {name} | {n_pairs} | {1 - right.mean():.3f} | "
+            + ("n/a" if np.isnan(a) else f"{a:.3f}")
+            + " | "
+            + " | ".join(cells)
+            + " |"
+        )
+    lines += [
+        "",
+        "Cells: precision / coverage.",
+        "",
+        "## How the confidence is computed",
+        "",
+        "The confidence stage (`hope_rs.pipeline.confidence`) reads the final map, HOPE's map",
+        "and ZoomOut's and computes per vertex of A: LMD's consistent share of the 2-ring and",
+        "its mean distortion; the share of 32 farthest-point anchors (among LMD-consistent",
+        "vertices) whose geodesic distance the map keeps, and the mean bend of those distances;",
+        "how far on B HOPE's and ZoomOut's images lie from the final one; the B/A ratio of edge",
+        "lengths under the map; and the pair's mean consistent share. The regional features are",
+        f"averaged over {config.confidence.rings} rings, so that regions, not single vertices,",
+        "lose confidence. A logistic regression of 'right' on these features",
+        "(`ConfidenceConfig.weights`, `.intercept`) was fitted by `scripts/confidence_fit.py` on",
+        "remeshed FAUST pairs outside `pairs.txt`: default matches, and one-pass matches from",
+        "SHOT and HKS initial maps (for examples of failing maps), each kind weighed equally.",
+        "",
+        "## Per pair",
+        "",
+        (
+            f"`quality.likely_failed`: mean confidence < {config.confidence.failed_mean} or "
+            f"fewer than {config.confidence.failed_share:.0%} of the vertices at confidence >= "
+            f"{config.confidence.threshold}."
+        ),
+        "",
+        "| set | pair | mean error | wrong | mean confidence | likely failed | AUROC |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for name, pair, err, conf, right, mean_c in per_pair:
+        q_failed = mean_c < config.confidence.failed_mean or (
+            (conf >= config.confidence.threshold).mean() < config.confidence.failed_share
+        )
+        a = auroc(conf, right)
+        lines.append(
+            f"| {name} | {pair} | {err.mean():.3f} | {1 - right.mean():.3f} | {mean_c:.3f} | "
+            f"{'yes' if q_failed else 'no'} | " + ("n/a" if np.isnan(a) else f"{a:.3f}") + " |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--cache", type=Path, default=default_cache())
+    p.add_argument("--max-pairs", type=int, default=None, help="pairs per set at most")
+    p.add_argument("--out", type=Path, default=ROOT / "docs" / "confidence.md")
+    args = p.parse_args(argv)
+    if not DATA.is_dir():
+        print(f"no data folder {DATA}; set HOPE_DATA", file=sys.stderr)
+        return 2
+    t0 = time.perf_counter()
+    config = MatchConfig()
+    rows, per_pair, matched_now, match_s = {}, [], 0, 0.0
+    for name, ps in pairs(HELD_OUT, args.max_pairs).items():
+        confs, rights = [], []
+        for pair in ps:
+            m = matched(pair, config, config.initial.descriptor, args.cache)
+            matched_now += not m["cached"]
+            match_s += float(m["seconds"])
+            conf, right, mean_c = scored(pair, m, config)
+            confs.append(conf)
+            rights.append(right)
+            per_pair.append((name, pair.name, m["errors"], conf, right, mean_c))
+            print(f"{name} {pair.name}: mean error {m['errors'].mean():.3f}", file=sys.stderr)
+        rows[name] = (np.concatenate(confs), np.concatenate(rights), len(ps))
+    seconds = time.perf_counter() - t0
+    text = render(rows, per_pair, args.max_pairs is not None, seconds, matched_now, match_s)
+    args.out.write_text(text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,168 @@
+import json
+
+import numpy as np
+import pytest
+from conftest import data_path
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from meshes import bumpy_sphere, bumpy_sphere_files, inverse, relabel
+from strategies import bumpy_surfaces, half_corrupted, isometric_copies, permutations
+
+import hope_rs
+from hope_rs.cli.commands import main
+from hope_rs.evaluation.datasets import pairs_of
+from hope_rs.evaluation.evaluate import confidence_auroc
+from hope_rs.pipeline.confidence import MatchQuality, match_quality, predict_confidence
+from hope_rs.pipeline.config import CONFIDENCE_FEATURES, ConfidenceConfig, MatchConfig
+from hope_rs.pipeline.progress import STAGES
+
+
+@pytest.fixture(scope="module")
+def broken_and_good(faust_pair):
+    """FAUST 012 -> 018 matched from a scrambled initial map with one pass and no spectral
+    pass (a broken map), and from the right map (a good one)."""
+    a, b = faust_pair
+    order = np.argsort(np.sin(np.arange(a.n_vertices) * 12.9898) * 43758.5453 % 1.0)
+    broken = hope_rs.match(a, b, init=order, max_passes=1, spectral=False)
+    good = hope_rs.match(a, b, init=np.arange(a.n_vertices), max_passes=1, spectral=False)
+    return a, b, broken, good
+
+
+def test_confidence_is_a_probability_per_vertex_of_a(broken_and_good):
+    a, _, broken, good = broken_and_good
+    for res in (broken, good):
+        assert res.confidence.shape == (a.n_vertices,)
+        assert res.confidence.dtype == np.float64
+        assert np.all((res.confidence >= 0) & (res.confidence <= 1))
+    assert "confidence" in STAGES and res.stage("confidence").ran
+
+
+def test_quality_flags_a_broken_match_and_not_a_good_one(broken_and_good):
+    a, _, broken, good = broken_and_good
+    truth = np.arange(a.n_vertices)
+    assert np.mean(broken.map == truth) < 0.5  # the broken match is broken
+    assert np.mean(good.map == truth) > 0.95
+    assert isinstance(good.quality, MatchQuality)
+    assert broken.quality.likely_failed
+    assert not good.quality.likely_failed
+    assert good.quality.mean_confidence > broken.quality.mean_confidence + 0.3
+    assert good.quality == match_quality(good.confidence, good.config.confidence)
+
+
+def test_map_or_unmatched(broken_and_good):
+    _, _, broken, _ = broken_and_good
+    for t in (0.0, 0.3, 0.5, 0.9, 1.0):
+        m = broken.map_or_unmatched(t)
+        low = broken.confidence < t
+        assert np.all(m[low] == -1)
+        np.testing.assert_array_equal(m[~low], broken.map[~low])
+    assert np.any(broken.map_or_unmatched() == -1)
+    np.testing.assert_array_equal(broken.map_or_unmatched(0.0), broken.map)
+    m = broken.map_or_unmatched()
+    m[:] = 0  # a new array: the result's map is untouched
+    assert not np.all(broken.map == 0)
+    with pytest.raises(ValueError, match="threshold"):
+        broken.map_or_unmatched(1.5)
+
+
+def test_turned_off_the_stage_is_skipped_and_the_map_unchanged():
+    a, b = (hope_rs.Mesh(*bumpy_sphere(600, s)) for s in (0, 1))
+    init = np.arange(a.n_vertices)
+    on = hope_rs.match(a, b, init=init, max_passes=1, spectral=False)
+    off = hope_rs.match(a, b, init=init, max_passes=1, spectral=False, confidence=False)
+    assert off.confidence is None and off.quality is None
+    assert not off.stage("confidence").ran
+    np.testing.assert_array_equal(on.map, off.map)
+    with pytest.raises(ValueError, match="confidence=False"):
+        off.map_or_unmatched()
+    cfg = MatchConfig(confidence=ConfidenceConfig(enabled=False))
+    assert hope_rs.match(a, b, init=init, max_passes=1, config=cfg).confidence is None
+    with pytest.raises(TypeError, match="confidence"):
+        hope_rs.match(a, b, confidence="yes")
+
+
+def test_the_model_reads_one_weight_per_feature():
+    x = np.zeros((3, len(CONFIDENCE_FEATURES)))
+    np.testing.assert_allclose(
+        predict_confidence(x, ConfidenceConfig(intercept=0.0)), np.full(3, 0.5)
+    )
+    with pytest.raises(ValueError, match="one entry per feature"):
+        predict_confidence(x, ConfidenceConfig(weights=(1.0, 2.0)))
+
+
+def test_quality_rule():
+    cfg = ConfidenceConfig(threshold=0.5, failed_mean=0.5, failed_share=0.5)
+    assert not match_quality(np.array([0.9, 0.8, 0.2]), cfg).likely_failed
+    assert match_quality(np.array([0.9, 0.1, 0.2]), cfg).likely_failed
+    q = match_quality(np.array([0.6, 0.4]), cfg)
+    assert q.share_confident == 0.5 and q.mean_confidence == pytest.approx(0.5)
+
+
+@settings(max_examples=4, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data())
+def test_relabelling_both_meshes_relabels_the_confidence(data):
+    v, f = data.draw(bumpy_surfaces(300, 500), label="surface")
+    a = hope_rs.Mesh(v, f)
+    b, truth = data.draw(isometric_copies(v, f), label="copy")
+    init = data.draw(half_corrupted(truth), label="init")
+    pa = data.draw(permutations(a.n_vertices), label="pa")  # new vertex i of A = old pa[i]
+    pb = data.draw(permutations(b.n_vertices), label="pb")
+    a2 = hope_rs.Mesh(a.vertices[pa], relabel(a.faces, pa))
+    b2 = hope_rs.Mesh(b.vertices[pb], relabel(b.faces, pb))
+    opts = {"max_passes": 1, "spectral": False}
+    res = hope_rs.match(a, b, init=init, **opts)
+    res2 = hope_rs.match(a2, b2, init=inverse(pb)[init[pa]], **opts)
+    np.testing.assert_array_equal(res2.map, inverse(pb)[res.map[pa]])
+    np.testing.assert_allclose(res2.confidence, res.confidence[pa], rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.slow
+def test_auroc_on_a_held_out_remeshed_pair():
+    folder = data_path("faust_r")
+    pair = next(p for p in pairs_of(folder) if p.name == "tr_reg_000->tr_reg_001")
+    a, b = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
+    a_idx, b_idx = pair.ground_truth(a.n_vertices, b.n_vertices)
+    # One pass without the spectral pass leaves wrong regions to find.
+    res = hope_rs.match(a, b, max_passes=1, spectral=False)
+    errors = hope_rs.geodesic_errors(b, res.map, a_idx=a_idx, b_idx=b_idx)
+    assert 0.02 < np.mean(errors > 0.05) < 0.9
+    assert confidence_auroc(res.confidence[a_idx], errors) > 0.85
+
+
+def test_confidence_auroc():
+    errors = np.array([0.0, 0.01, 0.2, 0.3])
+    assert confidence_auroc([0.9, 0.8, 0.1, 0.2], errors) == 1.0
+    assert confidence_auroc([0.1, 0.2, 0.9, 0.8], errors) == 0.0
+    assert confidence_auroc([0.5, 0.5, 0.5, 0.5], errors) == 0.5
+    assert confidence_auroc([0.9, 0.3, 0.5, 0.2], errors) == 0.75
+    assert np.isnan(confidence_auroc([0.1, 0.2], [0.0, 0.0]))
+
+
+def test_cli_writes_the_confidence_for_show(tmp_path, capsys):
+    pa, pb = bumpy_sphere_files(tmp_path, 2, 400)
+    out, conf = tmp_path / "map.npy", tmp_path / "conf.npy"
+    args = ["match", str(pa), str(pb), "-o", str(out), "-q", "--json"]
+    assert main([*args, "--confidence-out", str(conf)]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    c = np.load(conf)
+    assert c.shape == (np.load(out).size,) and c.dtype == np.float64
+    assert np.all((c >= 0) & (c <= 1))
+    assert summary["quality"]["mean_confidence"] == pytest.approx(c.mean())
+    # A bad name fails before any work, in one line.
+    assert main(["match", str(pa), str(pb), "-q", "--confidence-out", str(tmp_path / "c.txt")]) == 2
+    assert "must end in .npy" in capsys.readouterr().err
+    assert not (tmp_path / "c.txt").exists()
+
+
+@pytest.mark.slow
+def test_quality_flags_a_failed_benchmark_pair():
+    # Gorilla -> man (TOSCA non-isometric, remeshed): the default map is wrong almost
+    # everywhere (mean geodesic error about 0.7).
+    folder = data_path("tosca_nonisometric_r")
+    pair = next(p for p in pairs_of(folder) if p.name == "8_gorilla_02->8_man_02")
+    a, b = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
+    a_idx, b_idx = pair.ground_truth(a.n_vertices, b.n_vertices)
+    res = hope_rs.match(a, b)
+    errors = hope_rs.geodesic_errors(b, res.map, a_idx=a_idx, b_idx=b_idx)
+    assert np.mean(errors > 0.05) > 0.9
+    assert res.quality.likely_failed and res.quality.mean_confidence < 0.5
