@@ -28,6 +28,7 @@ __all__ = [
     "FinishConfig",
     "GrowthConfig",
     "InitialConfig",
+    "LandmarkConfig",
     "MatchConfig",
     "MultiscaleConfig",
     "RefineConfig",
@@ -50,6 +51,34 @@ class InitialConfig:
 
     descriptor: str = "shot"
     search: SearchConfig = field(default_factory=SearchConfig)
+
+
+@dataclass(frozen=True)
+class LandmarkConfig:
+    """What the caller's landmarks (``match(landmarks=...)``) do in each stage
+    (:mod:`hope_rs.pipeline.landmarks`). Every stage keeps them mapped exactly; without
+    landmarks these settings are unused.
+
+    Distances are edge-graph geodesics in sqrt(area) units; two distances agree by the rule of
+    :class:`RepairConfig` (``agree_rel``, ``agree_abs``).
+
+    Attributes
+    ----------
+    candidates : int
+        The initial map re-places a vertex among the vertices of B whose distances to the
+        landmarks are the nearest this many to its own, taking the nearest descriptor ...
+    init_min_agree : float
+        ... when its descriptor match agrees with fewer than this share of its distances to the
+        landmarks.
+    refine_min_agree : float
+        A vertex is a witness of the refinement only when its match agrees with at least this
+        share of its distances to the landmarks; the others are re-placed by the global repair,
+        whose anchors include the landmarks.
+    """
+
+    candidates: int = 64
+    init_min_agree: float = 1.0
+    refine_min_agree: float = 0.75
 
 
 @dataclass(frozen=True)
@@ -334,6 +363,8 @@ class MatchConfig:
         from meshes; a :class:`~hope_rs.Shape` passed in keeps its own.
     initial, refine, spectral, finish, multiscale
         The stages' settings.
+    landmarks : LandmarkConfig
+        What the caller's landmarks do, when there are any.
 
     Examples
     --------
@@ -352,6 +383,7 @@ class MatchConfig:
     spectral: SpectralConfig = field(default_factory=SpectralConfig)
     finish: FinishConfig = field(default_factory=FinishConfig)
     multiscale: MultiscaleConfig = field(default_factory=MultiscaleConfig)
+    landmarks: LandmarkConfig = field(default_factory=LandmarkConfig)
 
     def with_options(self, **options) -> MatchConfig:
         """A copy with ``match``'s keyword options (see :data:`KEYWORDS`) set."""

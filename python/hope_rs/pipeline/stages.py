@@ -7,6 +7,7 @@ Adding or removing a stage touches its own module, this list and its field of
 from __future__ import annotations
 
 from .initial import DescriptorStage, InitialStage
+from .landmarks import LandmarkStage
 from .multiscale import MultiscaleStage
 from .refine import RefineStage
 from .shared_faces import FinishStage
@@ -23,6 +24,7 @@ def default_stages() -> list[Stage]:
         MultiscaleStage(),  # "coarse", "lift": multiscale=True only
         DescriptorStage(),  # "descriptors"
         InitialStage(),  # "init"
+        LandmarkStage(),  # "landmarks": with landmarks only
         RefineStage(),  # "refine", "polish"
         SpectralStage(),  # "spectral"
         FinishStage(),  # "faces"

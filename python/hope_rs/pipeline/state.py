@@ -107,6 +107,9 @@ class MatchState:
         Why the map needs no further stage, once a stage found that out.
     coarse : MatchResult or None
         The multiscale stage's match of the coarse copies.
+    landmarks : (m, 2) ndarray of int or None
+        The caller's landmarks (vertex of A, vertex of B), rows sorted by A's vertex; ``None``
+        when there are none.
     """
 
     a: Shape
@@ -125,6 +128,7 @@ class MatchState:
     settled: bool = False
     done: str | None = None
     coarse: Any = None
+    landmarks: np.ndarray | None = None
 
 
 class Stage:

@@ -1,0 +1,192 @@
+"""The caller's landmarks: vertex pairs (A, B) known to correspond, kept exactly in the map.
+
+``match(a, b, landmarks=L)`` takes ``L``, an (m, 2) array of (vertex of A, vertex of B) rows.
+Geodesic distances to the landmarks are intrinsic coordinates both shapes share, and unlike
+descriptors they tell a left limb from its mirror image. They act in three places:
+
+* the "landmarks" stage (:class:`LandmarkStage`) re-places every vertex of the initial map
+  whose distances to the landmarks disagree with its match's, at the nearest descriptor among
+  the vertices of B whose distances to the landmarks are nearest its own
+  (:func:`landmark_initial_map`);
+* the refinement (:func:`hope_rs.pipeline.refine.refine`) pins the landmarks after every step,
+  counts them as witnesses, distrusts vertices that disagree with them
+  (:func:`landmark_trust`), and its global repair takes them as anchors;
+* after every later stage (the spectral pass, the finish), the stage re-pins them.
+
+Without landmarks none of this runs and the map is the one ``match`` makes without them.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..shape import Shape
+from .anchors import agree, distance_fields, reachable
+from .config import LandmarkConfig, RepairConfig
+from .state import QUIET, MatchState, Stage
+
+__all__ = [
+    "LandmarkStage",
+    "check_landmarks",
+    "landmark_fields",
+    "landmark_initial_map",
+    "landmark_trust",
+    "pin",
+]
+
+#: Rows of A's vertices compared at once with their candidates' descriptors (bounds the
+#: temporary (rows, candidates, descriptor length) array).
+_CHUNK = 512
+
+
+def check_landmarks(landmarks, n_a: int, n_b: int) -> np.ndarray | None:
+    """``landmarks`` as an (m, 2) int64 array of (vertex of A, vertex of B), 0-based, checked
+    against shapes of ``n_a`` and ``n_b`` vertices; ``None`` when there are none (``None`` or
+    an empty array). Rows given twice count once.
+
+    Raises
+    ------
+    TypeError, ValueError
+        One line saying what is wrong: not integers, not (m, 2), a vertex out of range, a vertex
+        of A given two matches or a vertex of B matched twice.
+    """
+    if landmarks is None:
+        return None
+    try:
+        arr = np.asarray(landmarks)
+    except (TypeError, ValueError) as e:
+        raise TypeError(f"landmarks must be an (m, 2) array of vertex indices: {e}") from None
+    if arr.size == 0:
+        return None
+    if arr.dtype == bool or not np.issubdtype(arr.dtype, np.integer):
+        raise TypeError(
+            f"landmarks must be integer vertex indices (0-based), got dtype {arr.dtype}; "
+            "convert with np.asarray(landmarks, dtype=np.int64)"
+        )
+    if arr.ndim != 2 or arr.shape[1] != 2:
+        raise ValueError(
+            f"landmarks must have shape (m, 2), one (vertex of A, vertex of B) row per "
+            f"landmark, got shape {arr.shape}"
+        )
+    arr = arr.astype(np.int64)
+    for col, n, name in ((0, n_a, "A"), (1, n_b, "B")):
+        bad = np.flatnonzero((arr[:, col] < 0) | (arr[:, col] >= n))
+        if bad.size:
+            r = int(bad[0])
+            raise ValueError(
+                f"landmark row {r} ({arr[r, 0]}, {arr[r, 1]}): vertex {arr[r, col]} is not a "
+                f"vertex of {name}, which has {n} (0-based indices 0..{n - 1})"
+            )
+    arr = np.unique(arr, axis=0)
+    for col, name, other in ((0, "A", "B"), (1, "B", "A")):
+        v, first, count = np.unique(arr[:, col], return_index=True, return_counts=True)
+        if (count > 1).any():
+            x = int(v[np.argmax(count > 1)])
+            rows = arr[arr[:, col] == x][:, 1 - col]
+            raise ValueError(
+                f"landmarks contradict each other: vertex {x} of {name} is paired with vertices "
+                f"{int(rows[0])} and {int(rows[1])} of {other}; give each vertex at most once"
+            )
+    return arr
+
+
+def pin(f: np.ndarray, landmarks: np.ndarray | None) -> np.ndarray:
+    """``f`` with every landmark's vertex of A mapped to its vertex of B (``f`` itself when it
+    does already)."""
+    if landmarks is None or (f[landmarks[:, 0]] == landmarks[:, 1]).all():
+        return f
+    g = f.copy()
+    g[landmarks[:, 0]] = landmarks[:, 1]
+    return g
+
+
+def landmark_fields(
+    a: Shape, b: Shape, landmarks: np.ndarray, config: RepairConfig = RepairConfig()
+) -> tuple[np.ndarray, np.ndarray]:
+    """Distances (sqrt(area) units, (m, n_a) and (m, n_b)) from the landmarks on A and on B,
+    vertices of other components at ``config.unreachable``."""
+    da = reachable(distance_fields(a, landmarks[:, 0]), config)
+    db = reachable(distance_fields(b, landmarks[:, 1]), config)
+    return da, db
+
+
+def landmark_trust(
+    f: np.ndarray, da: np.ndarray, db: np.ndarray, min_agree: float, config: RepairConfig
+) -> np.ndarray:
+    """Whether each vertex's match keeps at least ``min_agree`` of its distances to the
+    landmarks (``da``, ``db`` from :func:`landmark_fields`)."""
+    return agree(da, db[:, f], config).mean(axis=0) >= min_agree
+
+
+def landmark_initial_map(
+    a: Shape,
+    b: Shape,
+    f0: np.ndarray,
+    landmarks: np.ndarray,
+    desc: tuple[np.ndarray, np.ndarray] | None,
+    config: LandmarkConfig = LandmarkConfig(),
+    repair: RepairConfig = RepairConfig(),
+) -> np.ndarray:
+    """``f0`` with the landmarks pinned and every vertex whose match disagrees with its
+    distances to the landmarks (see ``config.init_min_agree``) re-placed: among the
+    ``config.candidates`` vertices of B whose distances to the landmarks are nearest its own,
+    the one of nearest descriptor (``desc``: A's and B's, internal numbering), or without
+    descriptors the nearest by distances."""
+    da, db = landmark_fields(a, b, landmarks, repair)
+    ok = landmark_trust(f0, da, db, config.init_min_agree, repair)
+    moved = np.flatnonzero(~ok)
+    f = f0.copy()
+    if moved.size:
+        tree = cKDTree(db.T)
+        k = 1 if desc is None else min(config.candidates, b.n_vertices)
+        _, cand = tree.query(da[:, moved].T, k=k)
+        if desc is None:
+            f[moved] = cand
+        else:
+            cand = cand.reshape(moved.size, k)
+            ea, eb = desc
+            for s in range(0, moved.size, _CHUNK):
+                rows, c = moved[s : s + _CHUNK], cand[s : s + _CHUNK]
+                diff = eb[c] - ea[rows][:, None, :]
+                best = np.argmin(np.einsum("ijk,ijk->ij", diff, diff), axis=1)
+                f[rows] = c[np.arange(rows.size), best]
+    return pin(f, landmarks)
+
+
+class LandmarkStage(Stage):
+    """The "landmarks" stage: ``state.f0`` made to agree with the landmarks
+    (:func:`landmark_initial_map`); after every later stage, the landmarks re-pinned in
+    ``state.f``. Silent without landmarks."""
+
+    name = "landmarks"
+
+    def attach(self, state: MatchState) -> None:
+        if state.landmarks is not None:
+            state.hooks.on("stage_end", _repin)
+
+    def skip_reason(self, state: MatchState):
+        return QUIET if state.landmarks is None else None
+
+    def run(self, state: MatchState) -> None:
+        a, b, lm = state.a, state.b, state.landmarks
+        detail = f"{len(lm)} landmarks"
+        t = state.log.start("landmarks", detail=detail)
+        kind = state.init if isinstance(state.init, str) else None
+        desc = None
+        if kind is not None and a.has_descriptors(kind) and b.has_descriptors(kind):
+            desc = a.internal_descriptors(kind), b.internal_descriptors(kind)
+        cfg = state.config
+        f0 = landmark_initial_map(a, b, state.f0, lm, desc, cfg.landmarks, cfg.refine.repair)
+        moved = int(np.count_nonzero(f0 != state.f0))
+        state.f0 = f0
+        state.timings["landmarks"] = time.perf_counter() - t
+        state.log.ran("landmarks", state.timings["landmarks"], f"{detail}, re-placed {moved}")
+
+
+def _repin(state: MatchState, name: str) -> None:
+    """The "stage_end" subscriber: the landmarks mapped exactly after every stage."""
+    if state.f is not None:
+        state.f = pin(state.f, state.landmarks)
