@@ -16,7 +16,7 @@ from .._version import __version__
 from ..batch.driver import one_line_warning
 from ..evaluation import bench, show
 from ..evaluation.demo import run_demo
-from ..geometry.map_io import check_writable_folder, map_format, write_map
+from ..geometry.map_io import check_writable_folder, map_format, read_landmarks, write_map
 from ..geometry.mesh import load_mesh
 from ..matching import check_match_options, match
 from ..pipeline.progress import ProgressBar
@@ -57,6 +57,7 @@ def cmd_match(args) -> int:
             raise ValueError(f"output {args.output!r} is a folder; give a file name")
         map_format(args.output)
         check_writable_folder(os.path.dirname(os.path.abspath(args.output)))
+    landmarks = None if args.landmarks is None else read_landmarks(args.landmarks)
     a, b = load_mesh(args.a), load_mesh(args.b)
     if not args.multiscale and not args.quiet and min(a.n_vertices, b.n_vertices) >= HINT_VERTICES:
         print(
@@ -68,7 +69,7 @@ def cmd_match(args) -> int:
     bar = ProgressBar()
     show_bar = bar.live and not args.quiet and not args.verbose
     try:
-        res = match(a, b, progress=bar if show_bar else None, **options)
+        res = match(a, b, landmarks=landmarks, progress=bar if show_bar else None, **options)
     finally:
         bar.close()
     coarse = next((s for s in res.stages if s.name == "coarse"), None)
@@ -119,6 +120,11 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     m.add_argument("--init", default="shot", choices=["shot", "wks", "hks"], help="descriptors")
     m.add_argument("--k-max", type=int, default=8, help="largest hop radius (default 8)")
+    m.add_argument(
+        "--landmarks", metavar="FILE",
+        help="vertex pairs known to correspond, one 'A_VERTEX B_VERTEX' line each (0-based): "
+        "mapped exactly, and the map around them follows",
+    )  # fmt: skip
     m.add_argument(
         "--multiscale",
         action="store_true",
