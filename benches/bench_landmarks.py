@@ -46,13 +46,17 @@ def ground_truth_landmarks(sa: hope_rs.Shape, ai: np.ndarray, bi: np.ndarray, n:
     return np.stack([a_in, [first[int(x)] for x in a_in]], axis=1).astype(np.int64)
 
 
-def run_pair(pair: Pair, n_landmarks: int, swap_error: float) -> dict:
+def run_pair(pair: Pair, n_landmarks: int, swap_error: float, without: dict | None = None) -> dict:
     ma, mb = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
     sa, sb = hope_rs.Shape(ma), hope_rs.Shape(mb)
     ai, bi = pair.ground_truth(ma.n_vertices, mb.n_vertices, max_points=None)
     lm = ground_truth_landmarks(sa, ai, bi, n_landmarks)
     row = {"set": pair.dataset, "pair": pair.name, "landmarks": lm.tolist()}
-    for name, given in (("without", None), ("with", lm)):
+    runs = (("without", None), ("with", lm))
+    if without is not None:  # today's map does not change with the landmark code
+        row["without"] = without
+        runs = runs[1:]
+    for name, given in runs:
         t0 = time.perf_counter()
         res = hope_rs.match(sa, sb, landmarks=given)
         seconds = time.perf_counter() - t0
@@ -92,16 +96,26 @@ def main(argv=None) -> int:
     p.add_argument("--swap-error", type=float, default=0.3, help="sqrt(area) units")
     p.add_argument("--swap-share", type=float, default=0.05)
     p.add_argument("--rows", type=Path, default=None, help="JSON lines of per-pair results")
+    p.add_argument(
+        "--reuse-without", type=Path, default=None,
+        help="a --rows file of an earlier run: its maps without landmarks are not recomputed",
+    )  # fmt: skip
     args = p.parse_args(argv)
     rows = []
     if args.rows is not None and args.rows.exists():
         rows = [json.loads(line) for line in args.rows.read_text().splitlines() if line]
     done = {(r["set"], r["pair"]) for r in rows}
+    earlier = {}
+    if args.reuse_without is not None:
+        for line in args.reuse_without.read_text().splitlines():
+            r = json.loads(line)
+            earlier[(r["set"], r["pair"])] = r["without"]
     for s in args.sets:
         for pair in pairs_of(args.data / s)[: args.max_pairs]:
             if (pair.dataset, pair.name) in done:
                 continue
-            row = run_pair(pair, args.landmarks, args.swap_error)
+            key = (pair.dataset, pair.name)
+            row = run_pair(pair, args.landmarks, args.swap_error, earlier.get(key))
             rows.append(row)
             w, o = row["with"], row["without"]
             print(

@@ -136,7 +136,10 @@ def test_landmarks_pull_a_mirrored_start_to_the_right_side(faust_pair):
     lm = spread_landmarks(sa)
     internal = np.stack([sa.rank[lm], sb.rank[lm]], axis=1)
     f0 = landmark_initial_map(sa, sb, sa.map_in(sb, mirror), internal, None)
-    assert geodesic_errors(sb, sa.map_out(sb, f0)).mean() < 0.1
+    err = geodesic_errors(sb, sa.map_out(sb, f0))
+    # The mirrored limbs go back to their side: far fewer vertices stay far from their match
+    # (the mirror image leaves more than half of them farther than 0.3).
+    assert (err > 0.3).mean() < 0.1 and err.mean() < 0.15
 
 
 @pytest.mark.slow

@@ -55,30 +55,35 @@ class InitialConfig:
 
 @dataclass(frozen=True)
 class LandmarkConfig:
-    """What the caller's landmarks (``match(landmarks=...)``) do in each stage
-    (:mod:`hope_rs.pipeline.landmarks`). Every stage keeps them mapped exactly; without
-    landmarks these settings are unused.
+    """What the caller's landmarks (``match(landmarks=...)``) do besides being mapped exactly
+    (:mod:`hope_rs.pipeline.landmarks`); unused without landmarks.
 
-    Distances are edge-graph geodesics in sqrt(area) units; two distances agree by the rule of
-    :class:`RepairConfig` (``agree_rel``, ``agree_abs``).
+    A vertex's distances to the landmarks (edge-graph geodesics, sqrt(area) units) are its
+    landmark coordinates. A match is *off* when the RMS difference between the coordinates of
+    a vertex and of its match exceeds, by more than ``max_gap``, the least any vertex of B
+    achieves: a region mapped onto its mirror image trades its distances to the left and right
+    landmarks, which pose and remeshing stretch far less.
 
     Attributes
     ----------
+    max_gap : float
+        The margin above (sqrt(area) units, RMS over the landmarks).
+    init : bool
+        The "landmarks" stage re-places every off match of the initial map ...
     candidates : int
-        The initial map re-places a vertex among the vertices of B whose distances to the
-        landmarks are the nearest this many to its own, taking the nearest descriptor ...
-    init_min_agree : float
-        ... when its descriptor match agrees with fewer than this share of its distances to the
-        landmarks.
-    refine_min_agree : float
-        A vertex is a witness of the refinement only when its match agrees with at least this
-        share of its distances to the landmarks; the others are re-placed by the global repair,
-        whose anchors include the landmarks.
+        ... at the nearest descriptor among the vertices of B whose landmark coordinates are
+        the nearest this many to the vertex's own.
+    refine_trust : bool
+        An off match is never a witness of the refinement.
+    anchors : bool
+        The refinement's global repair and swapped-region step take the landmarks as anchors.
     """
 
+    max_gap: float = 0.25
+    init: bool = True
     candidates: int = 64
-    init_min_agree: float = 1.0
-    refine_min_agree: float = 0.75
+    refine_trust: bool = True
+    anchors: bool = True
 
 
 @dataclass(frozen=True)

@@ -4,13 +4,13 @@
 Geodesic distances to the landmarks are intrinsic coordinates both shapes share, and unlike
 descriptors they tell a left limb from its mirror image. They act in three places:
 
-* the "landmarks" stage (:class:`LandmarkStage`) re-places every vertex of the initial map
-  whose distances to the landmarks disagree with its match's, at the nearest descriptor among
-  the vertices of B whose distances to the landmarks are nearest its own
-  (:func:`landmark_initial_map`);
+* the "landmarks" stage (:class:`LandmarkStage`) re-places every match of the initial map
+  whose distances to the landmarks fit far worse than they could (a mirrored region), at the
+  nearest descriptor among the vertices of B whose distances to the landmarks are nearest its
+  own (:func:`landmark_initial_map`);
 * the refinement (:func:`hope_rs.pipeline.refine.refine`) pins the landmarks after every step,
-  counts them as witnesses, distrusts vertices that disagree with them
-  (:func:`landmark_trust`), and its global repair takes them as anchors;
+  counts them as witnesses, never trusts such a match (:class:`LandmarkCoordinates`), and its
+  global repair takes the landmarks as anchors;
 * after every later stage (the spectral pass, the finish), the stage re-pins them.
 
 Without landmarks none of this runs and the map is the one ``match`` makes without them.
@@ -24,16 +24,15 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..shape import Shape
-from .anchors import agree, distance_fields, reachable
+from .anchors import distance_fields, reachable
 from .config import LandmarkConfig, RepairConfig
 from .state import QUIET, MatchState, Stage
 
 __all__ = [
+    "LandmarkCoordinates",
     "LandmarkStage",
     "check_landmarks",
-    "landmark_fields",
     "landmark_initial_map",
-    "landmark_trust",
     "pin",
 ]
 
@@ -103,22 +102,30 @@ def pin(f: np.ndarray, landmarks: np.ndarray | None) -> np.ndarray:
     return g
 
 
-def landmark_fields(
-    a: Shape, b: Shape, landmarks: np.ndarray, config: RepairConfig = RepairConfig()
-) -> tuple[np.ndarray, np.ndarray]:
-    """Distances (sqrt(area) units, (m, n_a) and (m, n_b)) from the landmarks on A and on B,
-    vertices of other components at ``config.unreachable``."""
-    da = reachable(distance_fields(a, landmarks[:, 0]), config)
-    db = reachable(distance_fields(b, landmarks[:, 1]), config)
-    return da, db
+class LandmarkCoordinates:
+    """Landmark coordinates of both shapes: ``da`` (m, n_a) and ``db`` (m, n_b) distances
+    (sqrt(area) units) from the landmarks on A and on B, vertices of other components at
+    ``repair.unreachable``; and, per vertex of A, the least RMS difference ``best`` any vertex
+    of B achieves (``nearest`` is that vertex)."""
 
+    def __init__(
+        self, a: Shape, b: Shape, landmarks: np.ndarray, repair: RepairConfig = RepairConfig()
+    ):
+        self.da = reachable(distance_fields(a, landmarks[:, 0]), repair)
+        self.db = reachable(distance_fields(b, landmarks[:, 1]), repair)
+        self.tree = cKDTree(self.db.T)
+        best, self.nearest = self.tree.query(self.da.T)
+        self.best = best / np.sqrt(len(landmarks))
 
-def landmark_trust(
-    f: np.ndarray, da: np.ndarray, db: np.ndarray, min_agree: float, config: RepairConfig
-) -> np.ndarray:
-    """Whether each vertex's match keeps at least ``min_agree`` of its distances to the
-    landmarks (``da``, ``db`` from :func:`landmark_fields`)."""
-    return agree(da, db[:, f], config).mean(axis=0) >= min_agree
+    def gap(self, f: np.ndarray, rows=slice(None)) -> np.ndarray:
+        """How much worse than ``best`` the matches ``f[rows]`` of the vertices ``rows`` fit
+        (RMS over the landmarks)."""
+        d = self.da[:, rows] - self.db[:, f[rows]]
+        return np.sqrt((d * d).mean(axis=0)) - self.best[rows]
+
+    def off(self, f: np.ndarray, max_gap: float) -> np.ndarray:
+        """Whether each vertex's match fits more than ``max_gap`` worse than ``best``."""
+        return self.gap(f) > max_gap
 
 
 def landmark_initial_map(
@@ -128,31 +135,27 @@ def landmark_initial_map(
     landmarks: np.ndarray,
     desc: tuple[np.ndarray, np.ndarray] | None,
     config: LandmarkConfig = LandmarkConfig(),
-    repair: RepairConfig = RepairConfig(),
+    coords: LandmarkCoordinates | None = None,
 ) -> np.ndarray:
-    """``f0`` with the landmarks pinned and every vertex whose match disagrees with its
-    distances to the landmarks (see ``config.init_min_agree``) re-placed: among the
-    ``config.candidates`` vertices of B whose distances to the landmarks are nearest its own,
-    the one of nearest descriptor (``desc``: A's and B's, internal numbering), or without
-    descriptors the nearest by distances."""
-    da, db = landmark_fields(a, b, landmarks, repair)
-    ok = landmark_trust(f0, da, db, config.init_min_agree, repair)
-    moved = np.flatnonzero(~ok)
+    """``f0`` with the landmarks pinned and every off match (see :class:`LandmarkConfig`)
+    re-placed: among the ``config.candidates`` vertices of B whose landmark coordinates are
+    nearest the vertex's own, the one of nearest descriptor (``desc``: A's and B's, internal
+    numbering), or without descriptors the nearest by coordinates. ``coords``: the shapes'
+    :class:`LandmarkCoordinates`, if computed already."""
+    coords = LandmarkCoordinates(a, b, landmarks) if coords is None else coords
+    moved = np.flatnonzero(coords.off(f0, config.max_gap))
     f = f0.copy()
-    if moved.size:
-        tree = cKDTree(db.T)
-        k = 1 if desc is None else min(config.candidates, b.n_vertices)
-        _, cand = tree.query(da[:, moved].T, k=k)
-        if desc is None:
-            f[moved] = cand
-        else:
-            cand = cand.reshape(moved.size, k)
-            ea, eb = desc
-            for s in range(0, moved.size, _CHUNK):
-                rows, c = moved[s : s + _CHUNK], cand[s : s + _CHUNK]
-                diff = eb[c] - ea[rows][:, None, :]
-                best = np.argmin(np.einsum("ijk,ijk->ij", diff, diff), axis=1)
-                f[rows] = c[np.arange(rows.size), best]
+    if desc is None:
+        f[moved] = coords.nearest[moved]
+    elif moved.size:
+        k = min(config.candidates, b.n_vertices)
+        cand = coords.tree.query(coords.da[:, moved].T, k=k)[1].reshape(moved.size, k)
+        ea, eb = desc
+        for s in range(0, moved.size, _CHUNK):
+            rows, c = moved[s : s + _CHUNK], cand[s : s + _CHUNK]
+            diff = eb[c] - ea[rows][:, None, :]
+            best = np.argmin(np.einsum("ijk,ijk->ij", diff, diff), axis=1)
+            f[rows] = c[np.arange(rows.size), best]
     return pin(f, landmarks)
 
 
@@ -179,7 +182,10 @@ class LandmarkStage(Stage):
         if kind is not None and a.has_descriptors(kind) and b.has_descriptors(kind):
             desc = a.internal_descriptors(kind), b.internal_descriptors(kind)
         cfg = state.config
-        f0 = landmark_initial_map(a, b, state.f0, lm, desc, cfg.landmarks, cfg.refine.repair)
+        f0 = pin(state.f0, lm)
+        if cfg.landmarks.init:
+            coords = LandmarkCoordinates(a, b, lm, cfg.refine.repair)
+            f0 = landmark_initial_map(a, b, state.f0, lm, desc, cfg.landmarks, coords)
         moved = int(np.count_nonzero(f0 != state.f0))
         state.f0 = f0
         state.timings["landmarks"] = time.perf_counter() - t

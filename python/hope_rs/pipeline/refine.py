@@ -18,7 +18,7 @@ from ..kernels.maps import hint_rows, injective_completion
 from ..shape import Shape
 from .anchors import anchor_step, swapped_regions
 from .config import LandmarkConfig, RefineConfig, RepairConfig
-from .landmarks import landmark_fields, landmark_trust, pin
+from .landmarks import LandmarkCoordinates, pin
 from .lmd import LmdTracker
 from .progress import StageLog, step_detail
 from .state import Iteration, MatchState, Stage
@@ -101,8 +101,8 @@ def refine(
     there when its rounds will take over).
 
     ``landmarks`` ((m, 2) internal vertex pairs, or None) are mapped exactly after every step
-    and always witnesses; a vertex whose match disagrees with its distances to them
-    (``landmark_config.refine_min_agree``) is never one, and the global repair and the swapped
+    and always witnesses; a vertex whose match fits its distances to them far worse than it
+    could (``landmark_config.max_gap``) is never one, and the global repair and the swapped
     region step take them as anchors (:mod:`hope_rs.pipeline.landmarks`).
     """
     k_max = min(a.k_max, b.k_max)
@@ -112,16 +112,18 @@ def refine(
         raise ValueError(f"every k of the schedule must be in [1, {k_max}], got {schedule}")
     f = np.ascontiguousarray(f0, dtype=np.int64)
     lmd = LmdTracker(a, b)
-    fixed = None
+    coords = fixed = None
     if landmarks is not None:
-        fixed = landmark_fields(a, b, landmarks, cfg.repair)
+        coords = LandmarkCoordinates(a, b, landmarks, cfg.repair)
+        fixed = (coords.da, coords.db) if landmark_config.anchors else None
         f = pin(f, landmarks)
 
     def trusted(w: np.ndarray, f: np.ndarray) -> np.ndarray:
         """The witnesses ``w`` of ``f`` as the landmarks judge them."""
-        if fixed is None:
+        if coords is None:
             return w
-        w = w & landmark_trust(f, *fixed, landmark_config.refine_min_agree, cfg.repair)
+        if landmark_config.refine_trust:
+            w = w & ~coords.off(f, landmark_config.max_gap)
         w[landmarks[:, 0]] = True
         return w
 
