@@ -8,6 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from meshes import bumpy_sphere, inverse, relabel, write_off
 from scipy.spatial import cKDTree
+from conftest import data_path
 from strategies import permutations
 
 import hope_rs
@@ -16,7 +17,7 @@ from hope_rs.cli import main
 from hope_rs.evaluation.evaluate import geodesic_errors
 from hope_rs.geometry.map_io import read_landmarks
 from hope_rs.pipeline.anchors import farthest_witnesses
-from hope_rs.pipeline.landmarks import check_landmarks, landmark_initial_map
+from hope_rs.pipeline.landmarks import check_landmarks, coarse_landmarks, landmark_initial_map
 
 FAST = {"max_passes": 2, "spectral": False}
 
@@ -194,3 +195,27 @@ def test_cli_landmark_errors_are_one_line(tmp_path, spheres, capsys, text, messa
 def test_cli_missing_landmark_file(tmp_path, capsys):
     assert main(["match", "a.off", "b.off", "--landmarks", str(tmp_path / "none.txt")]) == 2
     assert "no such landmark file" in capsys.readouterr().err
+
+
+def test_coarse_landmarks_drop_rows_that_share_a_cell():
+    owner_a = np.array([0, 0, 1, 2, 3])
+    owner_b = np.array([5, 4, 4, 3, 2])
+    # Rows 0 and 1 fall in one cell of A; rows 2 and 3 in one cell of B (4).
+    lm = np.array([[0, 0], [1, 3], [2, 1], [3, 2], [4, 4]])
+    got = coarse_landmarks(lm, owner_a, owner_b)
+    np.testing.assert_array_equal(got, [[3, 2]])
+    assert coarse_landmarks(lm[:2], owner_a, owner_b) is None
+
+
+@pytest.mark.slow
+def test_multiscale_match_keeps_the_landmarks():
+    a = hope_rs.load_mesh(data_path("tosca", "cat0.off"))
+    b = hope_rs.load_mesh(data_path("tosca", "cat6.off"))
+    sa = hope_rs.Shape(a)
+    lm = spread_landmarks(sa)
+    rows = np.stack([lm, lm], axis=1)  # the identity is the ground truth of this pair
+    res = hope_rs.match(sa, b, landmarks=rows, multiscale=True, spectral=False)
+    assert res.coarse is not None and "landmarks" in [s.name for s in res.coarse.stages]
+    np.testing.assert_array_equal(res.map[lm], lm)
+    err = geodesic_errors(b, res.map, a_idx=np.arange(0, a.n_vertices, 7))
+    assert err.mean() < 0.03

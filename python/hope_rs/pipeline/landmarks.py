@@ -32,6 +32,7 @@ __all__ = [
     "LandmarkCoordinates",
     "LandmarkStage",
     "check_landmarks",
+    "coarse_landmarks",
     "landmark_initial_map",
     "pin",
 ]
@@ -90,6 +91,22 @@ def check_landmarks(landmarks, n_a: int, n_b: int) -> np.ndarray | None:
                 f"{int(rows[0])} and {int(rows[1])} of {other}; give each vertex at most once"
             )
     return arr
+
+
+def coarse_landmarks(
+    landmarks: np.ndarray, owner_a: np.ndarray, owner_b: np.ndarray
+) -> np.ndarray | None:
+    """The landmarks carried to coarse copies of both shapes (fine vertex ``i`` belongs to
+    coarse vertex ``owner[i]``): a row whose coarse vertex of A or of B another row takes too
+    is dropped (two landmarks in one cell), as are later copies of a row; ``None`` if none is
+    left."""
+    rows = np.stack([owner_a[landmarks[:, 0]], owner_b[landmarks[:, 1]]], axis=1)
+    rows = np.unique(rows, axis=0)
+    keep = np.ones(len(rows), dtype=bool)
+    for col in (0, 1):
+        v, count = np.unique(rows[:, col], return_counts=True)
+        keep &= ~np.isin(rows[:, col], v[count > 1])
+    return rows[keep] if keep.any() else None
 
 
 def pin(f: np.ndarray, landmarks: np.ndarray | None) -> np.ndarray:

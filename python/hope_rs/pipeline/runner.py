@@ -92,8 +92,19 @@ def run_match(
 def _nested_run(stages: list[Stage] | None) -> Callable:
     """:func:`run_match` for a stage that matches other shapes, with fresh stages."""
 
-    def run(a: Shape, b: Shape, init, config: MatchConfig, *, callback=None, progress=None):
+    def run(
+        a: Shape, b: Shape, init, config: MatchConfig, *, callback=None, progress=None, landmarks=None
+    ):
         fresh = None if stages is None else [type(s)() for s in stages]
-        return run_match(a, b, init, config, callback=callback, progress=progress, stages=fresh)
+        return run_match(
+            a,
+            b,
+            init,
+            config,
+            callback=callback,
+            progress=progress,
+            stages=fresh,
+            landmarks=landmarks,
+        )
 
     return run

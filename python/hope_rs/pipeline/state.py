@@ -92,8 +92,8 @@ class MatchState:
     callback : callable or None
         The caller's per-step callback.
     run : callable
-        The runner itself, ``run(a, b, init, config, progress=...)`` → MatchResult, for stages
-        that match other shapes (the multiscale stage's coarse copies).
+        The runner itself, ``run(a, b, init, config, progress=..., landmarks=...)`` →
+        MatchResult, for stages that match other shapes (the multiscale stage's coarse copies).
     f0, f : ndarray or None
         The initial map, and the current map.
     hope_map : ndarray or None
