@@ -4,11 +4,11 @@ import re
 
 import numpy as np
 import pytest
+from conftest import data_path
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from meshes import bumpy_sphere, inverse, relabel, write_off
 from scipy.spatial import cKDTree
-from conftest import data_path
 from strategies import permutations
 
 import hope_rs
@@ -81,8 +81,16 @@ BAD = [
     ([[0, 1], [N, 2]], ValueError, rf"row 1 \({N}, 2\): vertex {N} is not a vertex of A, .*{N}"),
     ([[-1, 2]], ValueError, r"row 0 \(-1, 2\): vertex -1 is not a vertex of A"),
     ([[3, N + 5]], ValueError, rf"vertex {N + 5} is not a vertex of B"),
-    ([[3, 4], [3, 5]], ValueError, r"contradict.*vertex 3 of A is paired with vertices 4 and 5 of B"),
-    ([[3, 9], [7, 9]], ValueError, r"contradict.*vertex 9 of B is paired with vertices 3 and 7 of A"),
+    (
+        [[3, 4], [3, 5]],
+        ValueError,
+        r"contradict.*vertex 3 of A is paired with vertices 4 and 5 of B",
+    ),
+    (
+        [[3, 9], [7, 9]],
+        ValueError,
+        r"contradict.*vertex 9 of B is paired with vertices 3 and 7 of A",
+    ),
     ([[0, 1], [[2], 3]], TypeError, r"landmarks must be an \(m, 2\) array"),
 ]
 

@@ -82,7 +82,7 @@ def check_landmarks(landmarks, n_a: int, n_b: int) -> np.ndarray | None:
             )
     arr = np.unique(arr, axis=0)
     for col, name, other in ((0, "A", "B"), (1, "B", "A")):
-        v, first, count = np.unique(arr[:, col], return_index=True, return_counts=True)
+        v, count = np.unique(arr[:, col], return_counts=True)
         if (count > 1).any():
             x = int(v[np.argmax(count > 1)])
             rows = arr[arr[:, col] == x][:, 1 - col]

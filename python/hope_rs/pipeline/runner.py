@@ -93,7 +93,14 @@ def _nested_run(stages: list[Stage] | None) -> Callable:
     """:func:`run_match` for a stage that matches other shapes, with fresh stages."""
 
     def run(
-        a: Shape, b: Shape, init, config: MatchConfig, *, callback=None, progress=None, landmarks=None
+        a: Shape,
+        b: Shape,
+        init,
+        config: MatchConfig,
+        *,
+        callback=None,
+        progress=None,
+        landmarks=None,
     ):
         fresh = None if stages is None else [type(s)() for s in stages]
         return run_match(
