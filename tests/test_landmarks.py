@@ -7,6 +7,7 @@ import pytest
 from conftest import data_path
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
 from meshes import bumpy_sphere, inverse, relabel, write_off
 from scipy.spatial import cKDTree
 from strategies import permutations
@@ -81,6 +82,7 @@ BAD = [
     ([[0, 1], [N, 2]], ValueError, rf"row 1 \({N}, 2\): vertex {N} is not a vertex of A, .*{N}"),
     ([[-1, 2]], ValueError, r"row 0 \(-1, 2\): vertex -1 is not a vertex of A"),
     ([[3, N + 5]], ValueError, rf"vertex {N + 5} is not a vertex of B"),
+    (np.array([[2**63, 1]], np.uint64), ValueError, rf"vertex {2**63} is not a vertex of A"),
     (
         [[3, 4], [3, 5]],
         ValueError,
@@ -107,6 +109,20 @@ def test_bad_landmarks_fail_in_one_line_before_any_work(no_shapes, landmarks, ex
 def test_a_landmark_given_twice_counts_once():
     got = check_landmarks([[4, 5], [1, 2], [4, 5]], 10, 10)
     np.testing.assert_array_equal(got, [[1, 2], [4, 5]])
+
+
+@given(rows=arrays(np.int64, st.tuples(st.integers(1, 8), st.just(2)), elements=st.integers(0, 5)))
+def test_checked_landmarks_are_the_given_rows_one_to_one_or_an_error(rows):
+    try:
+        got = check_landmarks(rows, 6, 6)
+    except ValueError as e:
+        assert "contradict" in str(e)
+        # A contradiction is real: some vertex appears with two different partners.
+        pairs = {tuple(r) for r in rows.tolist()}
+        assert len({a for a, _ in pairs}) < len(pairs) or len({b for _, b in pairs}) < len(pairs)
+        return
+    assert {tuple(r) for r in got.tolist()} == {tuple(r) for r in rows.tolist()}
+    assert np.unique(got[:, 0]).size == np.unique(got[:, 1]).size == len(got)
 
 
 @settings(max_examples=4, deadline=None)

@@ -71,7 +71,7 @@ def check_landmarks(landmarks, n_a: int, n_b: int) -> np.ndarray | None:
             f"landmarks must have shape (m, 2), one (vertex of A, vertex of B) row per "
             f"landmark, got shape {arr.shape}"
         )
-    arr = arr.astype(np.int64)
+    # Checked in the given dtype, so that huge unsigned values are not wrapped first.
     for col, n, name in ((0, n_a, "A"), (1, n_b, "B")):
         bad = np.flatnonzero((arr[:, col] < 0) | (arr[:, col] >= n))
         if bad.size:
@@ -80,7 +80,7 @@ def check_landmarks(landmarks, n_a: int, n_b: int) -> np.ndarray | None:
                 f"landmark row {r} ({arr[r, 0]}, {arr[r, 1]}): vertex {arr[r, col]} is not a "
                 f"vertex of {name}, which has {n} (0-based indices 0..{n - 1})"
             )
-    arr = np.unique(arr, axis=0)
+    arr = np.unique(arr.astype(np.int64), axis=0)
     for col, name, other in ((0, "A", "B"), (1, "B", "A")):
         v, count = np.unique(arr[:, col], return_counts=True)
         if (count > 1).any():
