@@ -122,8 +122,12 @@ def refine(
         """The witnesses ``w`` of ``f`` as the landmarks judge them."""
         if coords is None:
             return w
-        if landmark_config.refine_trust:
-            w = w & ~coords.off(f, landmark_config.max_gap)
+        # A new array: ``w`` may be the tracker's own.
+        w = (
+            w & ~coords.off(f, landmark_config.max_gap)
+            if landmark_config.refine_trust
+            else w.copy()
+        )
         w[landmarks[:, 0]] = True
         return w
 
