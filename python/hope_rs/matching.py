@@ -13,6 +13,7 @@ import numpy as np
 from ._validate import as_index_map
 from .geometry.mesh import Mesh, as_mesh
 from .pipeline.config import KEYWORDS, MatchConfig
+from .pipeline.landmarks import check_landmarks
 from .pipeline.options import check_options
 from .pipeline.progress import ProgressBar, StageLog
 from .pipeline.result import MatchResult
@@ -40,6 +41,7 @@ def match(
     b,
     *,
     init=None,
+    landmarks=None,
     config: MatchConfig | None = None,
     callback=None,
     progress=None,
@@ -54,6 +56,12 @@ def match(
     init : {"shot", "wks", "hks"} or (n_a,) array_like of int, keyword-only
         Descriptors for the initial map (default ``config.initial.descriptor``, "shot"), or
         an initial map itself (``init[i]`` a vertex of B).
+    landmarks : (m, 2) array_like of int, keyword-only
+        Vertex pairs known to correspond: row ``(i, j)`` says vertex ``i`` of A is vertex
+        ``j`` of B (0-based, the meshes' own numbering). The map sends each exactly there,
+        and the vertices around them follow: a few well-spread landmarks (four extremities)
+        tell a left limb from the right one. ``None`` or an empty array: none
+        (:mod:`hope_rs.pipeline.landmarks`; their settings are ``config.landmarks``).
     config : MatchConfig, optional
         Every setting, stage by stage (:class:`~hope_rs.MatchConfig`); default
         ``MatchConfig()``, the method's one parameter set for all data.
@@ -124,6 +132,7 @@ def match(
     ma, mb = _as_mesh(a, config.k_max, "a"), _as_mesh(b, config.k_max, "b")
     if not isinstance(init, str):
         init = as_index_map(init, ma.n_vertices, mb.n_vertices, name="init")
+    landmarks = check_landmarks(landmarks, ma.n_vertices, mb.n_vertices)
     sa, sb = _as_shape(ma, config), _as_shape(mb, config)
     timings = {"shapes": time.perf_counter() - t0}
     if isinstance(progress, (bool, np.bool_)):  # True: the bar; False: nothing
@@ -134,7 +143,9 @@ def match(
     log.ran("shapes", timings["shapes"], f"A {sa.n_vertices} vertices, B {sb.n_vertices}")
     # The bar's line ends on every exit (an error or Ctrl-C included).
     try:
-        return run_match(sa, sb, init, config, callback=callback, log=log, timings=timings)
+        return run_match(
+            sa, sb, init, config, callback=callback, log=log, timings=timings, landmarks=landmarks
+        )
     finally:
         if bar is not None:
             bar.close()

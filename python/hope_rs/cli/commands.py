@@ -18,7 +18,13 @@ from .._version import __version__
 from ..batch.driver import one_line_warning
 from ..evaluation import bench, show
 from ..evaluation.demo import run_demo
-from ..geometry.map_io import atomic_write, check_writable_folder, map_format, write_map
+from ..geometry.map_io import (
+    atomic_write,
+    check_writable_folder,
+    map_format,
+    read_landmarks,
+    write_map,
+)
 from ..geometry.mesh import load_mesh
 from ..matching import check_match_options, match
 from ..pipeline.progress import ProgressBar
@@ -66,6 +72,7 @@ def cmd_match(args) -> int:
                 f"--confidence-out {args.confidence_out!r} must end in .npy (a NumPy float array)"
             )
         check_writable_folder(os.path.dirname(os.path.abspath(args.confidence_out)))
+    landmarks = None if args.landmarks is None else read_landmarks(args.landmarks)
     a, b = load_mesh(args.a), load_mesh(args.b)
     if not args.multiscale and not args.quiet and min(a.n_vertices, b.n_vertices) >= HINT_VERTICES:
         print(
@@ -77,7 +84,7 @@ def cmd_match(args) -> int:
     bar = ProgressBar()
     show_bar = bar.live and not args.quiet and not args.verbose
     try:
-        res = match(a, b, progress=bar if show_bar else None, **options)
+        res = match(a, b, landmarks=landmarks, progress=bar if show_bar else None, **options)
     finally:
         bar.close()
     coarse = next((s for s in res.stages if s.name == "coarse"), None)
@@ -138,6 +145,11 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     m.add_argument("--init", default="shot", choices=["shot", "wks", "hks"], help="descriptors")
     m.add_argument("--k-max", type=int, default=8, help="largest hop radius (default 8)")
+    m.add_argument(
+        "--landmarks", metavar="FILE",
+        help="vertex pairs known to correspond, one 'A_VERTEX B_VERTEX' line each (0-based): "
+        "mapped exactly, and the map around them follows",
+    )  # fmt: skip
     m.add_argument(
         "--multiscale",
         action="store_true",

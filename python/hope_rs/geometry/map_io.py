@@ -22,7 +22,14 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["MAP_SUFFIXES", "atomic_write", "check_writable_folder", "read_map", "write_map"]
+__all__ = [
+    "MAP_SUFFIXES",
+    "atomic_write",
+    "check_writable_folder",
+    "read_landmarks",
+    "read_map",
+    "write_map",
+]
 
 #: Map file suffixes and their format: "text" (one index per line) or "npy" (NumPy int64).
 MAP_SUFFIXES = {".txt": "text", ".csv": "text", "": "text", ".npy": "npy"}
@@ -194,6 +201,46 @@ def read_map(
             "indices must be below the vertex count)"
         )
     return arr
+
+
+def read_landmarks(path: str | os.PathLike) -> np.ndarray:
+    """Read a landmark file: one ``A_VERTEX B_VERTEX`` pair per line (0-based, separated by
+    spaces, tabs or a comma; ``#`` starts a comment; blank lines are skipped).
+
+    Returns
+    -------
+    (m, 2) int64 ndarray
+        Checked for form only; :func:`hope_rs.match` checks the indices against the meshes.
+
+    Raises
+    ------
+    FileNotFoundError
+        No such file.
+    ValueError
+        A one-line message naming the file and the first bad line.
+    """
+    name = os.fspath(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise FileNotFoundError(f"no such landmark file: {name!r}") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise ValueError(f"cannot read landmark file {name!r}: {e}") from None
+    rows = []
+    for n, line in enumerate(text.splitlines(), 1):
+        words = line.split("#", 1)[0].replace(",", " ").split()
+        if not words:
+            continue
+        try:
+            if len(words) != 2:
+                raise ValueError
+            rows.append((int(words[0]), int(words[1])))
+        except ValueError:
+            raise ValueError(
+                f"{name}:{n}: expected two 0-based vertex indices 'A_VERTEX B_VERTEX', got "
+                f"{line.strip()!r}"
+            ) from None
+    return np.array(rows, dtype=np.int64).reshape(-1, 2)
 
 
 def text_map_is_complete(path: str | os.PathLike) -> bool:

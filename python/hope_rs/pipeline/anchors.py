@@ -100,6 +100,7 @@ def anchor_step(
     *,
     global_check: bool = False,
     config: RepairConfig = RepairConfig(),
+    fixed: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """``f`` with every untrusted vertex moved to the vertex of B whose geodesic distances to
     the anchors' images are closest to its own distances to the anchors.
@@ -116,6 +117,10 @@ def anchor_step(
     remaining anchors agree. The check acts only when it flags at least
     ``config.global_min_flagged`` of the trusted vertices (a region, not scattered stretch), and
     a vertex it flags moves only as far as a mirror image lies (``config.flagged_min_shift``).
+
+    ``fixed``: the distance fields on A and on B ((m, n_a), (m, n_b), already
+    :func:`reachable`) of anchors known to be right (the caller's landmarks), used besides the
+    farthest-point ones and never dropped.
     """
     cand = np.flatnonzero(trusted)
     if cand.size < 4 or (cand.size == trusted.size and not global_check):
@@ -126,6 +131,9 @@ def anchor_step(
     flagged = None
     if global_check:
         anchors, da, db = drop_disagreeing_anchors(f, anchors, da, db, config)
+    if fixed is not None:
+        da, db = np.vstack([fixed[0], da]), np.vstack([fixed[1], db])
+    if global_check:
         flagged = trusted & (agree(da, db[:, f], config).mean(axis=0) < config.global_min_agree)
         if flagged.sum() >= config.global_min_flagged * trusted.sum():
             trusted = trusted & ~flagged
@@ -178,6 +186,7 @@ def swapped_regions(
     f: np.ndarray,
     consistent: np.ndarray,
     config: RepairConfig = RepairConfig(),
+    fixed: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """``f`` with every region that is mapped consistently but to the wrong place moved back.
 
@@ -191,7 +200,8 @@ def swapped_regions(
     anchors, and another region moves to its place by anchor distances
     (:class:`AnchorPlacement`) when that raises its share of agreeing anchor distances by
     ``config.region_min_gain`` and the place is ``config.region_min_shift`` away: every placement by
-    anchors agrees better, since it is chosen to, but only a wrong region moves far.
+    anchors agrees better, since it is chosen to, but only a wrong region moves far. ``fixed``:
+    see :func:`anchor_step`.
     """
     firm = consistent >= config.region_consistent
     if firm.sum() < 4:
@@ -215,6 +225,8 @@ def swapped_regions(
     if not others:
         return f
     db = reachable(db, config)
+    if fixed is not None:
+        da, db = np.vstack([fixed[0], da]), np.vstack([fixed[1], db])
     placement = AnchorPlacement(da, db, config.search_dims)
     owner = None
     g = f.copy()

@@ -30,6 +30,7 @@ __all__ = [
     "FinishConfig",
     "GrowthConfig",
     "InitialConfig",
+    "LandmarkConfig",
     "MatchConfig",
     "MultiscaleConfig",
     "RefineConfig",
@@ -52,6 +53,39 @@ class InitialConfig:
 
     descriptor: str = "shot"
     search: SearchConfig = field(default_factory=SearchConfig)
+
+
+@dataclass(frozen=True)
+class LandmarkConfig:
+    """What the caller's landmarks (``match(landmarks=...)``) do besides being mapped exactly
+    (:mod:`hope_rs.pipeline.landmarks`); unused without landmarks.
+
+    A vertex's distances to the landmarks (edge-graph geodesics, sqrt(area) units) are its
+    landmark coordinates. A match is *off* when the RMS difference between the coordinates of
+    a vertex and of its match exceeds, by more than ``max_gap``, the least any vertex of B
+    achieves: a region mapped onto its mirror image trades its distances to the left and right
+    landmarks, which pose and remeshing stretch far less.
+
+    Attributes
+    ----------
+    max_gap : float
+        The margin above (sqrt(area) units, RMS over the landmarks).
+    init : bool
+        The "landmarks" stage re-places every off match of the initial map ...
+    candidates : int
+        ... at the nearest descriptor among the vertices of B whose landmark coordinates are
+        the nearest this many to the vertex's own.
+    refine_trust : bool
+        An off match is never a witness of the refinement.
+    anchors : bool
+        The refinement's global repair and swapped-region step take the landmarks as anchors.
+    """
+
+    max_gap: float = 0.25
+    init: bool = True
+    candidates: int = 64
+    refine_trust: bool = True
+    anchors: bool = True
 
 
 @dataclass(frozen=True)
@@ -412,6 +446,8 @@ class MatchConfig:
         from meshes; a :class:`~hope_rs.Shape` passed in keeps its own.
     initial, refine, spectral, finish, multiscale, confidence
         The stages' settings.
+    landmarks : LandmarkConfig
+        What the caller's landmarks do, when there are any.
 
     Examples
     --------
@@ -431,6 +467,7 @@ class MatchConfig:
     finish: FinishConfig = field(default_factory=FinishConfig)
     multiscale: MultiscaleConfig = field(default_factory=MultiscaleConfig)
     confidence: ConfidenceConfig = field(default_factory=ConfidenceConfig)
+    landmarks: LandmarkConfig = field(default_factory=LandmarkConfig)
 
     def with_options(self, **options) -> MatchConfig:
         """A copy with ``match``'s keyword options (see :data:`KEYWORDS`) set."""

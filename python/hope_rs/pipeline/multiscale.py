@@ -35,6 +35,7 @@ from ..features.descriptors import shot_at
 from ..geometry.mesh import Mesh, unique_edges
 from ..shape import Shape
 from .config import MultiscaleConfig
+from .landmarks import coarse_landmarks
 from .spectral import applies as spectral_applies
 from .state import QUIET, MatchState, Stage
 
@@ -156,7 +157,12 @@ class MultiscaleStage(Stage):
             spectral=spectral,
             multiscale=dataclasses.replace(cfg.multiscale, enabled=False),
         )
-        res = state.run(csa, csb, init, coarse_cfg, callback=state.callback, progress=relay)
+        lm = None
+        if state.landmarks is not None:
+            lm = coarse_landmarks(state.landmarks, ca.owner, cb.owner)
+        res = state.run(
+            csa, csb, init, coarse_cfg, callback=state.callback, progress=relay, landmarks=lm
+        )
         state.f0 = lift_map(
             ca.mesh, cb.mesh, res.map, a.points, ca.owner, b.points, cfg.multiscale.lift_ridge
         )

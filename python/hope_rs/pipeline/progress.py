@@ -26,13 +26,15 @@ logger = logging.getLogger("hope_rs")
 logger.addHandler(logging.NullHandler())
 
 #: Every stage name a match can report, in the order they run. "coarse" and "lift" appear
-#: only with ``multiscale=True``; "polish" is the refinement's last, not one-to-one step.
+#: only with ``multiscale=True``, "landmarks" only with landmarks; "polish" is the
+#: refinement's last, not one-to-one step.
 STAGES = (
     "shapes",
     "descriptors",
     "init",
     "coarse",
     "lift",
+    "landmarks",
     "refine",
     "polish",
     "spectral",

@@ -17,7 +17,8 @@ from .._blas import with_single_threaded_blas
 from ..kernels.maps import hint_rows, injective_completion
 from ..shape import Shape
 from .anchors import anchor_step, swapped_regions
-from .config import RefineConfig, RepairConfig
+from .config import LandmarkConfig, RefineConfig, RepairConfig
+from .landmarks import LandmarkCoordinates, pin
 from .lmd import LmdTracker
 from .progress import StageLog, step_detail
 from .state import Iteration, MatchState, Stage
@@ -61,6 +62,8 @@ def refine(
     callback=None,
     on_last_pass=None,
     last_pass_if=None,
+    landmarks: np.ndarray | None = None,
+    landmark_config: LandmarkConfig = LandmarkConfig(),
 ) -> RefineResult:
     """Refine the map ``f0`` (A → B) with HOPE.
 
@@ -96,6 +99,11 @@ def refine(
     second on; once it returns True, that pass is the last (and ``on_last_pass`` fires in it).
     (the runner's "stop_refining" question: the shared-face finish stops the refinement
     there when its rounds will take over).
+
+    ``landmarks`` ((m, 2) internal vertex pairs, or None) are mapped exactly after every step
+    and always witnesses; a vertex whose match fits its distances to them far worse than it
+    could (``landmark_config.max_gap``) is never one, and the global repair and the swapped
+    region step take them as anchors (:mod:`hope_rs.pipeline.landmarks`).
     """
     k_max = min(a.k_max, b.k_max)
     cfg, min_consistent = config, config.min_consistent
@@ -104,6 +112,25 @@ def refine(
         raise ValueError(f"every k of the schedule must be in [1, {k_max}], got {schedule}")
     f = np.ascontiguousarray(f0, dtype=np.int64)
     lmd = LmdTracker(a, b)
+    coords = fixed = None
+    if landmarks is not None:
+        coords = LandmarkCoordinates(a, b, landmarks, cfg.repair)
+        fixed = (coords.da, coords.db) if landmark_config.anchors else None
+        f = pin(f, landmarks)
+
+    def trusted(w: np.ndarray, f: np.ndarray) -> np.ndarray:
+        """The witnesses ``w`` of ``f`` as the landmarks judge them."""
+        if coords is None:
+            return w
+        # A new array: ``w`` may be the tracker's own.
+        w = (
+            w & ~coords.off(f, landmark_config.max_gap)
+            if landmark_config.refine_trust
+            else w.copy()
+        )
+        w[landmarks[:, 0]] = True
+        return w
+
     history: list[Iteration] = []
     last_fraction = -1.0
     last_pass_changed = -1
@@ -114,7 +141,7 @@ def refine(
             last_pass = n_pass
         if cfg.global_step:
             t0 = time.perf_counter()
-            w = lmd.witnesses(f, min_consistent=min_consistent)
+            w = trusted(lmd.witnesses(f, min_consistent=min_consistent), f)
             untrusted, before = 1.0 - w.mean(), 1.0 - last_fraction
             drop = before * (1.0 - cfg.min_untrusted_drop)
             if n_pass >= cfg.untrusted_drop_pass and untrusted > drop:
@@ -123,13 +150,22 @@ def refine(
             f_new = f
             if n_pass >= cfg.region_check_pass:
                 consistent = lmd.local_map_distortion(f)[1]
-                f_new = swapped_regions(a, b, f, consistent, cfg.repair)
+                f_new = pin(swapped_regions(a, b, f, consistent, cfg.repair, fixed), landmarks)
                 if f_new is not f:
-                    w = lmd.witnesses(f_new, min_consistent=min_consistent)
+                    w = trusted(lmd.witnesses(f_new, min_consistent=min_consistent), f_new)
             check = n_pass >= cfg.global_check_pass
             f_new = global_repair(
-                a, b, f_new, w, min_consistent, global_check=check, lmd=lmd, config=cfg.repair
+                a,
+                b,
+                f_new,
+                w,
+                min_consistent,
+                global_check=check,
+                lmd=lmd,
+                config=cfg.repair,
+                fixed=fixed,
             )
+            f_new = pin(f_new, landmarks)
             changed = int(np.count_nonzero(f_new != f))
             changed_in_pass += changed
             f = f_new
@@ -138,9 +174,9 @@ def refine(
                 callback(history[-1])
         for step, k in enumerate(schedule):
             t0 = time.perf_counter()
-            w = voters(lmd, f, min_consistent, cfg.min_witness_fraction)
+            w = trusted(voters(lmd, f, min_consistent, cfg.min_witness_fraction), f)
             stay = cfg.stay_counts if n_pass >= cfg.stay_pass and not w.all() else 0
-            f_new = assign_by_overlap(a, b, k, f, w, config=cfg, stay=stay)
+            f_new = pin(assign_by_overlap(a, b, k, f, w, config=cfg, stay=stay), landmarks)
             changed = int(np.count_nonzero(f_new != f))
             changed_in_pass += changed
             f = f_new
@@ -156,8 +192,8 @@ def refine(
     if cfg.polish_k is not None:
         t0 = time.perf_counter()
         k = min(cfg.polish_k, k_max)
-        w = voters(lmd, f, min_consistent, cfg.min_witness_fraction)
-        f_new = best_overlap(a, b, k, f, w, top_k=cfg.top_k)
+        w = trusted(voters(lmd, f, min_consistent, cfg.min_witness_fraction), f)
+        f_new = pin(best_overlap(a, b, k, f, w, top_k=cfg.top_k), landmarks)
         history.append(
             Iteration(
                 k,
@@ -186,12 +222,14 @@ def global_repair(
     global_check: bool = False,
     lmd: LmdTracker | None = None,
     config: RepairConfig = RepairConfig(),
+    fixed: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """:func:`~hope_rs.pipeline.anchors.anchor_step` on ``w``, the LMD witnesses of ``f``, keeping a moved
     vertex only where it then passes LMD itself (the anchor coordinates are coarser than a k-hop
     step, so elsewhere the old match is at least as good). ``global_check``: see
-    :func:`~hope_rs.pipeline.anchors.anchor_step`; ``lmd``: the tracker of the caller's maps, if any."""
-    g = anchor_step(a, b, f, w, global_check=global_check, config=config)
+    :func:`~hope_rs.pipeline.anchors.anchor_step`; ``lmd``: the tracker of the caller's maps, if any;
+    ``fixed``: anchors known to be right (see :func:`~hope_rs.pipeline.anchors.anchor_step`)."""
+    g = anchor_step(a, b, f, w, global_check=global_check, config=config, fixed=fixed)
     if g is f:
         return f
     ok = (lmd or LmdTracker(a, b)).witnesses(g, min_consistent=min_consistent)
@@ -288,6 +326,8 @@ class RefineStage(Stage):
                     if hooks.has("stop_refining")
                     else None
                 ),
+                landmarks=state.landmarks,
+                landmark_config=state.config.landmarks,
             )
         finally:
             hooks.emit("refine_end", state, res)

@@ -55,11 +55,14 @@ def run_match(
     stages: list[Stage] | None = None,
     on_stage: Callable | None = None,
     timings: dict[str, float] | None = None,
+    landmarks: np.ndarray | None = None,
 ) -> MatchResult:
     """The match of ``a`` to ``b``: ``init`` is a descriptor kind or a map in the shapes' input
     numbering; ``progress`` receives the stages' events (or pass ``log``, which has them);
     ``on_stage(state, name)`` is called after each stage (the benches sample memory there);
-    ``timings`` (seconds per stage) is filled in and returned as the result's. Options are not checked here (:func:`hope_rs.match` does)."""
+    ``timings`` (seconds per stage) is filled in and returned as the result's; ``landmarks``
+    (checked (m, 2) rows of input vertex indices, or None) are translated like ``init``.
+    Options are not checked here (:func:`hope_rs.match` does)."""
     t0 = time.perf_counter() if log is None else log.t0
     log = StageLog(progress) if log is None else log
     if not isinstance(init, str):
@@ -68,6 +71,9 @@ def run_match(
     state.timings = {} if timings is None else timings
     if not isinstance(init, str):
         state.f0 = init
+    if landmarks is not None:
+        lm = np.stack([a.rank[landmarks[:, 0]], b.rank[landmarks[:, 1]]], axis=1)
+        state.landmarks = lm[np.argsort(lm[:, 0])]
     if on_stage is not None:
         state.hooks.on("stage_end", on_stage)
     run_stages(state, default_stages() if stages is None else stages)
@@ -93,8 +99,26 @@ def run_match(
 def _nested_run(stages: list[Stage] | None) -> Callable:
     """:func:`run_match` for a stage that matches other shapes, with fresh stages."""
 
-    def run(a: Shape, b: Shape, init, config: MatchConfig, *, callback=None, progress=None):
+    def run(
+        a: Shape,
+        b: Shape,
+        init,
+        config: MatchConfig,
+        *,
+        callback=None,
+        progress=None,
+        landmarks=None,
+    ):
         fresh = None if stages is None else [type(s)() for s in stages]
-        return run_match(a, b, init, config, callback=callback, progress=progress, stages=fresh)
+        return run_match(
+            a,
+            b,
+            init,
+            config,
+            callback=callback,
+            progress=progress,
+            stages=fresh,
+            landmarks=landmarks,
+        )
 
     return run

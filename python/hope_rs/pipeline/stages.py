@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from .confidence import ConfidenceStage
 from .initial import DescriptorStage, InitialStage
+from .landmarks import LandmarkStage
 from .multiscale import MultiscaleStage
 from .refine import RefineStage
 from .shared_faces import FinishStage
@@ -24,6 +25,7 @@ def default_stages() -> list[Stage]:
         MultiscaleStage(),  # "coarse", "lift": multiscale=True only
         DescriptorStage(),  # "descriptors"
         InitialStage(),  # "init"
+        LandmarkStage(),  # "landmarks": with landmarks only
         RefineStage(),  # "refine", "polish"
         SpectralStage(),  # "spectral"
         FinishStage(),  # "faces"

@@ -92,8 +92,8 @@ class MatchState:
     callback : callable or None
         The caller's per-step callback.
     run : callable
-        The runner itself, ``run(a, b, init, config, progress=...)`` → MatchResult, for stages
-        that match other shapes (the multiscale stage's coarse copies).
+        The runner itself, ``run(a, b, init, config, progress=..., landmarks=...)`` →
+        MatchResult, for stages that match other shapes (the multiscale stage's coarse copies).
     f0, f : ndarray or None
         The initial map, and the current map.
     hope_map : ndarray or None
@@ -111,6 +111,9 @@ class MatchState:
         The spectral pass's ZoomOut map, when it computed one.
     confidence : ndarray or None
         Per vertex of A, the confidence in the final map (the confidence stage).
+    landmarks : (m, 2) ndarray of int or None
+        The caller's landmarks (vertex of A, vertex of B), rows sorted by A's vertex; ``None``
+        when there are none.
     """
 
     a: Shape
@@ -131,6 +134,7 @@ class MatchState:
     coarse: Any = None
     zoomout: np.ndarray | None = None
     confidence: np.ndarray | None = None
+    landmarks: np.ndarray | None = None
 
 
 class Stage:

@@ -1,0 +1,215 @@
+"""The caller's landmarks: vertex pairs (A, B) known to correspond, kept exactly in the map.
+
+``match(a, b, landmarks=L)`` takes ``L``, an (m, 2) array of (vertex of A, vertex of B) rows.
+Geodesic distances to the landmarks are intrinsic coordinates both shapes share, and unlike
+descriptors they tell a left limb from its mirror image. They act in three places:
+
+* the "landmarks" stage (:class:`LandmarkStage`) re-places every match of the initial map
+  whose distances to the landmarks fit far worse than they could (a mirrored region), at the
+  nearest descriptor among the vertices of B whose distances to the landmarks are nearest its
+  own (:func:`landmark_initial_map`);
+* the refinement (:func:`hope_rs.pipeline.refine.refine`) pins the landmarks after every step,
+  counts them as witnesses, never trusts such a match (:class:`LandmarkCoordinates`), and its
+  global repair takes the landmarks as anchors;
+* after every later stage (the spectral pass, the finish), the stage re-pins them.
+
+Without landmarks none of this runs and the map is the one ``match`` makes without them.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..shape import Shape
+from .anchors import distance_fields, reachable
+from .config import LandmarkConfig, RepairConfig
+from .state import QUIET, MatchState, Stage
+
+__all__ = [
+    "LandmarkCoordinates",
+    "LandmarkStage",
+    "check_landmarks",
+    "coarse_landmarks",
+    "landmark_initial_map",
+    "pin",
+]
+
+#: Rows of A's vertices compared at once with their candidates' descriptors (bounds the
+#: temporary (rows, candidates, descriptor length) array).
+_CHUNK = 512
+
+
+def check_landmarks(landmarks, n_a: int, n_b: int) -> np.ndarray | None:
+    """``landmarks`` as an (m, 2) int64 array of (vertex of A, vertex of B), 0-based, checked
+    against shapes of ``n_a`` and ``n_b`` vertices; ``None`` when there are none (``None`` or
+    an empty array). Rows given twice count once.
+
+    Raises
+    ------
+    TypeError, ValueError
+        One line saying what is wrong: not integers, not (m, 2), a vertex out of range, a vertex
+        of A given two matches or a vertex of B matched twice.
+    """
+    if landmarks is None:
+        return None
+    try:
+        arr = np.asarray(landmarks)
+    except (TypeError, ValueError) as e:
+        raise TypeError(f"landmarks must be an (m, 2) array of vertex indices: {e}") from None
+    if arr.size == 0:
+        return None
+    if arr.dtype == bool or not np.issubdtype(arr.dtype, np.integer):
+        raise TypeError(
+            f"landmarks must be integer vertex indices (0-based), got dtype {arr.dtype}; "
+            "convert with np.asarray(landmarks, dtype=np.int64)"
+        )
+    if arr.ndim != 2 or arr.shape[1] != 2:
+        raise ValueError(
+            f"landmarks must have shape (m, 2), one (vertex of A, vertex of B) row per "
+            f"landmark, got shape {arr.shape}"
+        )
+    # Checked in the given dtype, so that huge unsigned values are not wrapped first.
+    for col, n, name in ((0, n_a, "A"), (1, n_b, "B")):
+        bad = np.flatnonzero((arr[:, col] < 0) | (arr[:, col] >= n))
+        if bad.size:
+            r = int(bad[0])
+            raise ValueError(
+                f"landmark row {r} ({arr[r, 0]}, {arr[r, 1]}): vertex {arr[r, col]} is not a "
+                f"vertex of {name}, which has {n} (0-based indices 0..{n - 1})"
+            )
+    arr = np.unique(arr.astype(np.int64), axis=0)
+    for col, name, other in ((0, "A", "B"), (1, "B", "A")):
+        v, count = np.unique(arr[:, col], return_counts=True)
+        if (count > 1).any():
+            x = int(v[np.argmax(count > 1)])
+            rows = arr[arr[:, col] == x][:, 1 - col]
+            raise ValueError(
+                f"landmarks contradict each other: vertex {x} of {name} is paired with vertices "
+                f"{int(rows[0])} and {int(rows[1])} of {other}; give each vertex at most once"
+            )
+    return arr
+
+
+def coarse_landmarks(
+    landmarks: np.ndarray, owner_a: np.ndarray, owner_b: np.ndarray
+) -> np.ndarray | None:
+    """The landmarks carried to coarse copies of both shapes (fine vertex ``i`` belongs to
+    coarse vertex ``owner[i]``): a row whose coarse vertex of A or of B another row takes too
+    is dropped (two landmarks in one cell), as are later copies of a row; ``None`` if none is
+    left."""
+    rows = np.stack([owner_a[landmarks[:, 0]], owner_b[landmarks[:, 1]]], axis=1)
+    rows = np.unique(rows, axis=0)
+    keep = np.ones(len(rows), dtype=bool)
+    for col in (0, 1):
+        v, count = np.unique(rows[:, col], return_counts=True)
+        keep &= ~np.isin(rows[:, col], v[count > 1])
+    return rows[keep] if keep.any() else None
+
+
+def pin(f: np.ndarray, landmarks: np.ndarray | None) -> np.ndarray:
+    """``f`` with every landmark's vertex of A mapped to its vertex of B (``f`` itself when it
+    does already)."""
+    if landmarks is None or (f[landmarks[:, 0]] == landmarks[:, 1]).all():
+        return f
+    g = f.copy()
+    g[landmarks[:, 0]] = landmarks[:, 1]
+    return g
+
+
+class LandmarkCoordinates:
+    """Landmark coordinates of both shapes: ``da`` (m, n_a) and ``db`` (m, n_b) distances
+    (sqrt(area) units) from the landmarks on A and on B, vertices of other components at
+    ``repair.unreachable``; and, per vertex of A, the least RMS difference ``best`` any vertex
+    of B achieves (``nearest`` is that vertex)."""
+
+    def __init__(
+        self, a: Shape, b: Shape, landmarks: np.ndarray, repair: RepairConfig = RepairConfig()
+    ):
+        self.da = reachable(distance_fields(a, landmarks[:, 0]), repair)
+        self.db = reachable(distance_fields(b, landmarks[:, 1]), repair)
+        self.tree = cKDTree(self.db.T)
+        best, self.nearest = self.tree.query(self.da.T)
+        self.best = best / np.sqrt(len(landmarks))
+
+    def gap(self, f: np.ndarray, rows=slice(None)) -> np.ndarray:
+        """How much worse than ``best`` the matches ``f[rows]`` of the vertices ``rows`` fit
+        (RMS over the landmarks)."""
+        d = self.da[:, rows] - self.db[:, f[rows]]
+        return np.sqrt((d * d).mean(axis=0)) - self.best[rows]
+
+    def off(self, f: np.ndarray, max_gap: float) -> np.ndarray:
+        """Whether each vertex's match fits more than ``max_gap`` worse than ``best``."""
+        return self.gap(f) > max_gap
+
+
+def landmark_initial_map(
+    a: Shape,
+    b: Shape,
+    f0: np.ndarray,
+    landmarks: np.ndarray,
+    desc: tuple[np.ndarray, np.ndarray] | None,
+    config: LandmarkConfig = LandmarkConfig(),
+    coords: LandmarkCoordinates | None = None,
+) -> np.ndarray:
+    """``f0`` with the landmarks pinned and every off match (see :class:`LandmarkConfig`)
+    re-placed: among the ``config.candidates`` vertices of B whose landmark coordinates are
+    nearest the vertex's own, the one of nearest descriptor (``desc``: A's and B's, internal
+    numbering), or without descriptors the nearest by coordinates. ``coords``: the shapes'
+    :class:`LandmarkCoordinates`, if computed already."""
+    coords = LandmarkCoordinates(a, b, landmarks) if coords is None else coords
+    moved = np.flatnonzero(coords.off(f0, config.max_gap))
+    f = f0.copy()
+    if desc is None:
+        f[moved] = coords.nearest[moved]
+    elif moved.size:
+        k = min(config.candidates, b.n_vertices)
+        cand = coords.tree.query(coords.da[:, moved].T, k=k)[1].reshape(moved.size, k)
+        ea, eb = desc
+        for s in range(0, moved.size, _CHUNK):
+            rows, c = moved[s : s + _CHUNK], cand[s : s + _CHUNK]
+            diff = eb[c] - ea[rows][:, None, :]
+            best = np.argmin(np.einsum("ijk,ijk->ij", diff, diff), axis=1)
+            f[rows] = c[np.arange(rows.size), best]
+    return pin(f, landmarks)
+
+
+class LandmarkStage(Stage):
+    """The "landmarks" stage: ``state.f0`` made to agree with the landmarks
+    (:func:`landmark_initial_map`); after every later stage, the landmarks re-pinned in
+    ``state.f``. Silent without landmarks."""
+
+    name = "landmarks"
+
+    def attach(self, state: MatchState) -> None:
+        if state.landmarks is not None:
+            state.hooks.on("stage_end", _repin)
+
+    def skip_reason(self, state: MatchState):
+        return QUIET if state.landmarks is None else None
+
+    def run(self, state: MatchState) -> None:
+        a, b, lm = state.a, state.b, state.landmarks
+        detail = f"{len(lm)} landmarks"
+        t = state.log.start("landmarks", detail=detail)
+        kind = state.init if isinstance(state.init, str) else None
+        desc = None
+        if kind is not None and a.has_descriptors(kind) and b.has_descriptors(kind):
+            desc = a.internal_descriptors(kind), b.internal_descriptors(kind)
+        cfg = state.config
+        f0 = pin(state.f0, lm)
+        if cfg.landmarks.init:
+            coords = LandmarkCoordinates(a, b, lm, cfg.refine.repair)
+            f0 = landmark_initial_map(a, b, state.f0, lm, desc, cfg.landmarks, coords)
+        moved = int(np.count_nonzero(f0 != state.f0))
+        state.f0 = f0
+        state.timings["landmarks"] = time.perf_counter() - t
+        state.log.ran("landmarks", state.timings["landmarks"], f"{detail}, re-placed {moved}")
+
+
+def _repin(state: MatchState, name: str) -> None:
+    """The "stage_end" subscriber: the landmarks mapped exactly after every stage."""
+    if state.f is not None:
+        state.f = pin(state.f, state.landmarks)

@@ -1,0 +1,245 @@
+"""``match(landmarks=...)``: user landmarks are mapped exactly and resolve symmetric regions."""
+
+import re
+
+import numpy as np
+import pytest
+from conftest import data_path
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+from meshes import bumpy_sphere, inverse, relabel, write_off
+from scipy.spatial import cKDTree
+from strategies import permutations
+
+import hope_rs
+from hope_rs import matching
+from hope_rs.cli import main
+from hope_rs.evaluation.evaluate import geodesic_errors
+from hope_rs.geometry.map_io import read_landmarks
+from hope_rs.pipeline.anchors import farthest_witnesses
+from hope_rs.pipeline.landmarks import check_landmarks, coarse_landmarks, landmark_initial_map
+
+FAST = {"max_passes": 2, "spectral": False}
+
+
+@pytest.fixture(scope="module")
+def spheres():
+    return hope_rs.Mesh(*bumpy_sphere(500, 3)), hope_rs.Mesh(*bumpy_sphere(450, 4))
+
+
+@pytest.fixture
+def no_shapes(monkeypatch):
+    """Fails the test if ``match`` starts building shapes (the expensive part)."""
+
+    def forbidden(*args, **kwargs):
+        raise AssertionError("match built a Shape before checking its landmarks")
+
+    monkeypatch.setattr(matching.Shape, "__init__", forbidden)
+
+
+def spread_landmarks(shape: hope_rs.Shape, n: int = 4) -> np.ndarray:
+    """``n`` farthest-point samples of the shape (input numbering), the centroid start left out."""
+    chosen, _ = farthest_witnesses(shape, np.arange(shape.n_vertices), n + 1)
+    return shape.order[chosen[1:]]
+
+
+def test_landmarks_are_mapped_exactly_by_every_stage(spheres):
+    a, b = spheres
+    plain = hope_rs.match(a, b, **FAST)
+    # Pairs the default map does not make, so pinning them is what puts them in the map.
+    rows = np.array([[0, 5], [17, 300], [250, 40], [499, 449]])
+    assert not (plain.map[rows[:, 0]] == rows[:, 1]).any()
+    res = hope_rs.match(a, b, landmarks=rows, **FAST)
+    for m in (res.init_map, res.hope_map, res.map):
+        np.testing.assert_array_equal(m[rows[:, 0]], rows[:, 1])
+    assert "landmarks" in [s.name for s in res.stages if s.ran]
+    # The spectral pass runs after HOPE and keeps them too.
+    full = hope_rs.match(a, b, landmarks=rows, max_passes=1)
+    np.testing.assert_array_equal(full.map[rows[:, 0]], rows[:, 1])
+
+
+def test_no_landmarks_is_the_map_without_them(spheres):
+    a, b = spheres
+    plain = hope_rs.match(a, b, **FAST)
+    assert "landmarks" not in [s.name for s in plain.stages]
+    for none in (None, np.empty((0, 2), dtype=np.int64), [], np.empty((0, 2))):
+        res = hope_rs.match(a, b, landmarks=none, **FAST)
+        np.testing.assert_array_equal(res.map, plain.map)
+        np.testing.assert_array_equal(res.init_map, plain.init_map)
+        assert [s.name for s in res.stages] == [s.name for s in plain.stages]
+
+
+N = 6890  # vertices of each bundled mesh
+
+BAD = [
+    # (landmarks, exception, message)
+    (np.array([[1.0, 2.0]]), TypeError, r"landmarks must be integer vertex indices .*float64"),
+    (np.array([[True, False]]), TypeError, r"landmarks must be integer .*bool"),
+    ([["1", "2"]], TypeError, r"landmarks must be integer .*<U1"),
+    (np.array([1, 2]), ValueError, r"landmarks must have shape \(m, 2\).*got shape \(2,\)"),
+    (np.zeros((2, 3), int), ValueError, r"shape \(m, 2\).*got shape \(2, 3\)"),
+    ([[0, 1], [N, 2]], ValueError, rf"row 1 \({N}, 2\): vertex {N} is not a vertex of A, .*{N}"),
+    ([[-1, 2]], ValueError, r"row 0 \(-1, 2\): vertex -1 is not a vertex of A"),
+    ([[3, N + 5]], ValueError, rf"vertex {N + 5} is not a vertex of B"),
+    (np.array([[2**63, 1]], np.uint64), ValueError, rf"vertex {2**63} is not a vertex of A"),
+    (
+        [[3, 4], [3, 5]],
+        ValueError,
+        r"contradict.*vertex 3 of A is paired with vertices 4 and 5 of B",
+    ),
+    (
+        [[3, 9], [7, 9]],
+        ValueError,
+        r"contradict.*vertex 9 of B is paired with vertices 3 and 7 of A",
+    ),
+    ([[0, 1], [[2], 3]], TypeError, r"landmarks must be an \(m, 2\) array"),
+]
+
+
+@pytest.mark.parametrize("landmarks, exc, message", BAD)
+def test_bad_landmarks_fail_in_one_line_before_any_work(no_shapes, landmarks, exc, message):
+    v = np.zeros((N, 3))
+    f = np.array([[0, 1, 2]])
+    with pytest.raises(exc, match=message) as info:
+        hope_rs.match((v, f), (v, f), landmarks=landmarks)
+    assert "\n" not in str(info.value)
+
+
+def test_a_landmark_given_twice_counts_once():
+    got = check_landmarks([[4, 5], [1, 2], [4, 5]], 10, 10)
+    np.testing.assert_array_equal(got, [[1, 2], [4, 5]])
+
+
+@given(rows=arrays(np.int64, st.tuples(st.integers(1, 8), st.just(2)), elements=st.integers(0, 5)))
+def test_checked_landmarks_are_the_given_rows_one_to_one_or_an_error(rows):
+    try:
+        got = check_landmarks(rows, 6, 6)
+    except ValueError as e:
+        assert "contradict" in str(e)
+        # A contradiction is real: some vertex appears with two different partners.
+        pairs = {tuple(r) for r in rows.tolist()}
+        assert len({a for a, _ in pairs}) < len(pairs) or len({b for _, b in pairs}) < len(pairs)
+        return
+    assert {tuple(r) for r in got.tolist()} == {tuple(r) for r in rows.tolist()}
+    assert np.unique(got[:, 0]).size == np.unique(got[:, 1]).size == len(got)
+
+
+@settings(max_examples=4, deadline=None)
+@given(
+    perm_a=permutations(500),
+    perm_b=permutations(450),
+    rows=st.permutations(range(4)),
+)
+def test_relabelled_meshes_and_landmarks_give_the_relabelled_map(spheres, perm_a, perm_b, rows):
+    a, b = spheres
+    lm = np.array([[0, 5], [17, 300], [250, 40], [499, 449]])
+    # New vertex i of a2 is old vertex perm_a[i]; the landmark rows come in another order.
+    a2 = hope_rs.Mesh(a.vertices[perm_a], relabel(a.faces, perm_a))
+    b2 = hope_rs.Mesh(b.vertices[perm_b], relabel(b.faces, perm_b))
+    lm2 = np.stack([inverse(perm_a)[lm[:, 0]], inverse(perm_b)[lm[:, 1]]], axis=1)[list(rows)]
+    r1 = hope_rs.match(a, b, landmarks=lm, **FAST)
+    r2 = hope_rs.match(a2, b2, landmarks=lm2, **FAST)
+    for got, want in [(r2.map, r1.map), (r2.init_map, r1.init_map)]:
+        np.testing.assert_array_equal(perm_b[got][inverse(perm_a)], want)
+
+
+def mirrored_start(mesh: hope_rs.Mesh) -> np.ndarray:
+    """FAUST's left/right mirror: each vertex to the vertex nearest its reflection in the
+    body's plane of symmetry (x = mean x), on the same triangulation."""
+    v = mesh.vertices
+    r = v.copy()
+    r[:, 0] = 2 * v[:, 0].mean() - r[:, 0]
+    return cKDTree(v).query(r)[1]
+
+
+def test_landmarks_pull_a_mirrored_start_to_the_right_side(faust_pair):
+    a, b = faust_pair
+    sa, sb = hope_rs.Shape(a), hope_rs.Shape(b)
+    mirror = mirrored_start(a)  # vertex i of A is vertex i of B on this pair
+    assert geodesic_errors(sb, mirror).mean() > 0.4
+    lm = spread_landmarks(sa)
+    internal = np.stack([sa.rank[lm], sb.rank[lm]], axis=1)
+    f0 = landmark_initial_map(sa, sb, sa.map_in(sb, mirror), internal, None)
+    err = geodesic_errors(sb, sa.map_out(sb, f0))
+    # The mirrored limbs go back to their side: far fewer vertices stay far from their match
+    # (the mirror image leaves more than half of them farther than 0.3).
+    assert (err > 0.3).mean() < 0.1 and err.mean() < 0.15
+
+
+@pytest.mark.slow
+def test_four_landmarks_undo_a_mirrored_start(faust_pair):
+    a, b = faust_pair
+    sa, sb = hope_rs.Shape(a), hope_rs.Shape(b)
+    mirror = mirrored_start(a)
+    lm = spread_landmarks(sa)
+    res = hope_rs.match(sa, sb, init=mirror, landmarks=np.stack([lm, lm], 1), **FAST)
+    err = geodesic_errors(sb, res.map)
+    # From the mirror image (error 0.55) to the right side: no vertex stays far off.
+    assert err.mean() < 0.03 and (err > 0.3).mean() == 0
+
+
+def test_cli_reads_a_landmark_file(tmp_path, spheres):
+    a, b = spheres
+    pa, pb = tmp_path / "a.off", tmp_path / "b.off"
+    write_off(pa, a.vertices, a.faces)
+    write_off(pb, b.vertices, b.faces)
+    lm = tmp_path / "lm.txt"
+    lm.write_text("# A B\n0 5\n17, 300\n\n250\t40  # a comment\n")
+    np.testing.assert_array_equal(read_landmarks(lm), [[0, 5], [17, 300], [250, 40]])
+    out = tmp_path / "map.txt"
+    args = ["match", str(pa), str(pb), "-q", "--no-spectral", "--landmarks", str(lm)]
+    assert main([*args, "-o", str(out)]) == 0
+    got = np.loadtxt(out, dtype=np.int64)
+    np.testing.assert_array_equal(got[[0, 17, 250]], [5, 300, 40])
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("0 5\n1 2 3\n", r"lm.txt:2: expected two 0-based vertex indices .*'1 2 3'"),
+        ("0 x\n", r"lm.txt:1: expected two .*'0 x'"),
+        ("0 5\n0 6\n", r"contradict.*vertex 0 of A is paired with vertices 5 and 6 of B"),
+        ("0 999\n", r"vertex 999 is not a vertex of B, which has 450"),
+    ],
+)
+def test_cli_landmark_errors_are_one_line(tmp_path, spheres, capsys, text, message):
+    a, b = spheres
+    pa, pb = tmp_path / "a.off", tmp_path / "b.off"
+    write_off(pa, a.vertices, a.faces)
+    write_off(pb, b.vertices, b.faces)
+    lm = tmp_path / "lm.txt"
+    lm.write_text(text)
+    assert main(["match", str(pa), str(pb), "-q", "--landmarks", str(lm)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("hope-rs: error: ")
+    assert re.search(message, err)
+
+
+def test_cli_missing_landmark_file(tmp_path, capsys):
+    assert main(["match", "a.off", "b.off", "--landmarks", str(tmp_path / "none.txt")]) == 2
+    assert "no such landmark file" in capsys.readouterr().err
+
+
+def test_coarse_landmarks_drop_rows_that_share_a_cell():
+    owner_a = np.array([0, 0, 1, 2, 3])
+    owner_b = np.array([5, 4, 4, 3, 2])
+    # Rows 0 and 1 fall in one cell of A; rows 2 and 3 in one cell of B (4).
+    lm = np.array([[0, 0], [1, 3], [2, 1], [3, 2], [4, 4]])
+    got = coarse_landmarks(lm, owner_a, owner_b)
+    np.testing.assert_array_equal(got, [[3, 2]])
+    assert coarse_landmarks(lm[:2], owner_a, owner_b) is None
+
+
+@pytest.mark.slow
+def test_multiscale_match_keeps_the_landmarks():
+    a = hope_rs.load_mesh(data_path("tosca", "cat0.off"))
+    b = hope_rs.load_mesh(data_path("tosca", "cat6.off"))
+    sa = hope_rs.Shape(a)
+    lm = spread_landmarks(sa)
+    rows = np.stack([lm, lm], axis=1)  # the identity is the ground truth of this pair
+    res = hope_rs.match(sa, b, landmarks=rows, multiscale=True, spectral=False)
+    assert res.coarse is not None and "landmarks" in [s.name for s in res.coarse.stages]
+    np.testing.assert_array_equal(res.map[lm], lm)
+    err = geodesic_errors(b, res.map, a_idx=np.arange(0, a.n_vertices, 7))
+    assert err.mean() < 0.03
