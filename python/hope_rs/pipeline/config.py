@@ -30,6 +30,7 @@ __all__ = [
     "InitialConfig",
     "MatchConfig",
     "MultiscaleConfig",
+    "PartialConfig",
     "RefineConfig",
     "RepairConfig",
     "SpectralConfig",
@@ -306,6 +307,25 @@ class MultiscaleConfig:
     lift_ridge: float = 1e-3
 
 
+@dataclass(frozen=True)
+class PartialConfig:
+    """Matching a part of a shape (:mod:`hope_rs.pipeline.partial`).
+
+    Attributes
+    ----------
+    enabled : bool
+        Detect a part and measure both shapes at the whole's scale (the shapes must be in the
+        same units).
+    min_boundary_excess : float
+        A shape is a part of the other when its boundary is longer than the other's by at
+        least this, each in units of its own sqrt(area) (a plane cut through a human torso is
+        about 0.6, one geodesic hole of 3% of the area about 0.6, a closed shape 0).
+    """
+
+    enabled: bool = True
+    min_boundary_excess: float = 0.3
+
+
 #: ``match``'s keyword options → (stage field of :class:`MatchConfig`, field of that stage).
 KEYWORDS: dict[str, tuple[str | None, str]] = {
     "k_max": (None, "k_max"),
@@ -332,7 +352,7 @@ class MatchConfig:
     shape : ShapeConfig
         Per-shape precomputation (descriptors, eigenbases, coarse copies) of shapes built
         from meshes; a :class:`~hope_rs.Shape` passed in keeps its own.
-    initial, refine, spectral, finish, multiscale
+    initial, refine, spectral, finish, multiscale, partial
         The stages' settings.
 
     Examples
@@ -352,6 +372,7 @@ class MatchConfig:
     spectral: SpectralConfig = field(default_factory=SpectralConfig)
     finish: FinishConfig = field(default_factory=FinishConfig)
     multiscale: MultiscaleConfig = field(default_factory=MultiscaleConfig)
+    partial: PartialConfig = field(default_factory=PartialConfig)
 
     def with_options(self, **options) -> MatchConfig:
         """A copy with ``match``'s keyword options (see :data:`KEYWORDS`) set."""

@@ -29,6 +29,7 @@ logger.addHandler(logging.NullHandler())
 #: only with ``multiscale=True``; "polish" is the refinement's last, not one-to-one step.
 STAGES = (
     "shapes",
+    "partial",
     "descriptors",
     "init",
     "coarse",

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from .initial import DescriptorStage, InitialStage
 from .multiscale import MultiscaleStage
+from .partial import PartialStage
 from .refine import RefineStage
 from .shared_faces import FinishStage
 from .spectral import SpectralStage
@@ -20,6 +21,7 @@ def default_stages() -> list[Stage]:
     """Fresh instances of the stages (a stage keeps the state of one match, such as the
     spectral pass's background threads)."""
     return [
+        PartialStage(),  # "partial": only when one shape is a part of the other
         MultiscaleStage(),  # "coarse", "lift": multiscale=True only
         DescriptorStage(),  # "descriptors"
         InitialStage(),  # "init"

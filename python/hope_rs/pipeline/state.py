@@ -107,6 +107,8 @@ class MatchState:
         Why the map needs no further stage, once a stage found that out.
     coarse : MatchResult or None
         The multiscale stage's match of the coarse copies.
+    partial : PartialInfo or None
+        Which shape is a part of the other, when the partial stage found one is.
     """
 
     a: Shape
@@ -125,6 +127,7 @@ class MatchState:
     settled: bool = False
     done: str | None = None
     coarse: Any = None
+    partial: Any = None
 
 
 class Stage:
