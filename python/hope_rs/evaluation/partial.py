@@ -72,8 +72,23 @@ class Part:
 
 def submesh(mesh: Mesh, keep: np.ndarray) -> Part:
     """The faces of ``mesh`` with all three corners in ``keep`` (a boolean mask), reduced to
-    their largest connected component (ties: the one with the lowest vertex)."""
-    keep = np.asarray(keep, dtype=bool)
+    their largest connected component (ties: the one with the lowest vertex); vertices where
+    two boundary loops would touch are removed too, so that a part of a manifold mesh is a
+    manifold mesh with boundary."""
+    keep = np.array(keep, dtype=bool)
+    while True:
+        part = _largest_component(mesh, keep)
+        f = part.mesh.faces
+        e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+        u, count = np.unique(e, axis=0, return_counts=True)
+        ends = np.bincount(u[count == 1].reshape(-1), minlength=part.mesh.n_vertices)
+        pinched = ends > 2
+        if not pinched.any():
+            return part
+        keep[part.origin[pinched]] = False
+
+
+def _largest_component(mesh: Mesh, keep: np.ndarray) -> Part:
     faces = mesh.faces[keep[mesh.faces].all(axis=1)]
     if faces.shape[0] == 0:
         raise ValueError("the cut removes every face of the mesh")
