@@ -124,7 +124,7 @@ def cut_by_plane(mesh: Mesh, normal, fraction: float) -> Part:
     h = mesh.vertices @ np.asarray(normal, dtype=np.float64)
     order = np.argsort(h, kind="stable")
     keep = np.zeros(mesh.n_vertices, dtype=bool)
-    keep[order[: int(round((1.0 - fraction) * mesh.n_vertices))]] = True
+    keep[order[: round((1.0 - fraction) * mesh.n_vertices)]] = True
     return submesh(mesh, keep)
 
 
@@ -183,7 +183,9 @@ def _condition(name: str, mesh_a: Mesh, mesh_b: Mesh, i: int) -> tuple[Part | No
     if name == "cut_both":
         n = plane_normal(i)
         return cut_by_plane(mesh_a, n, 0.3), cut_by_plane(mesh_b, -n, 0.3)
-    raise ValueError(f"unknown partial condition {name!r}; the conditions are {', '.join(CONDITIONS)}")
+    raise ValueError(
+        f"unknown partial condition {name!r}; the conditions are {', '.join(CONDITIONS)}"
+    )
 
 
 def write_partial_sets(
@@ -209,12 +211,16 @@ def write_partial_sets(
         sources = [sources]
     bad = [c for c in conditions if c not in CONDITIONS]
     if bad:
-        raise ValueError(f"unknown condition {', '.join(bad)}; the conditions are {', '.join(CONDITIONS)}")
+        raise ValueError(
+            f"unknown condition {', '.join(bad)}; the conditions are {', '.join(CONDITIONS)}"
+        )
     jobs = []
     for src in sources:
         pairs = pairs_of(src)
         if any(p.a_vts is None for p in pairs):
-            raise ValueError(f"{str(src)!r} has identity ground truth; partial sets need .vts pairs")
+            raise ValueError(
+                f"{str(src)!r} has identity ground truth; partial sets need .vts pairs"
+            )
         jobs.append((Path(src), pairs[:max_pairs]))
     out = Path(out)
     written = []
@@ -263,7 +269,8 @@ def add_parser(sub) -> None:
         "partial-set",
         help="write partial-shape benchmark sets (cuts, holes) for hope-rs bench",
         description="Cuts and holes of the pairs of .vts data sets, with their ground truth, "
-        "in the layout hope-rs bench reads. " + "; ".join(f"{k}: {v}" for k, v in CONDITIONS.items()),
+        "in the layout hope-rs bench reads. "
+        + "; ".join(f"{k}: {v}" for k, v in CONDITIONS.items()),
     )
     p.add_argument("out", help="output folder (created)")
     p.add_argument(
@@ -284,5 +291,7 @@ def cmd_partial_set(args) -> int:
         conditions=[c.strip() for c in args.conditions.split(",")], max_pairs=args.max_pairs,
         reverse=not args.no_reverse,
     )  # fmt: skip
-    print(f"{len(written)} data sets written to {args.out}; run: hope-rs bench {args.out} --out RESULTS")
+    print(
+        f"{len(written)} data sets written to {args.out}; run: hope-rs bench {args.out} --out RESULTS"
+    )
     return 0

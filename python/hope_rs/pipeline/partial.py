@@ -55,9 +55,10 @@ class PartialInfo:
     scale: float
 
 
-def detect_part(a: Shape, b: Shape, config: PartialConfig = PartialConfig()) -> PartialInfo | None:
+def detect_part(a: Shape, b: Shape, config: PartialConfig | None = None) -> PartialInfo | None:
     """:class:`PartialInfo` when A or B is a part of the other (see the module notes), else
-    ``None``."""
+    ``None``; ``config`` defaults to ``PartialConfig()``."""
+    config = PartialConfig() if config is None else config
     la, lb = boundary_length(a), boundary_length(b)
     if la - lb >= config.min_boundary_excess and a.scale < b.scale:
         return PartialInfo("a", (la, lb), b.scale)
