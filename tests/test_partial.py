@@ -20,7 +20,8 @@ from hope_rs.evaluation.partial import (
     write_partial_sets,
 )
 from hope_rs.pipeline.config import MatchConfig, PartialConfig
-from hope_rs.pipeline.partial import boundary_length, detect_part
+from hope_rs.pipeline.partial import boundary_length, covered_share, detect_part
+from hope_rs.pipeline.runner import run_match
 
 
 @pytest.fixture(scope="module")
@@ -147,6 +148,34 @@ def test_partial_stage_runs_only_on_a_part(sphere):
     off = MatchConfig(partial=PartialConfig(enabled=False))
     with pytest.raises(KeyError):
         match(part, sphere, config=off).stage("partial")
+
+
+def test_whole_to_part_inverts_the_part_match_and_says_which_vertices_have_a_partner(sphere):
+    """match(whole, part): the vertices of the whole that are on the part map to themselves
+    (the same surface), and the counterpart estimate on the state tells them from the rest."""
+    part = cut_by_plane(sphere, plane_normal(4), 0.3)
+    seen = {}
+    sa, sb = Shape(sphere), Shape(part.mesh)
+    res = run_match(sa, sb, "shot", MatchConfig(), on_stage=lambda st, name: seen.update(st=st))
+    assert "B -> A and inverted" in str(res.stage("partial"))
+    info = seen["st"].partial
+    assert info.part == "b"
+    has = np.zeros(sphere.n_vertices, dtype=bool)
+    has[part.origin] = True
+    counterpart = info.counterpart[sa.rank]  # internal -> input numbering
+    assert counterpart[has].mean() > 0.98  # partners found ...
+    assert has[counterpart].mean() > 0.9  # ... and few claimed beyond the cut
+    exact = part.origin[res.map] == np.arange(sphere.n_vertices)
+    assert exact[has].mean() > 0.9
+    # The part matched the other way: every vertex has its partner.
+    res_a = run_match(sb, sa, "shot", MatchConfig(), on_stage=lambda st, name: seen.update(st=st))
+    assert seen["st"].partial.counterpart.all()
+    assert (res_a.map == part.origin).mean() > 0.9
+    # The share of the whole the part's true map covers is the part's share of its area, and
+    # at most one ring of faces beyond it (800 vertices: a ring is about a tenth of the area).
+    share = covered_share(sa, sa.rank[part.origin][sb.order])
+    truth = part.mesh.area / sphere.area
+    assert truth <= share < truth + 0.12
 
 
 @pytest.mark.slow
