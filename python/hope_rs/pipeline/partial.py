@@ -169,23 +169,36 @@ class PartialStage(Stage):
 
     @staticmethod
     def _rescale_part(state: MatchState, info: PartialInfo) -> PartialInfo:
-        """A (the part) matched at the guessed scale; when the share of B its map covers
-        puts A's whole at another scale, A is measured at that one for the stages that follow,
-        else the guess's match is the result."""
+        """A (the part) matched at the guessed scale and, when the share of B its map covers
+        puts A's whole at a scale off by more than ``rescale_tolerance``, again at that scale;
+        of the two maps the one whose vertices' descriptors (at the second scale) lie nearer
+        their images' wins. A left-right mirror keeps every distance, so only the
+        descriptors, which see orientation, tell it from the true map. Sets the map and
+        ``state.done``."""
         cfg = state.config
-        a = state.a
-        guess = a.at_scale(info.scale) if info.scale != a.scale else a
+        a, b = state.a, state.b
         off = dataclasses.replace(cfg, partial=dataclasses.replace(cfg.partial, enabled=False))
-        first = state.run(guess, state.b, state.init, off)
-        share = covered_share(state.b, guess.map_in(state.b, first.map))
+        guess = a.at_scale(info.scale) if info.scale != a.scale else a
+        best, first = guess, state.run(guess, b, state.init, off)
+        share = covered_share(b, guess.map_in(b, first.map))
         scale = a.internal.scale / np.sqrt(max(share, cfg.partial.min_covered))
-        if abs(scale / info.scale - 1.0) <= cfg.partial.rescale_tolerance:
-            state.a = guess
-            state.f0 = guess.map_in(state.b, first.init_map)
-            state.f = guess.map_in(state.b, first.map)
-            state.hope_map = guess.map_in(state.b, first.hope_map)
-            state.history = first.history
-            state.done = "the part's match at the whole's scale"
-            return info
-        state.a = a.at_scale(scale)
-        return dataclasses.replace(info, scale=float(scale))
+        chosen = first
+        if abs(scale / info.scale - 1.0) > cfg.partial.rescale_tolerance:
+            again = a.at_scale(scale)
+            second = state.run(again, b, state.init, off)
+            kind = state.init if isinstance(state.init, str) else "shot"
+            da, db = again.internal_descriptors(kind), b.internal_descriptors(kind)
+            cost = [
+                float(np.linalg.norm(da - db[again.map_in(b, r.map)], axis=1).mean())
+                for r in (first, second)
+            ]
+            if cost[1] <= cost[0]:
+                best, chosen = again, second
+                info = dataclasses.replace(info, scale=float(scale))
+        state.a = best
+        state.f0 = best.map_in(b, chosen.init_map)
+        state.f = best.map_in(b, chosen.map)
+        state.hope_map = best.map_in(b, chosen.hope_map)
+        state.history = chosen.history
+        state.done = "the map is the part's match at the whole's scale"
+        return info
