@@ -150,6 +150,7 @@ def test_partial_stage_runs_only_on_a_part(sphere):
         match(part, sphere, config=off).stage("partial")
 
 
+@pytest.mark.slow
 def test_whole_to_part_inverts_the_part_match_and_says_which_vertices_have_a_partner(sphere):
     """match(whole, part): the vertices of the whole that are on the part map to themselves
     (the same surface), and the counterpart estimate on the state tells them from the rest."""
