@@ -178,14 +178,16 @@ class PartialStage(Stage):
         cfg = state.config
         a, b = state.a, state.b
         off = dataclasses.replace(cfg, partial=dataclasses.replace(cfg.partial, enabled=False))
+        # The nested runs take a given initial map in the input numbering.
+        init = state.init if isinstance(state.init, str) else a.map_out(b, state.init)
         guess = a.at_scale(info.scale) if info.scale != a.scale else a
-        best, first = guess, state.run(guess, b, state.init, off)
+        best, first = guess, state.run(guess, b, init, off)
         share = covered_share(b, guess.map_in(b, first.map))
         scale = a.internal.scale / np.sqrt(max(share, cfg.partial.min_covered))
         chosen = first
         if abs(scale / info.scale - 1.0) > cfg.partial.rescale_tolerance:
             again = a.at_scale(scale)
-            second = state.run(again, b, state.init, off)
+            second = state.run(again, b, init, off)
             kind = state.init if isinstance(state.init, str) else "shot"
             da, db = again.internal_descriptors(kind), b.internal_descriptors(kind)
             cost = [
