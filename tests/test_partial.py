@@ -140,9 +140,14 @@ def test_at_scale_is_a_view_with_its_own_descriptors(sphere):
 
 
 def test_partial_stage_runs_only_on_a_part(sphere):
-    part = cut_by_plane(sphere, plane_normal(2), 0.3).mesh
+    cut = cut_by_plane(sphere, plane_normal(2), 0.3)
+    part = cut.mesh
     res = match(part, sphere)
     assert "A is a part" in str(res.stage("partial"))
+    # A given initial map (the true one) is taken in the input numbering and kept.
+    given = match(part, sphere, init=cut.origin)
+    assert (given.map == cut.origin).mean() > 0.95
+    np.testing.assert_array_equal(given.init_map, cut.origin)
     with pytest.raises(KeyError):
         match(sphere, sphere).stage("partial")
     off = MatchConfig(partial=PartialConfig(enabled=False))
