@@ -214,3 +214,15 @@ def test_half_a_faust_shape_matches_the_whole(tmp_path):
     off = MatchConfig(partial=PartialConfig(enabled=False))
     e_off = geodesic_errors(b, match(a, b, config=off).map, a_idx=ai, b_idx=bi)
     assert e.mean() < 0.06 and e_off.mean() > 2 * e.mean()
+
+
+def test_partial_set_cli(tmp_path, self_set, capsys):
+    from hope_rs.cli import main
+
+    assert main(["partial-set", str(tmp_path / "out"), "--from", str(self_set), "--max-pairs", "1",
+                 "--conditions", "cut30", "--no-reverse"]) == 0  # fmt: skip
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["spheres_cut30"]
+    assert main(["partial-set", str(tmp_path / "bad"), "--from", str(tmp_path / "nowhere")]) == 2
+    err = capsys.readouterr().err
+    assert "is not a folder" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "bad").exists()

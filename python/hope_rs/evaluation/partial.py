@@ -26,6 +26,7 @@ line j is the 1-based vertex of the original mesh its vertex j came from.
 from __future__ import annotations
 
 import os
+import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -226,41 +227,55 @@ def write_partial_sets(
     written = []
     for src, pairs in jobs:
         for cond in conditions:
-            fwd = out / f"{src.name}_{cond}"
-            rev = out / f"{src.name}_{cond}_rev" if reverse and cond != "cut_both" else None
-            for d in (fwd, rev):
-                if d is not None:
-                    (d / "corres").mkdir(parents=True, exist_ok=True)
-                    (d / "origin").mkdir(exist_ok=True)
-            lines, rev_lines = [], []
-            for i, pair in enumerate(pairs):
-                ma, mb = load_mesh(pair.a), load_mesh(pair.b)
-                ai, bi = pair.ground_truth(ma.n_vertices, mb.n_vertices)
-                pa, pb = _condition(cond, ma, mb, i)
-                na = f"{i:02d}_{pair.a.stem}_{cond}"
-                nb = f"{i:02d}_{pair.b.stem}" + (f"_{cond}" if pb is not None else "")
-                parts = {}
-                ia = pa.inverse(ma.n_vertices)[ai] if pa is not None else ai
-                ib = pb.inverse(mb.n_vertices)[bi] if pb is not None else bi
-                ok = (ia >= 0) & (ib >= 0)
-                for name, mesh, part, idx in ((na, ma, pa, ia), (nb, mb, pb, ib)):
-                    parts[name] = (part.mesh if part is not None else mesh, part, idx[ok])
-                for d in (fwd, rev):
-                    if d is None:
-                        continue
-                    for name, (mesh, part, idx) in parts.items():
-                        _write_off(d / f"{name}.off", mesh)
-                        _write_vts(d / "corres" / f"{name}.vts", idx)
-                        if part is not None:
-                            _write_vts(d / "origin" / f"{name}.vts", part.origin)
-                lines.append(f"{na} {nb}\n")
-                rev_lines.append(f"{nb} {na}\n")
-            (fwd / "pairs.txt").write_text("".join(lines))
-            written.append(fwd)
-            if rev is not None:
-                (rev / "pairs.txt").write_text("".join(rev_lines))
-                written.append(rev)
+            names = [f"{src.name}_{cond}"]
+            if reverse and cond != "cut_both":
+                names.append(f"{src.name}_{cond}_rev")
+            # Written to a scratch folder, moved into place once complete: an error or an
+            # interrupt leaves no half-written set behind.
+            scratch = [out / f".{n}.tmp" for n in names]
+            try:
+                _write_condition(src, pairs, cond, scratch)
+                for tmp, n in zip(scratch, names):
+                    if (out / n).exists():
+                        shutil.rmtree(out / n)
+                    tmp.rename(out / n)
+                    written.append(out / n)
+            finally:
+                for tmp in scratch:
+                    shutil.rmtree(tmp, ignore_errors=True)
     return written
+
+
+def _write_condition(src: Path, pairs, cond: str, folders: list[Path]) -> None:
+    """The pairs of one condition into ``folders`` (the forward set, then the reverse one)."""
+    for d in folders:
+        shutil.rmtree(d, ignore_errors=True)
+        (d / "corres").mkdir(parents=True)
+        (d / "origin").mkdir()
+    lines = []
+    for i, pair in enumerate(pairs):
+        ma, mb = load_mesh(pair.a), load_mesh(pair.b)
+        ai, bi = pair.ground_truth(ma.n_vertices, mb.n_vertices)
+        pa, pb = _condition(cond, ma, mb, i)
+        na = f"{i:02d}_{pair.a.stem}_{cond}"
+        nb = f"{i:02d}_{pair.b.stem}" + (f"_{cond}" if pb is not None else "")
+        ia = pa.inverse(ma.n_vertices)[ai] if pa is not None else ai
+        ib = pb.inverse(mb.n_vertices)[bi] if pb is not None else bi
+        ok = (ia >= 0) & (ib >= 0)
+        parts = {
+            name: (part.mesh if part is not None else mesh, part, idx[ok])
+            for name, mesh, part, idx in ((na, ma, pa, ia), (nb, mb, pb, ib))
+        }
+        for d in folders:
+            for name, (mesh, part, idx) in parts.items():
+                _write_off(d / f"{name}.off", mesh)
+                _write_vts(d / "corres" / f"{name}.vts", idx)
+                if part is not None:
+                    _write_vts(d / "origin" / f"{name}.vts", part.origin)
+        lines.append((na, nb))
+    (folders[0] / "pairs.txt").write_text("".join(f"{x} {y}\n" for x, y in lines))
+    if len(folders) > 1:
+        (folders[1] / "pairs.txt").write_text("".join(f"{y} {x}\n" for x, y in lines))
 
 
 def add_parser(sub) -> None:
