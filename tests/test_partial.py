@@ -10,6 +10,7 @@ from strategies import permutations
 
 import hope_rs
 from hope_rs import Shape, match
+from hope_rs.cli import main
 from hope_rs.evaluation.datasets import pairs_of
 from hope_rs.evaluation.evaluate import geodesic_errors, load_vts
 from hope_rs.evaluation.partial import (
@@ -217,8 +218,6 @@ def test_half_a_faust_shape_matches_the_whole(tmp_path):
 
 
 def test_partial_set_cli(tmp_path, self_set, capsys):
-    from hope_rs.cli import main
-
     assert main(["partial-set", str(tmp_path / "out"), "--from", str(self_set), "--max-pairs", "1",
                  "--conditions", "cut30", "--no-reverse"]) == 0  # fmt: skip
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["spheres_cut30"]
