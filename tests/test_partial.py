@@ -225,3 +225,15 @@ def test_partial_set_cli(tmp_path, self_set, capsys):
     err = capsys.readouterr().err
     assert "is not a folder" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "bad").exists()
+
+
+@pytest.mark.slow
+def test_a_legless_faust_registration_is_matched_exactly(faust_pair):
+    """FAUST 012 without its legs onto 018 (same triangulation): the partial path keeps the
+    exact map the whole-shape path's shared-face finish reaches."""
+    a, b = faust_pair
+    keep = a.vertices[:, 1] > np.quantile(a.vertices[:, 1], 0.3)
+    part = submesh(a, keep)
+    res = match(part.mesh, b)
+    assert "A is a part" in str(res.stage("partial")) and "faces" in res.timings
+    assert (res.map == part.origin).mean() > 0.999

@@ -158,6 +158,7 @@ class PartialStage(Stage):
             f, has = invert_part_map(state.a, g, cfg.counterpart_edges * mean_edge(state.a))
             info = dataclasses.replace(info, counterpart=has)
             state.f0 = state.f = state.hope_map = f
+            state.timings.update({k: v for k, v in back.timings.items() if k != "total"})
             state.done = "the map is the inverse of the match of the part B to the whole A"
         elif info.scale != state.b.scale:
             state.b = state.b.at_scale(info.scale)
@@ -202,5 +203,7 @@ class PartialStage(Stage):
         state.f = best.map_in(b, chosen.map)
         state.hope_map = best.map_in(b, chosen.hope_map)
         state.history = chosen.history
+        # The stages of the kept nested match, as seconds within "partial".
+        state.timings.update({k: v for k, v in chosen.timings.items() if k != "total"})
         state.done = "the map is the part's match at the whole's scale"
         return info
