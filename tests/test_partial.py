@@ -126,6 +126,10 @@ def test_detect_part_by_boundary(sphere):
     assert detect_part(whole, Shape(sphere)) is None
     strict = PartialConfig(min_boundary_excess=10.0)
     assert detect_part(part, whole, strict) is None
+    # Two cut shapes: neither is the other's whole, however their boundaries compare.
+    other = Shape(cut_by_plane(sphere, -plane_normal(0), 0.1).mesh)
+    assert 0.3 < boundary_length(other) < boundary_length(part) - 0.3
+    assert detect_part(part, other) is None and detect_part(other, part) is None
 
 
 def test_at_scale_is_a_view_with_its_own_descriptors(sphere):

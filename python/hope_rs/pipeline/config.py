@@ -320,6 +320,9 @@ class PartialConfig:
         A shape is a part of the other when its boundary is longer than the other's by at
         least this, each in units of its own sqrt(area) (a plane cut through a human torso is
         about 0.6, one geodesic hole of 3% of the area about 0.6, a closed shape 0).
+    max_whole_boundary : float
+        ... and the other's boundary is at most this long (two cut shapes are not a part
+        and its whole).
     whole_to_part : {"reverse", "direct"}
         When B is the part: "reverse" matches B → A and inverts the map (each vertex of A
         takes the vertex of B whose image is nearest); "direct" matches A → B like any pair,
@@ -338,6 +341,7 @@ class PartialConfig:
 
     enabled: bool = True
     min_boundary_excess: float = 0.3
+    max_whole_boundary: float = 0.3
     rescale_tolerance: float = 0.03
     min_covered: float = 0.2
     whole_to_part: str = "reverse"

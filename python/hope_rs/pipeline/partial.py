@@ -8,8 +8,10 @@ detects a part by its boundary and measures it at the other shape's scale when t
 larger (see :meth:`hope_rs.Shape.at_scale`); shapes of the same units then compare as they are.
 
 A shape is a part when its boundary is longer than the other shape's by at least
-``PartialConfig.min_boundary_excess`` (both in units of their own sqrt(area)); closed shapes,
-and pairs with boundaries of about the same length, are matched exactly as before.
+``PartialConfig.min_boundary_excess`` and the other's is at most
+``PartialConfig.max_whole_boundary`` (both in units of their own sqrt(area)); closed shapes,
+pairs with boundaries of about the same length and pairs of two cut shapes are matched
+exactly as before.
 
 Matching a whole A to its part B asks every vertex of A for a partner, also where B has
 none, and the refinement's overlaps then pull the vertices that do have one off their place.
@@ -113,9 +115,10 @@ def detect_part(a: Shape, b: Shape, config: PartialConfig | None = None) -> Part
     la, lb = boundary_length(a), boundary_length(b)
     # A part is never larger than its whole: when it is larger than the other shape already
     # (a smaller body), its own sqrt(area) is the better guess and it keeps it.
-    if la - lb >= config.min_boundary_excess:
+    # Two parts of one shape (both cut) are not a part and its whole: the whole-shape path.
+    if la - lb >= config.min_boundary_excess and lb <= config.max_whole_boundary:
         return PartialInfo("a", (la, lb), max(a.scale, b.scale))
-    if lb - la >= config.min_boundary_excess:
+    if lb - la >= config.min_boundary_excess and la <= config.max_whole_boundary:
         return PartialInfo("b", (la, lb), max(a.scale, b.scale))
     return None
 
