@@ -9,7 +9,7 @@ import hope_rs
 from hope_rs import _core
 from hope_rs.pipeline import handles
 from hope_rs.pipeline import shared_faces as SF
-from hope_rs.pipeline.config import FinishConfig
+from hope_rs.pipeline.config import FinishConfig, PartialConfig
 from hope_rs.pipeline.refine import refine
 
 
@@ -116,8 +116,10 @@ def test_a_partial_shape_of_the_same_triangulation_becomes_exact(faust_pair):
     # A = FAUST 012 without its legs, B = the whole 018.
     part, idx = legless(faust_pair[0])
     sa, sb = hope_rs.Shape(part), hope_rs.Shape(faust_pair[1])
-    without = hope_rs.match(sa, sb, shared_faces=False)
-    res = hope_rs.match(sa, sb)
+    # On the whole-shape path (the partial stage's own test is in test_partial.py).
+    cfg = hope_rs.MatchConfig(partial=PartialConfig(enabled=False))
+    without = hope_rs.match(sa, sb, shared_faces=False, config=cfg)
+    res = hope_rs.match(sa, sb, config=cfg)
     assert "faces" in res.timings and "faces" not in without.timings
     assert (without.map == idx).mean() < 0.95  # measured 93.1%
     assert (res.map == idx).mean() > 0.999  # measured 100% (99.98% before the growth)

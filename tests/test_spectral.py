@@ -1,5 +1,6 @@
 """The spectral pass after HOPE: ZoomOut from HOPE's map and the per-region choice."""
 
+import dataclasses
 import threading
 import warnings
 
@@ -15,7 +16,7 @@ from hope_rs import MatchConfig
 from hope_rs._blas import single_threaded_blas
 from hope_rs.evaluation.datasets import Pair
 from hope_rs.pipeline import spectral as S
-from hope_rs.pipeline.config import RefineConfig, SpectralConfig
+from hope_rs.pipeline.config import PartialConfig, RefineConfig, SpectralConfig
 
 
 def spectral_config(**fields) -> MatchConfig:
@@ -334,9 +335,12 @@ def test_a_partial_shape_keeps_hope_map_when_the_spectral_one_bends_distances(
 
     # Without the shared-face finish, which would go on from the spectral pass's choice (and
     # makes this pair exact: see test_shared_faces.py).
-    res = hope_rs.match(sa, sb, shared_faces=False)
+    # And on the whole-shape path: the partial stage would measure A at B's scale first.
+    whole_path = MatchConfig(partial=PartialConfig(enabled=False))
+    res = hope_rs.match(sa, sb, shared_faces=False, config=whole_path)
     np.testing.assert_array_equal(res.map, res.hope_map)
     unguarded = spectral_config(max_discrepancy_ratio=np.inf, max_zoomout_discrepancy_ratio=np.inf)
+    unguarded = dataclasses.replace(unguarded, partial=whole_path.partial)
     unchecked = hope_rs.match(sa, sb, shared_faces=False, config=unguarded).map
     assert error(unchecked) > 1.5 * error(res.map)
 

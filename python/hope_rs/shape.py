@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -128,7 +129,7 @@ class Shape:
             # descriptors(self.mesh, kind)[self.order] bit for bit, without renumbering again.
             cfg = self.config.descriptors
             self._descriptors[kind] = (
-                shot_as_numbered(self.internal, cfg.shot_radius, self.descriptor_sites("shot"))
+                shot_as_numbered(self.internal, self._shot_radius(), self.descriptor_sites("shot"))
                 if kind == "shot"
                 else descriptors_as_numbered(self.internal, kind, n_eigen=cfg.n_eigen)
             )
@@ -143,8 +144,30 @@ class Shape:
             return None
         if self._sites is False:
             cfg = self.config.descriptors
-            self._sites = shot_sites(self.internal, cfg.shot_radius, cfg.sites)
+            self._sites = shot_sites(self.internal, self._shot_radius(), cfg.sites)
         return self._sites
+
+    def _shot_radius(self) -> float:
+        """SHOT's support radius relative to the internal mesh's sqrt(area): the configured one,
+        stretched when this shape is measured at another scale (:meth:`at_scale`)."""
+        radius = self.config.descriptors.shot_radius
+        if self.scale == self.internal.scale:
+            return radius
+        return radius * (self.scale / self.internal.scale)
+
+    def at_scale(self, scale: float) -> Shape:
+        """This shape measured in units of ``scale`` instead of its own sqrt(area): a view
+        sharing the mesh, its numbering and neighbourhoods, with its own descriptor cache (the
+        SHOT radius is ``shot_radius * scale``). A part of a shape is matched at the whole's
+        scale (:mod:`hope_rs.pipeline.partial`): its own sqrt(area) is smaller, which would
+        shrink every distance it compares."""
+        if not (np.isfinite(scale) and scale > 0):
+            raise ValueError(f"a shape's scale must be a positive number, got {scale}")
+        view = copy.copy(self)
+        view.scale = float(scale)
+        view._descriptors = {}
+        view._sites = False
+        return view
 
     def has_descriptors(self, kind: str) -> bool:
         """Whether descriptors of ``kind`` are computed or set already."""

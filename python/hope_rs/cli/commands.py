@@ -16,7 +16,7 @@ import numpy as np
 
 from .._version import __version__
 from ..batch.driver import one_line_warning
-from ..evaluation import bench, show
+from ..evaluation import bench, partial, show
 from ..evaluation.demo import run_demo
 from ..geometry.map_io import (
     atomic_write,
@@ -184,6 +184,7 @@ def build_parser() -> argparse.ArgumentParser:
     d.set_defaults(func=cmd_demo)
 
     bench.add_parser(sub)
+    partial.add_parser(sub)
     show.add_parser(sub)
     add_batch_parser(sub)
     return p

@@ -164,7 +164,9 @@ def _ring_average(e: np.ndarray, n: int) -> sp.csr_matrix:
 
 class ConfidenceStage(Stage):
     """The "confidence" stage: ``state.confidence`` from :func:`confidence_features` of the
-    final map, HOPE's and ZoomOut's (``state.zoomout``), by :func:`predict_confidence`."""
+    final map, HOPE's and ZoomOut's (``state.zoomout``), by :func:`predict_confidence`; 0 on
+    the vertices of a whole that the partial stage found without a counterpart on the part
+    (``state.partial.counterpart``)."""
 
     name = "confidence"
 
@@ -187,6 +189,10 @@ class ConfidenceStage(Stage):
             repair=state.config.refine.repair,
         )
         state.confidence = predict_confidence(x, cfg)
+        counterpart = getattr(state.partial, "counterpart", None)
+        if counterpart is not None:
+            # A vertex of the whole without a counterpart on the part has no right match.
+            state.confidence = np.where(counterpart, state.confidence, 0.0)
         state.timings["confidence"] = time.perf_counter() - t
         share = float((state.confidence >= cfg.threshold).mean())
         state.log.ran(

@@ -33,6 +33,7 @@ __all__ = [
     "LandmarkConfig",
     "MatchConfig",
     "MultiscaleConfig",
+    "PartialConfig",
     "RefineConfig",
     "RepairConfig",
     "SpectralConfig",
@@ -350,6 +351,53 @@ class MultiscaleConfig:
     lift_ridge: float = 1e-3
 
 
+@dataclass(frozen=True)
+class PartialConfig:
+    """Matching a part of a shape (:mod:`hope_rs.pipeline.partial`).
+
+    Attributes
+    ----------
+    enabled : bool
+        Detect a part and measure both shapes at the whole's scale (the shapes must be in the
+        same units).
+    min_boundary_excess : float
+        A shape is a part of the other when its boundary is longer than the other's by at
+        least this, each in units of its own sqrt(area) (a plane cut through a human torso is
+        about 0.6, one geodesic hole of 3% of the area about 0.6, a closed shape 0).
+    max_whole_boundary : float
+        ... and the other's boundary is at most this long (two cut shapes are not a part
+        and its whole).
+    whole_to_part : {"reverse", "direct"}
+        When B is the part: "reverse" matches B → A and inverts the map (each vertex of A
+        takes the vertex of B whose image is nearest); "direct" matches A → B like any pair,
+        with B at A's scale.
+    counterpart_edges : float
+        With "reverse", a vertex of A has a counterpart on B when the nearest image of a
+        vertex of B lies within this many of A's mean edge lengths.
+    rescale_tolerance : float
+        A part (A) is first matched at the larger sqrt(area) of the two; when the share of B
+        its map covers puts A's whole at a scale off by more than this fraction, A is matched
+        again at that scale (shapes of one class in different units, people of different
+        sizes).
+    min_covered : float
+        The covered share is taken as at least this (a map gone wrong covers little).
+    """
+
+    enabled: bool = True
+    min_boundary_excess: float = 0.3
+    max_whole_boundary: float = 0.3
+    rescale_tolerance: float = 0.03
+    min_covered: float = 0.2
+    whole_to_part: str = "reverse"
+    counterpart_edges: float = 1.0
+
+    def __post_init__(self):
+        if self.whole_to_part not in ("reverse", "direct"):
+            raise ValueError(
+                f"PartialConfig.whole_to_part must be 'reverse' or 'direct', got {self.whole_to_part!r}"
+            )
+
+
 #: The features of :class:`ConfidenceConfig`, in the order of its ``weights``.
 CONFIDENCE_FEATURES = (
     "consistent",  # LMD's consistent share of the 2-ring under the final map
@@ -444,7 +492,7 @@ class MatchConfig:
     shape : ShapeConfig
         Per-shape precomputation (descriptors, eigenbases, coarse copies) of shapes built
         from meshes; a :class:`~hope_rs.Shape` passed in keeps its own.
-    initial, refine, spectral, finish, multiscale, confidence
+    initial, refine, spectral, finish, multiscale, partial, confidence
         The stages' settings.
     landmarks : LandmarkConfig
         What the caller's landmarks do, when there are any.
@@ -468,6 +516,7 @@ class MatchConfig:
     multiscale: MultiscaleConfig = field(default_factory=MultiscaleConfig)
     confidence: ConfidenceConfig = field(default_factory=ConfidenceConfig)
     landmarks: LandmarkConfig = field(default_factory=LandmarkConfig)
+    partial: PartialConfig = field(default_factory=PartialConfig)
 
     def with_options(self, **options) -> MatchConfig:
         """A copy with ``match``'s keyword options (see :data:`KEYWORDS`) set."""

@@ -30,6 +30,7 @@ logger.addHandler(logging.NullHandler())
 #: refinement's last, not one-to-one step.
 STAGES = (
     "shapes",
+    "partial",
     "descriptors",
     "init",
     "coarse",

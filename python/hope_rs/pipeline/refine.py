@@ -307,6 +307,10 @@ class RefineStage(Stage):
 
     name = "refine"
 
+    def skip_reason(self, state: MatchState):
+        # A stage before it may have the final map already (the partial stage's inverse).
+        return state.done if state.f is not None else None
+
     def run(self, state: MatchState) -> None:
         a, b, cfg, hooks = state.a, state.b, state.config.refine, state.hooks
         steps = _RefineSteps(a, b, state.log, cfg, state.callback)

@@ -10,6 +10,7 @@ from .confidence import ConfidenceStage
 from .initial import DescriptorStage, InitialStage
 from .landmarks import LandmarkStage
 from .multiscale import MultiscaleStage
+from .partial import PartialStage
 from .refine import RefineStage
 from .shared_faces import FinishStage
 from .spectral import SpectralStage
@@ -22,6 +23,7 @@ def default_stages() -> list[Stage]:
     """Fresh instances of the stages (a stage keeps the state of one match, such as the
     spectral pass's background threads)."""
     return [
+        PartialStage(),  # "partial": only when one shape is a part of the other
         MultiscaleStage(),  # "coarse", "lift": multiscale=True only
         DescriptorStage(),  # "descriptors"
         InitialStage(),  # "init"

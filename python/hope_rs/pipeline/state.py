@@ -114,6 +114,8 @@ class MatchState:
     landmarks : (m, 2) ndarray of int or None
         The caller's landmarks (vertex of A, vertex of B), rows sorted by A's vertex; ``None``
         when there are none.
+    partial : PartialInfo or None
+        Which shape is a part of the other, when the partial stage found one is.
     """
 
     a: Shape
@@ -135,6 +137,7 @@ class MatchState:
     zoomout: np.ndarray | None = None
     confidence: np.ndarray | None = None
     landmarks: np.ndarray | None = None
+    partial: Any = None
 
 
 class Stage:

@@ -1,0 +1,224 @@
+"""Partial shapes: when one shape is a part of the other (a cut, holes, a partial scan).
+
+Every distance of a match is measured in units of the shape's own sqrt(area): the SHOT radius,
+LMD's 2-ring distances, the global repair's geodesics. A part's sqrt(area) is smaller than the
+whole's, so on a part all of them would shrink (by 1/sqrt(0.5) for half a shape) and no
+distance of the part would agree with its counterpart on the whole. The "partial" stage
+detects a part by its boundary and measures it at the other shape's scale when that is the
+larger (see :meth:`hope_rs.Shape.at_scale`); shapes of the same units then compare as they are.
+
+A shape is a part when its boundary is longer than the other shape's by at least
+``PartialConfig.min_boundary_excess`` and the other's is at most
+``PartialConfig.max_whole_boundary`` (both in units of their own sqrt(area)); closed shapes,
+pairs with boundaries of about the same length and pairs of two cut shapes are matched
+exactly as before.
+
+Matching a whole A to its part B asks every vertex of A for a partner, also where B has
+none, and the refinement's overlaps then pull the vertices that do have one off their place.
+So the stage matches B → A instead (a part to a whole, which works) and inverts that map:
+each vertex of A takes the vertex of B whose image lies nearest to it, and has a counterpart
+(``PartialInfo.counterpart``) when that image lies within ``PartialConfig.counterpart_edges``
+mean edge lengths of it (``PartialConfig.whole_to_part="reverse"``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..shape import Shape
+from .config import PartialConfig
+from .state import QUIET, MatchState, Stage
+
+__all__ = [
+    "PartialInfo",
+    "PartialStage",
+    "boundary_length",
+    "covered_share",
+    "detect_part",
+    "invert_part_map",
+    "mean_edge",
+]
+
+
+def boundary_length(shape: Shape) -> float:
+    """Total length of the edges of one face only, in units of the shape's own sqrt(area)."""
+    f = shape.internal.faces
+    e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+    u, count = np.unique(e, axis=0, return_counts=True)
+    b = u[count == 1]
+    p = shape.internal.vertices
+    return float(np.linalg.norm(p[b[:, 0]] - p[b[:, 1]], axis=1).sum() / shape.internal.scale)
+
+
+@dataclass(frozen=True)
+class PartialInfo:
+    """Which shape of a pair is a part of the other.
+
+    Attributes
+    ----------
+    part : {"a", "b"}
+        The shape that is a part.
+    boundary : tuple of float
+        Boundary lengths of A and B, each in units of its own sqrt(area).
+    scale : float
+        The scale the part is measured at: the larger sqrt(area) of the two.
+    counterpart : (n_a,) bool ndarray or None
+        Per vertex of A (internal numbering), whether it has a counterpart on B: all True when
+        A is the part; when B is, those whose image the reverse match places near them (see
+        the module notes); ``None`` until known.
+    """
+
+    part: str
+    boundary: tuple[float, float]
+    scale: float
+    counterpart: np.ndarray | None = None
+
+
+def mean_edge(shape: Shape) -> float:
+    """Mean edge length of the shape's internal mesh (its own units)."""
+    e, p = shape.edges, shape.points
+    return float(np.linalg.norm(p[e[:, 0]] - p[e[:, 1]], axis=1).mean())
+
+
+def invert_part_map(a: Shape, g: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """From ``g``, a map of a part B into the whole A (internal numbering), the map A → B that
+    sends each vertex of A to the vertex of B whose image is nearest (in space), and whether
+    that image lies within ``radius`` (A's units) of it."""
+    d, j = cKDTree(a.points[g]).query(a.points, workers=2)
+    return j.astype(np.int64), d <= radius
+
+
+def covered_share(b: Shape, f: np.ndarray) -> float:
+    """Share of B's area that the map ``f`` (into B, internal numbering) covers: the faces
+    of B whose corners are all images of ``f`` or their neighbours (one ring closes the gaps
+    that differing vertex densities leave)."""
+    n = b.n_vertices
+    hit = np.zeros(n, dtype=bool)
+    hit[f] = True
+    e = b.edges
+    grown = hit.copy()
+    grown[e[hit[e[:, 0]], 1]] = True
+    grown[e[hit[e[:, 1]], 0]] = True
+    faces = b.internal.faces
+    return float(b.internal.face_areas[grown[faces].all(axis=1)].sum() / b.internal.area)
+
+
+def detect_part(a: Shape, b: Shape, config: PartialConfig | None = None) -> PartialInfo | None:
+    """:class:`PartialInfo` when A or B is a part of the other (see the module notes), else
+    ``None``; ``config`` defaults to ``PartialConfig()``."""
+    config = PartialConfig() if config is None else config
+    la, lb = boundary_length(a), boundary_length(b)
+    # A part is never larger than its whole: when it is larger than the other shape already
+    # (a smaller body), its own sqrt(area) is the better guess and it keeps it.
+    # Two parts of one shape (both cut) are not a part and its whole: the whole-shape path.
+    if la - lb >= config.min_boundary_excess and lb <= config.max_whole_boundary:
+        return PartialInfo("a", (la, lb), max(a.scale, b.scale))
+    if lb - la >= config.min_boundary_excess and la <= config.max_whole_boundary:
+        return PartialInfo("b", (la, lb), max(a.scale, b.scale))
+    return None
+
+
+class PartialStage(Stage):
+    """The "partial" stage: when one shape is a part of the other, both are measured at the
+    whole's scale from here on (``state.a``/``state.b`` become :meth:`~hope_rs.Shape.at_scale`
+    views) and ``state.partial`` says which is the part. Not recorded when neither is."""
+
+    name = "partial"
+
+    def __init__(self):
+        self.info: PartialInfo | None = None
+
+    def skip_reason(self, state: MatchState):
+        cfg = state.config.partial
+        if not cfg.enabled:
+            return QUIET
+        self.info = detect_part(state.a, state.b, cfg)
+        return QUIET if self.info is None else None
+
+    def run(self, state: MatchState) -> None:
+        info = self.info
+        assert info is not None
+        cfg = state.config.partial
+        la, lb = info.boundary
+        detail = f"{info.part.upper()} is a part (boundary {la:.2f} vs {lb:.2f} sqrt(area))"
+        reverse = (
+            info.part == "b" and cfg.whole_to_part == "reverse" and isinstance(state.init, str)
+        )
+        detail += ": matched B -> A and inverted" if reverse else ": matched at the whole's scale"
+        t = state.log.start("partial", detail=detail)
+        if info.part == "a":
+            info = dataclasses.replace(info, counterpart=np.ones(state.a.n_vertices, dtype=bool))
+            info = self._rescale_part(state, info)
+        elif reverse:
+            # The nested match detects B as the part of its pair and scales it itself.
+            back = state.run(
+                state.b, state.a, state.init, state.config, landmarks=_landmarks(state, swap=True)
+            )
+            g = state.b.map_in(state.a, back.map)
+            f, has = invert_part_map(state.a, g, cfg.counterpart_edges * mean_edge(state.a))
+            info = dataclasses.replace(info, counterpart=has)
+            state.f0 = state.f = state.hope_map = f
+            state.timings.update({k: v for k, v in back.timings.items() if k != "total"})
+            state.done = "the map is the inverse of the match of the part B to the whole A"
+        elif info.scale != state.b.scale:
+            state.b = state.b.at_scale(info.scale)
+        state.partial = info
+        state.timings["partial"] = time.perf_counter() - t
+        if info.part == "a":
+            detail += f" ({info.scale / state.a.internal.scale:.3f} x its own sqrt(area))"
+        state.log.ran("partial", state.timings["partial"], detail)
+
+    @staticmethod
+    def _rescale_part(state: MatchState, info: PartialInfo) -> PartialInfo:
+        """A (the part) matched at the guessed scale and, when the share of B its map covers
+        puts A's whole at a scale off by more than ``rescale_tolerance``, again at that scale;
+        of the two maps the one whose vertices' descriptors (at the second scale) lie nearer
+        their images' wins. A left-right mirror keeps every distance, so only the
+        descriptors, which see orientation, tell it from the true map. Sets the map and
+        ``state.done``."""
+        cfg = state.config
+        a, b = state.a, state.b
+        off = dataclasses.replace(cfg, partial=dataclasses.replace(cfg.partial, enabled=False))
+        # The nested runs take a given initial map in the input numbering.
+        init = state.init if isinstance(state.init, str) else a.map_out(b, state.init)
+        guess = a.at_scale(info.scale) if info.scale != a.scale else a
+        landmarks = _landmarks(state)
+        best, first = guess, state.run(guess, b, init, off, landmarks=landmarks)
+        share = covered_share(b, guess.map_in(b, first.map))
+        scale = a.internal.scale / np.sqrt(max(share, cfg.partial.min_covered))
+        chosen = first
+        if abs(scale / info.scale - 1.0) > cfg.partial.rescale_tolerance:
+            again = a.at_scale(scale)
+            second = state.run(again, b, init, off, landmarks=landmarks)
+            kind = state.init if isinstance(state.init, str) else "shot"
+            da, db = again.internal_descriptors(kind), b.internal_descriptors(kind)
+            cost = [
+                float(np.linalg.norm(da - db[again.map_in(b, r.map)], axis=1).mean())
+                for r in (first, second)
+            ]
+            if cost[1] <= cost[0]:
+                best, chosen = again, second
+                info = dataclasses.replace(info, scale=float(scale))
+        state.a = best
+        state.f0 = best.map_in(b, chosen.init_map)
+        state.f = best.map_in(b, chosen.map)
+        state.hope_map = best.map_in(b, chosen.hope_map)
+        state.history = chosen.history
+        # The stages of the kept nested match, as seconds within "partial".
+        state.timings.update({k: v for k, v in chosen.timings.items() if k != "total"})
+        state.done = "the map is the part's match at the whole's scale"
+        return info
+
+
+def _landmarks(state: MatchState, swap: bool = False) -> np.ndarray | None:
+    """The caller's landmarks in the shapes' input numbering, for a nested match (of B to A
+    with ``swap``)."""
+    if state.landmarks is None:
+        return None
+    la, lb = state.a.order[state.landmarks[:, 0]], state.b.order[state.landmarks[:, 1]]
+    return np.column_stack([lb, la] if swap else [la, lb])

@@ -1,0 +1,243 @@
+"""Partial shapes: the benchmark-set generator, the detection of a part, and matching a part."""
+
+import numpy as np
+import pytest
+from conftest import data_path
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from meshes import bumpy_sphere, inverse, relabel, write_off
+from strategies import permutations
+
+import hope_rs
+from hope_rs import Shape, match
+from hope_rs.cli import main
+from hope_rs.evaluation.datasets import pairs_of
+from hope_rs.evaluation.evaluate import geodesic_errors, load_vts
+from hope_rs.evaluation.partial import (
+    cut_by_plane,
+    plane_normal,
+    punch_holes,
+    submesh,
+    write_partial_sets,
+)
+from hope_rs.pipeline.config import MatchConfig, PartialConfig
+from hope_rs.pipeline.partial import boundary_length, covered_share, detect_part
+from hope_rs.pipeline.runner import run_match
+
+
+@pytest.fixture(scope="module")
+def sphere():
+    return hope_rs.Mesh(*bumpy_sphere(800, 0))
+
+
+@pytest.fixture(scope="module")
+def self_set(tmp_path_factory, sphere):
+    """A .vts data set of one pair, a bumpy sphere and itself, every 3rd vertex a landmark."""
+    folder = tmp_path_factory.mktemp("src") / "spheres"
+    (folder / "corres").mkdir(parents=True)
+    for name in ("s", "t"):
+        write_off(folder / f"{name}.off", sphere.vertices, sphere.faces)
+        (folder / "corres" / f"{name}.vts").write_text(
+            "".join(f"{i + 1}\n" for i in range(0, sphere.n_vertices, 3))
+        )
+    (folder / "pairs.txt").write_text("s t\n")
+    return folder
+
+
+def boundary_ends(mesh) -> np.ndarray:
+    f = mesh.faces
+    e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+    u, c = np.unique(e, axis=0, return_counts=True)
+    return np.bincount(u[c == 1].reshape(-1), minlength=mesh.n_vertices)
+
+
+def test_cut_removes_its_share_keeps_positions_and_stays_manifold(sphere):
+    part = cut_by_plane(sphere, plane_normal(1), 0.3)
+    assert 0.6 * sphere.n_vertices <= part.mesh.n_vertices <= 0.71 * sphere.n_vertices
+    np.testing.assert_array_equal(part.mesh.vertices, sphere.vertices[part.origin])
+    # Every face of the part is a face of the original, through the vertex map.
+    faces = {tuple(sorted(t)) for t in sphere.faces.tolist()}
+    assert all(tuple(sorted(t)) in faces for t in part.origin[part.mesh.faces].tolist())
+    ends = boundary_ends(part.mesh)
+    assert ends.max() == 2 and ends.sum() > 0  # one boundary loop through each boundary vertex
+    # The removed side is the one the normal points to.
+    h = sphere.vertices @ plane_normal(1)
+    assert h[part.origin].max() <= np.sort(h)[int(0.7 * sphere.n_vertices)]
+
+
+def test_holes_and_submesh_of_everything(sphere):
+    part = punch_holes(sphere, 4)
+    assert boundary_ends(part.mesh).max() == 2
+    assert 0.75 * sphere.n_vertices < part.mesh.n_vertices < 0.95 * sphere.n_vertices
+    whole = submesh(sphere, np.ones(sphere.n_vertices, dtype=bool))
+    np.testing.assert_array_equal(whole.origin, np.arange(sphere.n_vertices))
+    with pytest.raises(ValueError, match="removes every face"):
+        submesh(sphere, np.zeros(sphere.n_vertices, dtype=bool))
+
+
+def test_partial_sets_ground_truth_is_consistent_and_deterministic(tmp_path, self_set):
+    """A part of a shape matched to the shape through its vertex map has zero error on every
+    landmark, in both directions; writing the sets twice gives the same files."""
+    out = write_partial_sets(self_set, tmp_path / "one")
+    names = sorted(d.name for d in out)
+    want = [f"spheres_{c}{r}" for c in ("cut30", "cut50", "holes") for r in ("", "_rev")]
+    assert names == sorted([*want, "spheres_cut_both"])
+    for d in out:
+        (pair,) = pairs_of(d)
+        a, b = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
+        ai, bi = pair.ground_truth(a.n_vertices, b.n_vertices)
+        assert ai.size > 0.3 * 800 / 3
+        origin = {
+            p.stem: load_vts(d / "origin" / f"{p.stem}.vts")
+            for p in (pair.a, pair.b)
+            if (d / "origin" / f"{p.stem}.vts").exists()
+        }
+        assert origin, "every set has a cut shape"
+        # Through the original sphere: both landmarks are the same original vertex.
+        oa = origin.get(pair.a.stem, np.arange(a.n_vertices))
+        ob = origin.get(pair.b.stem, np.arange(b.n_vertices))
+        np.testing.assert_array_equal(oa[ai], ob[bi])
+        if pair.b.stem not in origin:  # A is the part of the whole B: its map is the origin
+            e = geodesic_errors(b, oa, a_idx=ai, b_idx=bi)
+            assert np.all(e == 0)
+    again = write_partial_sets(self_set, tmp_path / "two")
+    for d1, d2 in zip(out, again):
+        for f1 in sorted(d1.rglob("*")):
+            if f1.is_file():
+                assert f1.read_bytes() == (d2 / f1.relative_to(d1)).read_bytes(), f1
+
+
+def test_partial_sets_bad_input(tmp_path, sphere):
+    write_off(tmp_path / "a.off", sphere.vertices, sphere.faces)
+    write_off(tmp_path / "b.off", sphere.vertices, sphere.faces)
+    with pytest.raises(ValueError, match="identity ground truth"):
+        write_partial_sets(tmp_path, tmp_path / "out")
+    with pytest.raises(ValueError, match="unknown condition"):
+        write_partial_sets(tmp_path, tmp_path / "out", conditions=["cut99"])
+
+
+def test_detect_part_by_boundary(sphere):
+    whole = Shape(sphere)
+    part = Shape(cut_by_plane(sphere, plane_normal(0), 0.3).mesh)
+    assert boundary_length(whole) == 0.0 and boundary_length(part) > 0.5
+    info = detect_part(part, whole)
+    assert info is not None and info.part == "a" and info.scale == whole.scale
+    assert detect_part(whole, part).part == "b"
+    assert detect_part(whole, Shape(sphere)) is None
+    strict = PartialConfig(min_boundary_excess=10.0)
+    assert detect_part(part, whole, strict) is None
+    # Two cut shapes: neither is the other's whole, however their boundaries compare.
+    other = Shape(cut_by_plane(sphere, -plane_normal(0), 0.1).mesh)
+    assert 0.3 < boundary_length(other) < boundary_length(part) - 0.3
+    assert detect_part(part, other) is None and detect_part(other, part) is None
+
+
+def test_at_scale_is_a_view_with_its_own_descriptors(sphere):
+    s = Shape(sphere)
+    d = s.descriptors("shot")
+    v = s.at_scale(2 * s.scale)
+    assert v.graph is s.graph and v.scale == 2 * s.scale and s.scale == s.internal.scale
+    assert not np.allclose(v.descriptors("shot"), d)  # twice the SHOT radius
+    np.testing.assert_array_equal(s.descriptors("shot"), d)  # the shape itself is untouched
+    np.testing.assert_array_equal(s.at_scale(s.scale).descriptors("shot"), d)
+    with pytest.raises(ValueError, match="positive"):
+        s.at_scale(0.0)
+
+
+def test_partial_stage_runs_only_on_a_part(sphere):
+    cut = cut_by_plane(sphere, plane_normal(2), 0.3)
+    part = cut.mesh
+    res = match(part, sphere)
+    assert "A is a part" in str(res.stage("partial"))
+    # A given initial map (the true one) is taken in the input numbering and kept.
+    given = match(part, sphere, init=cut.origin)
+    assert (given.map == cut.origin).mean() > 0.95
+    np.testing.assert_array_equal(given.init_map, cut.origin)
+    with pytest.raises(KeyError):
+        match(sphere, sphere).stage("partial")
+    off = MatchConfig(partial=PartialConfig(enabled=False))
+    with pytest.raises(KeyError):
+        match(part, sphere, config=off).stage("partial")
+
+
+@pytest.mark.slow
+def test_whole_to_part_inverts_the_part_match_and_says_which_vertices_have_a_partner(sphere):
+    """match(whole, part): the vertices of the whole that are on the part map to themselves
+    (the same surface), and the counterpart estimate on the state tells them from the rest."""
+    part = cut_by_plane(sphere, plane_normal(4), 0.3)
+    seen = {}
+    sa, sb = Shape(sphere), Shape(part.mesh)
+    res = run_match(sa, sb, "shot", MatchConfig(), on_stage=lambda st, name: seen.update(st=st))
+    assert "B -> A and inverted" in str(res.stage("partial"))
+    info = seen["st"].partial
+    assert info.part == "b"
+    has = np.zeros(sphere.n_vertices, dtype=bool)
+    has[part.origin] = True
+    counterpart = info.counterpart[sa.rank]  # internal -> input numbering
+    assert counterpart[has].mean() > 0.98  # partners found ...
+    assert has[counterpart].mean() > 0.9  # ... and few claimed beyond the cut
+    exact = part.origin[res.map] == np.arange(sphere.n_vertices)
+    assert exact[has].mean() > 0.9
+    # The part matched the other way: every vertex has its partner.
+    res_a = run_match(sb, sa, "shot", MatchConfig(), on_stage=lambda st, name: seen.update(st=st))
+    assert seen["st"].partial.counterpart.all()
+    assert (res_a.map == part.origin).mean() > 0.9
+    # The share of the whole the part's true map covers is the part's share of its area, and
+    # at most one ring of faces beyond it (800 vertices: a ring is about a tenth of the area).
+    share = covered_share(sa, sa.rank[part.origin][sb.order])
+    truth = part.mesh.area / sphere.area
+    assert truth <= share < truth + 0.12
+
+
+@pytest.mark.slow
+@settings(max_examples=4, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data())
+def test_partial_match_is_invariant_to_relabelling(sphere, data):
+    """Relabelling the part (or the whole) relabels the map of the partial path, nothing else."""
+    part = cut_by_plane(sphere, plane_normal(3), 0.3).mesh
+    base = match(part, sphere).map
+    pa = data.draw(permutations(part.n_vertices), label="perm_a")
+    pb = data.draw(permutations(sphere.n_vertices), label="perm_b")
+    a2 = hope_rs.Mesh(part.vertices[pa], relabel(part.faces, pa))
+    b2 = hope_rs.Mesh(sphere.vertices[pb], relabel(sphere.faces, pb))
+    got = match(a2, b2)
+    assert "A is a part" in str(got.stage("partial"))
+    np.testing.assert_array_equal(pb[got.map], base[pa])
+    np.testing.assert_array_equal(inverse(pb)[base[pa]], got.map)
+
+
+@pytest.mark.slow
+def test_half_a_faust_shape_matches_the_whole(tmp_path):
+    """A FAUST shape cut in half by a plane, matched to another person in another pose."""
+    (out,) = write_partial_sets(
+        data_path("faust_r"), tmp_path, conditions=["cut50"], max_pairs=2, reverse=False
+    )
+    pair = pairs_of(out)[1]
+    a, b = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
+    ai, bi = pair.ground_truth(a.n_vertices, b.n_vertices)
+    e = geodesic_errors(b, match(a, b).map, a_idx=ai, b_idx=bi)
+    off = MatchConfig(partial=PartialConfig(enabled=False))
+    e_off = geodesic_errors(b, match(a, b, config=off).map, a_idx=ai, b_idx=bi)
+    assert e.mean() < 0.06 and e_off.mean() > 2 * e.mean()
+
+
+def test_partial_set_cli(tmp_path, self_set, capsys):
+    assert main(["partial-set", str(tmp_path / "out"), "--from", str(self_set), "--max-pairs", "1",
+                 "--conditions", "cut30", "--no-reverse"]) == 0  # fmt: skip
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["spheres_cut30"]
+    assert main(["partial-set", str(tmp_path / "bad"), "--from", str(tmp_path / "nowhere")]) == 2
+    err = capsys.readouterr().err
+    assert "is not a folder" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "bad").exists()
+
+
+@pytest.mark.slow
+def test_a_legless_faust_registration_is_matched_exactly(faust_pair):
+    """FAUST 012 without its legs onto 018 (same triangulation): the partial path keeps the
+    exact map the whole-shape path's shared-face finish reaches."""
+    a, b = faust_pair
+    keep = a.vertices[:, 1] > np.quantile(a.vertices[:, 1], 0.3)
+    part = submesh(a, keep)
+    res = match(part.mesh, b)
+    assert "A is a part" in str(res.stage("partial")) and "faces" in res.timings
+    assert (res.map == part.origin).mean() > 0.999
