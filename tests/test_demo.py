@@ -51,7 +51,8 @@ def test_demo_reports_both_pairs(capsys):
     assert same["final"]["exact"] >= 0.95 and same["hope"]["exact"] >= 0.95
     assert remeshed["final"]["mean"] < remeshed["hope"]["mean"] < remeshed["initial_map"]["mean"]
     assert remeshed["final"]["mean"] < 0.02
-    assert [s["name"] for s in remeshed["stages"] if s["ran"]][-2:] == ["polish", "spectral"]
+    ran = [s["name"] for s in remeshed["stages"] if s["ran"]]
+    assert ran[-3:] == ["polish", "spectral", "confidence"]
     # % exact is printed for the shared triangulation only, and the remeshed one says why.
     assert text.count("% exact,") == 3 and "the triangulations differ" in text
     assert f"{remeshed['final']['mean']:.4f}" in text
