@@ -178,6 +178,10 @@ def test_whole_to_part_inverts_the_part_match_and_says_which_vertices_have_a_par
     assert has[counterpart].mean() > 0.9  # ... and few claimed beyond the cut
     exact = part.origin[res.map] == np.arange(sphere.n_vertices)
     assert exact[has].mean() > 0.9
+    # No counterpart, no confidence: those vertices come out unmatched.
+    assert (res.confidence[~counterpart] == 0).all()
+    unmatched = res.map_or_unmatched(0.5) == -1
+    assert unmatched[~counterpart].all()
     # The part matched the other way: every vertex has its partner.
     res_a = run_match(sb, sa, "shot", MatchConfig(), on_stage=lambda st, name: seen.update(st=st))
     assert seen["st"].partial.counterpart.all()
