@@ -14,10 +14,12 @@ from .geometry.mesh import Mesh, load_mesh
 from .kernels.assignment import auction_assignment
 from .kernels.khop import khop_neighbourhoods, overlap_cost
 from .matching import MatchConfig, MatchResult, match
+from .pipeline.confidence import MatchQuality
 from .shape import Shape
 
 __all__ = [
     "MatchConfig",
+    "MatchQuality",
     "MatchResult",
     "Mesh",
     "PairResult",

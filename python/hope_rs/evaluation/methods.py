@@ -8,7 +8,9 @@ flattering any of them.
 ``init``, ``init-wks``, ``init-hks``
     The descriptor-based initial map alone (SHOT, WKS, HKS + one-to-one assignment).
 ``hope``
-    :func:`hope_rs.match` with default parameters (SHOT start), the same for every data set.
+    :func:`hope_rs.match` with default parameters (SHOT start), the same for every data set;
+    on a part and its whole it computes its own start (the part described at the whole's
+    scale), so its time includes that start's.
 ``zoomout``, ``zoomout-wks``
     ZoomOut (Melzi et al. 2019) from pyFM (``pip install pyfmaps``), started from the same
     initial map as HOPE: the map is converted to a 20 x 20 functional map and zoomed out in
@@ -32,6 +34,7 @@ from ..features.descriptors import descriptors
 from ..geometry.mesh import Mesh
 from ..matching import match
 from ..pipeline.initial import initial_map
+from ..pipeline.partial import detect_part
 from ..shape import Shape
 
 #: ZoomOut settings: functional map size at the start, steps and increment per step.
@@ -107,7 +110,13 @@ def _hope(*, kind: str = "shot", k_max: int = 8, degrade: float = 0.0, **kw):
             (f0, t_init), key = ctx.initial(kind), kind
         sa, sb, t_shapes = ctx.shapes(k_max)
         t = time.perf_counter()
-        res = match(sa, sb, init=f0, k_max=k_max, **kw)
+        if not degrade and detect_part(sa, sb) is not None:
+            # A part is described at the whole's scale (hope_rs.pipeline.partial): the shared
+            # start, described at each shape's own scale, is not HOPE's start there.
+            res = match(sa, sb, init=kind, k_max=k_max, **kw)
+            t_init, key = 0.0, None
+        else:
+            res = match(sa, sb, init=f0, k_max=k_max, **kw)
         seconds = t_init + t_shapes + time.perf_counter() - t
         return MethodResult(res.map, seconds, key, res.confidence)
 
