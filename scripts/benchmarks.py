@@ -36,6 +36,17 @@ SETS = {
     "tosca_r": "TOSCA remeshed independently, ~5k vertices",
     "tosca_nonisometric_r": "man / woman / gorilla remeshed, non-isometric",
 }
+#: Partial-shape sets written by ``hope-rs partial-set`` from faust_r and tosca_r (the first
+#: PARTIAL_PAIRS pairs of each), in the order of their table.
+PARTIAL = {
+    "cut30": "A cut by a plane removing 30% of its vertices, matched to the whole B",
+    "cut50": "A cut by a plane removing 50% of its vertices",
+    "holes": "3-5 geodesic discs punched out of A",
+    "cut30_rev": "the whole A matched to B cut by a plane removing 30% (scored where A has a counterpart)",
+}
+PARTIAL_SOURCES = ("faust_r", "tosca_r")
+PARTIAL_PAIRS = 4
+PARTIAL_METHODS = ["init", "hope"]
 MARK_START, MARK_END = "<!-- results:start -->", "<!-- results:end -->"
 
 
@@ -82,6 +93,20 @@ def run() -> None:
         "--sets", ",".join(SETS), "--no-render", "--out", str(RUN),
     ]  # fmt: skip
     subprocess.run(cmd, check=True)
+    parts = RUN / "partial-data"
+    sources = ",".join(str(DATA / s) for s in PARTIAL_SOURCES)
+    conditions = ",".join(c for c in PARTIAL if not c.endswith("_rev"))
+    subprocess.run(
+        [sys.executable, "-m", "hope_rs.cli", "partial-set", str(parts), "--from", sources,
+         "--conditions", conditions, "--max-pairs", str(PARTIAL_PAIRS)],
+        check=True,
+    )  # fmt: skip
+    names = [f"{s}_{c}" for s in PARTIAL_SOURCES for c in PARTIAL]
+    subprocess.run(
+        [sys.executable, "-m", "hope_rs.cli", "bench", str(parts), "--methods",
+         ",".join(PARTIAL_METHODS), "--sets", ",".join(names), "--no-render", "--out", str(RUN)],
+        check=True,
+    )  # fmt: skip
     (RUN / "provenance.txt").write_text(start + f"{_load()} at the end\n")
 
 
@@ -101,9 +126,12 @@ def _stats(rows: list[dict], method: str) -> dict | None:
     def col(k):
         return np.array([float(r[k]) for r in rs])
 
+    aurocs = [float(r.get("confidence_auroc") or "nan") for r in rs]
+    aurocs = [x for x in aurocs if np.isfinite(x)]
     return {
         "pairs": len(rs), "exact": 100 * col("exact").mean(), "mean": col("mean").mean(),
         "worst": col("mean").max(), "auc": col("auc").mean(), "seconds": float(np.median(col("seconds"))),
+        "auroc": float(np.mean(aurocs)) if aurocs else None,
     }  # fmt: skip
 
 
@@ -137,18 +165,52 @@ def detailed() -> str:
         if not rows:
             continue
         out.append(f"### {name}\n\n{what}.\n")
-        out.append(
-            "| method | pairs | mean error | worst pair's mean | exact % | AUC 0–0.25 "
-            "| median s / pair |\n|---|---|---|---|---|---|---|"
-        )
-        for m in METHODS:
-            s = _stats(rows, m)
-            if s:
-                out.append(
-                    f"| {m} | {s['pairs']} | {s['mean']:.4f} | {s['worst']:.4f} "
-                    f"| {s['exact']:.1f} | {s['auc']:.3f} | {s['seconds']:.1f} |"
-                )
-        out.append("")
+        out.append(_method_table(rows, METHODS))
+    return "\n".join(out)
+
+
+def _method_table(rows: list[dict], methods: list[str]) -> str:
+    head = (
+        "| method | pairs | mean error | worst pair's mean | exact % | AUC 0–0.25 "
+        "| confidence AUROC | median s / pair |\n|---|---|---|---|---|---|---|---|"
+    )
+    lines = [head]
+    for m in methods:
+        s = _stats(rows, m)
+        if s:
+            auroc = f"{s['auroc']:.3f}" if s["auroc"] is not None else "–"
+            lines.append(
+                f"| {m} | {s['pairs']} | {s['mean']:.4f} | {s['worst']:.4f} "
+                f"| {s['exact']:.1f} | {s['auc']:.3f} | {auroc} | {s['seconds']:.1f} |"
+            )
+    return "\n".join(lines) + "\n"
+
+
+def partial() -> str:
+    """The partial-shape section: one table per condition, a row per source set (HOPE)."""
+    out = []
+    for cond, what in PARTIAL.items():
+        lines = [
+            f"### {cond}\n\n{what}; the first {PARTIAL_PAIRS} pairs of each source set.\n",
+            (
+                "| source set | pairs | init mean error | HOPE mean error | HOPE worst pair's mean "
+                "| HOPE confidence AUROC | HOPE median s / pair |"
+            ),
+            "|---|---|---|---|---|---|---|",
+        ]
+        for src in PARTIAL_SOURCES:
+            rows = _rows(f"{src}_{cond}")
+            h, i = _stats(rows, "hope"), _stats(rows, "init")
+            if h is None:
+                continue
+            auroc = f"{h['auroc']:.3f}" if h["auroc"] is not None else "–"
+            im = f"{i['mean']:.4f}" if i else "–"
+            lines.append(
+                f"| {src} | {h['pairs']} | {im} | **{h['mean']:.4f}** | {h['worst']:.4f} "
+                f"| {auroc} | {h['seconds']:.1f} |"
+            )
+        if len(lines) > 3:
+            out.append("\n".join(lines) + "\n")
     return "\n".join(out)
 
 
@@ -167,7 +229,18 @@ def render() -> None:
         "from; `zoomout` is pyFM's ZoomOut (20 → 100 eigenfunctions) from that map; `hope` is "
         "`hope_rs.match` with default settings. Seconds are wall time from the two meshes in "
         "memory to the map, medians over pairs, on the machine above.\n\n"
-        "## Summary\n\n" + headline() + "\n## Per data set\n\n" + detailed()
+        "## Summary\n\n"
+        + headline()
+        + "\n## Per data set\n\n"
+        + detailed()
+        + "\n## Partial shapes\n\nWritten by `hope-rs partial-set` from the pairs of the "
+        "source sets (ground truth carried over); `init` is the SHOT map at each shape's own "
+        "scale, `hope` is `hope_rs.match` (which measures a part at the whole's scale). Errors "
+        "are divided by sqrt(area) of the target; for the whole → part set only the vertices "
+        "of the whole with a counterpart on the part are scored.\n\n"
+        + partial()
+        + "\nThe confidence AUROC ranks the vertices with error above 0.05 below the others "
+        "(`MatchResult.confidence`; 1 is perfect, 0.5 is chance).\n"
     )
     (ROOT / "docs" / "benchmarks.md").write_text(doc)
     readme = ROOT / "README.md"
