@@ -15,7 +15,7 @@ from hope_rs.evaluation.demo import demo_pair
 from hope_rs.features.descriptors import DescriptorConfig
 from hope_rs.pipeline import refine as refine_module
 from hope_rs.pipeline import shared_faces as finish_module
-from hope_rs.pipeline.config import KEYWORDS, RefineConfig, SpectralConfig
+from hope_rs.pipeline.config import KEYWORDS, PartialConfig, RefineConfig, SpectralConfig
 from hope_rs.pipeline.runner import run_match
 from hope_rs.pipeline.stages import default_stages
 from hope_rs.pipeline.state import Stage
@@ -93,7 +93,8 @@ def test_the_polish_and_the_finish_use_the_configured_top_k(monkeypatch):
     # A = FAUST 012 without its legs, B = the whole 018: the finish runs on this pair.
     a, b = demo_pair()
     part, _ = legless(a)
-    res = hope_rs.match(part, b, top_k=20)
+    whole_path = MatchConfig(partial=PartialConfig(enabled=False))  # the stages run here
+    res = hope_rs.match(part, b, top_k=20, config=whole_path)
     assert res.stage("faces").ran, "the finish must run for this test to see its steps"
     assert seen["polish"] == [20] and seen["finish"] and set(seen["finish"]) == {20}
 
