@@ -6,6 +6,7 @@ import copy
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.sparse as sp
 
 from . import _core
 from .features.descriptors import (
@@ -100,6 +101,7 @@ class Shape:
         self._coarse: tuple | None | bool = False
         self._basis: tuple[np.ndarray, np.ndarray] | None = None
         self._edges: np.ndarray | None = None
+        self._ring: sp.csr_matrix | None = None
 
     @property
     def points(self) -> np.ndarray:
@@ -112,6 +114,17 @@ class Shape:
         if self._edges is None:
             self._edges = unique_edges(self.internal.faces)
         return self._edges
+
+    def ring_average(self) -> sp.csr_matrix:
+        """The operator averaging a vertex function over each closed 1-ring of the internal
+        mesh (rows sum to 1), built once."""
+        if self._ring is None:
+            n, e = self.n_vertices, self.edges
+            rows = np.concatenate([e[:, 0], e[:, 1], np.arange(n)])
+            cols = np.concatenate([e[:, 1], e[:, 0], np.arange(n)])
+            m = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n, n))
+            self._ring = sp.diags(1.0 / np.asarray(m.sum(axis=1)).ravel()) @ m
+        return self._ring
 
     @property
     def n_vertices(self) -> int:

@@ -24,7 +24,6 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 
 from ..shape import Shape
 from .anchors import (
@@ -120,7 +119,7 @@ def confidence_features(
     stretch = np.bincount(e.ravel(), weights=np.repeat(ratio, 2), minlength=n)
     stretch = stretch / np.maximum(deg, 1.0)
 
-    ring = _ring_average(a.edges, n)
+    ring = a.ring_average()
 
     def smooth(x):
         for _ in range(config.rings):
@@ -152,14 +151,6 @@ def predict_confidence(features: np.ndarray, config: ConfidenceConfig = Confiden
         )
     z = features @ w + config.intercept
     return 1.0 / (1.0 + np.exp(-np.clip(z, -60.0, 60.0)))
-
-
-def _ring_average(e: np.ndarray, n: int) -> sp.csr_matrix:
-    """The operator averaging a vertex function over each closed 1-ring (edges ``e``)."""
-    rows = np.concatenate([e[:, 0], e[:, 1], np.arange(n)])
-    cols = np.concatenate([e[:, 1], e[:, 0], np.arange(n)])
-    m = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n, n))
-    return sp.diags(1.0 / np.asarray(m.sum(axis=1)).ravel()) @ m
 
 
 class ConfidenceStage(Stage):

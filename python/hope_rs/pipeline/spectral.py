@@ -26,7 +26,6 @@ from contextlib import ExitStack
 
 import numpy as np
 import scipy.linalg
-import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from .. import _core
@@ -34,7 +33,7 @@ from .._blas import single_threaded_blas
 from ..kernels.search import nearest_one
 from ..shape import Shape
 from .anchors import distance_fields, farthest_witnesses, reachable
-from .config import RepairConfig, SpectralConfig
+from .config import RefineConfig, RepairConfig, SpectralConfig
 from .lmd import local_map_distortion
 from .refine import RefineResult
 from .state import MatchState, Stage
@@ -181,20 +180,10 @@ def choose_by_region(
 def _choose(a: Shape, h, z, d: np.ndarray, smoothing: int, margin: float) -> np.ndarray:
     """:func:`choose_by_region` given ``d``, the per-vertex mean LMD of ``h`` minus ``z``'s."""
     if smoothing:
-        p = _ring_average(a)
+        p = a.ring_average()
         for _ in range(smoothing):
             d = p @ d
     return np.where(d <= margin, h, z)
-
-
-def _ring_average(a: Shape) -> sp.csr_matrix:
-    """The operator averaging a vertex function over each closed 1-ring of A (internal)."""
-    n = a.n_vertices
-    e = a.edges
-    rows = np.concatenate([e[:, 0], e[:, 1], np.arange(n)])
-    cols = np.concatenate([e[:, 1], e[:, 0], np.arange(n)])
-    m = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n, n))
-    return sp.diags(1.0 / np.asarray(m.sum(axis=1)).ravel()) @ m
 
 
 def applies(a: Shape, b: Shape, config: SpectralConfig = SpectralConfig()) -> bool:
@@ -317,7 +306,7 @@ def spectral_refine(
     z: np.ndarray | None = None,
     config: SpectralConfig = SpectralConfig(),
     *,
-    min_consistent: float = 0.5,
+    min_consistent: float = RefineConfig.min_consistent,
     repair: RepairConfig = RepairConfig(),
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """(the map chosen by region between ``h`` and ZoomOut from it, the ZoomOut map), maps in
