@@ -15,7 +15,13 @@ from hope_rs.evaluation.demo import demo_pair
 from hope_rs.features.descriptors import DescriptorConfig
 from hope_rs.pipeline import refine as refine_module
 from hope_rs.pipeline import shared_faces as finish_module
-from hope_rs.pipeline.config import KEYWORDS, PartialConfig, RefineConfig, SpectralConfig
+from hope_rs.pipeline.config import (
+    KEYWORDS,
+    PartialConfig,
+    RefineConfig,
+    RepairConfig,
+    SpectralConfig,
+)
 from hope_rs.pipeline.runner import run_match
 from hope_rs.pipeline.stages import default_stages
 from hope_rs.pipeline.state import Stage
@@ -133,3 +139,36 @@ def test_spectral_settings_reach_the_pass(bundled):
     cfg = MatchConfig(spectral=SpectralConfig(max_vertices=100))
     res = hope_rs.match(a, b, config=cfg, init=np.roll(np.arange(a.n_vertices), 5))
     assert not res.stage("spectral").ran
+
+
+@pytest.mark.parametrize(
+    "config, exc, message",
+    [
+        (
+            MatchConfig(spectral=SpectralConfig(k_end=-1)),
+            ValueError,
+            r"spectral\.k_end must be an integer >= 0",
+        ),
+        (
+            MatchConfig(spectral=SpectralConfig(margin=float("nan"))),
+            ValueError,
+            r"spectral\.margin must be a number >= 0",
+        ),
+        (MatchConfig(refine=RefineConfig(top_k=2.5)), TypeError, r"top_k must be an integer"),
+        (
+            MatchConfig(spectral=SpectralConfig(enabled=1)),
+            TypeError,
+            r"MatchConfig\.spectral\.enabled must be True or False",
+        ),
+        (
+            MatchConfig(refine=RefineConfig(repair=RepairConfig(agree_rel=-0.1))),
+            ValueError,
+            r"refine\.repair\.agree_rel",
+        ),
+        (MatchConfig(spectral=RefineConfig()), TypeError, r"spectral must be a SpectralConfig"),
+    ],
+)
+def test_a_bad_setting_in_a_config_is_refused_before_any_work(bundled, config, exc, message):
+    a, b = bundled
+    with pytest.raises(exc, match=message):
+        hope_rs.match(a, b, config=config)

@@ -14,7 +14,7 @@ from ._validate import as_index_map
 from .geometry.mesh import Mesh, as_mesh
 from .pipeline.config import KEYWORDS, MatchConfig
 from .pipeline.landmarks import check_landmarks
-from .pipeline.options import check_options
+from .pipeline.options import check_config, check_options
 from .pipeline.progress import ProgressBar, StageLog
 from .pipeline.result import MatchResult
 from .pipeline.runner import run_match
@@ -159,16 +159,25 @@ def _effective_config(config, init, options: dict, callback, progress) -> MatchC
         raise TypeError(
             f"config must be a hope_rs.MatchConfig or None, got {type(config).__name__}"
         )
-    unknown = sorted(set(options) - set(KEYWORDS))
+    check_config(config)
+    unknown = _unknown_option(options)
     if unknown:
-        raise TypeError(
-            f"match() got an unexpected keyword argument {unknown[0]!r}; the options are "
-            f"init, config, callback, progress, {', '.join(KEYWORDS)}"
-        )
+        raise TypeError(f"match() got an unexpected keyword argument {unknown}")
     values = {**config.options(), **options}
     kind = config.initial.descriptor if init is None else init
     check_options(init=kind, callback=callback, progress=progress, **values)
     return config.with_options(**options) if options else config
+
+
+def _unknown_option(options: dict) -> str | None:
+    """The first name of ``options`` that is no option of :func:`match`, with the list of
+    options, or ``None``."""
+    unknown = sorted(set(options) - set(KEYWORDS))
+    if not unknown:
+        return None
+    return (
+        f"{unknown[0]!r}; the options are init, config, callback, progress, {', '.join(KEYWORDS)}"
+    )
 
 
 def check_match_options(**options) -> None:
@@ -178,9 +187,9 @@ def check_match_options(**options) -> None:
     given = dict(options)
     config, init = given.pop("config", None), given.pop("init", None)
     callback, progress = given.pop("callback", None), given.pop("progress", None)
-    try:
-        _effective_config(config, init, given, callback, progress)
-    except TypeError as e:
-        if "unexpected keyword" in str(e):
-            raise TypeError(f"not an option of hope_rs.match: {e}") from None
-        raise
+    unknown = _unknown_option(given)
+    if unknown:
+        raise TypeError(
+            f"not an option of hope_rs.match: match() got an unexpected keyword argument {unknown}"
+        )
+    _effective_config(config, init, given, callback, progress)

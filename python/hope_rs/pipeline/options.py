@@ -5,6 +5,7 @@ Each bad value gets a one-line message naming the option, what it allows and wha
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import numbers
 
@@ -114,3 +115,37 @@ def _check_schedule(schedule, k_max: int) -> None:
             raise TypeError(f"schedule must be {allowed}, got the entry {k!r}")
         if not 1 <= k <= k_max:
             raise ValueError(f"schedule must be {allowed}, got the entry {k}")
+
+
+def check_config(config, path: str = "MatchConfig") -> None:
+    """Raise ``TypeError`` or ``ValueError`` (one line, naming the field) for a setting of a
+    config dataclass that cannot be right: a number of another kind than its default, not
+    NaN, or negative where the default is not (pass indices, counts, sizes, tolerances).
+    Nested configs are checked too; fields whose default is ``None``, a string or a tuple are
+    left to their own checks."""
+    default = type(config)()
+    for f in dataclasses.fields(config):
+        value, ref = getattr(config, f.name), getattr(default, f.name)
+        name = f"{path}.{f.name}"
+        if value is None and "None" in str(f.type):
+            continue
+        if dataclasses.is_dataclass(ref):
+            if type(value) is not type(ref):
+                raise TypeError(
+                    f"{name} must be a {type(ref).__name__}, got {type(value).__name__}"
+                )
+            check_config(value, f"{path}.{f.name}")
+        elif isinstance(ref, bool):
+            if not isinstance(value, (bool, np.bool_)):
+                raise TypeError(f"{name} must be True or False, got {value!r}")
+        elif isinstance(ref, int):
+            _integer(name, value, 0 if ref >= 0 else -(2**63), None, _sign(ref, "an integer"))
+        elif isinstance(ref, float):
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+                raise TypeError(f"{name} must be a number, got {type(value).__name__} {value!r}")
+            if math.isnan(value) or (ref >= 0 and value < 0):
+                raise ValueError(f"{name} must be {_sign(ref, 'a number')}, got {value}")
+
+
+def _sign(ref, what: str) -> str:
+    return f"{what} >= 0 (default {ref})" if ref >= 0 else f"{what} (default {ref})"
