@@ -131,6 +131,9 @@ def run_case(name: str, data: Path, multiscale: bool = False, spectral: bool = T
         t["descriptors"], t["init"] = t.pop("coarse"), 0.0
     for stage in ("descriptors", "init", "spectral", "faces"):
         t.setdefault(stage, 0.0)
+    for stage in ("refine", "faces"):
+        for part in ("cost", "assign"):
+            t.setdefault(f"{stage}.{part}", 0.0)
     t["total"] = time.perf_counter() - t0
     f0, f = res.init_map, res.map
     res.map = res.hope_map
@@ -178,6 +181,32 @@ def table(rows: list[dict]) -> str:
     return head + "\n".join(lines) + "\n"
 
 
+def steps_table(rows: list[dict]) -> str:
+    """Where the HOPE steps' time goes: building overlap costs (parallel) against solving the
+    assignments (the exact auction, sequential), and the rest of the refinement (LMD, the
+    global repair, the map bookkeeping)."""
+    head = (
+        "| case | refine (s) | steps | overlap cost (s) | assignment (s) | rest (s) "
+        "| faces (s) | faces' steps: cost / assignment (s) | assignment share of all steps |\n"
+        "|---|---|---|---|---|---|---|---|---|\n"
+    )
+    lines = []
+    for r in rows:
+        if "error" in r:
+            continue
+        s = r["seconds"]
+        cost = s["refine.cost"] + s["faces.cost"]
+        assign = s["refine.assign"] + s["faces.assign"]
+        rest = s["refine"] - s["refine.cost"] - s["refine.assign"]
+        share = assign / (cost + assign) if cost + assign > 0 else float("nan")
+        lines.append(
+            f"| {r['case']} | {s['refine']:.2f} | {r['steps']} | {s['refine.cost']:.2f} "
+            f"| {s['refine.assign']:.2f} | {rest:.2f} | {s['faces']:.2f} "
+            f"| {s['faces.cost']:.2f} / {s['faces.assign']:.2f} | {share:.0%} |"
+        )
+    return head + "\n".join(lines) + "\n"
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--data", type=Path, default=Path(os.environ.get("HOPE_DATA", DEFAULT_DATA)))
@@ -216,7 +245,7 @@ def main() -> None:
             row = {"case": name, "error": f"over {args.timeout:.0f} s"}
         rows.append(row)
         print(json.dumps(row), flush=True)
-    md = table(rows)
+    md = table(rows) + "\n" + steps_table(rows)
     print(md)
     if args.out:
         args.out.write_text(md)

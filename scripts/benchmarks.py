@@ -15,14 +15,13 @@ from __future__ import annotations
 
 import argparse
 import csv
-import datetime
 import os
-import platform
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
+from provenance import header, load
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = Path(os.environ.get("HOPE_DATA", ROOT.parent / "shared" / "data"))
@@ -50,44 +49,11 @@ PARTIAL_METHODS = ["init", "hope"]
 MARK_START, MARK_END = "<!-- results:start -->", "<!-- results:end -->"
 
 
-def _git(*args: str) -> str:
-    try:
-        return subprocess.check_output(["git", *args], cwd=ROOT, text=True).strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
-
-
-def _machine() -> str:
-    cpu = platform.processor() or "unknown CPU"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return f"{cpu}, {cores} cores, Python {platform.python_version()}, {platform.system()}"
-
-
-def _load() -> str:
-    try:
-        return "load average " + ", ".join(f"{x:.1f}" for x in os.getloadavg())
-    except OSError:
-        return "load average unknown"
-
-
 def run() -> None:
     RUN.mkdir(parents=True, exist_ok=True)
     for f in RUN.glob("*"):
         f.unlink()
-    dirty = _git("status", "--porcelain", "--untracked-files=no")
-    start = (
-        f"commit {_git('rev-parse', '--short', 'HEAD')}{' (uncommitted changes)' if dirty else ''}\n"
-        f"date {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC\n"
-        f"machine {_machine()}\n"
-        f"{_load()} at the start\n"
-    )
+    start = header()
     cmd = [
         sys.executable, "-m", "hope_rs.cli", "bench", str(DATA), "--methods", ",".join(METHODS),
         "--sets", ",".join(SETS), "--no-render", "--out", str(RUN),
@@ -107,7 +73,7 @@ def run() -> None:
          ",".join(PARTIAL_METHODS), "--sets", ",".join(names), "--no-render", "--out", str(RUN)],
         check=True,
     )  # fmt: skip
-    (RUN / "provenance.txt").write_text(start + f"{_load()} at the end\n")
+    (RUN / "provenance.txt").write_text(start + f"{load()} at the end\n")
 
 
 def _rows(name: str) -> list[dict]:

@@ -8,6 +8,7 @@ use crate::csr::{Csr, CsrView};
 use crate::error::{invalid, Result};
 use crate::overlap::{overlap_rows, OverlapOptions, Rows};
 use rayon::prelude::*;
+use std::time::Instant;
 
 /// Each overlap count is worth this much, and the current match 1 on top: a vertex moves only
 /// when the overlap gains.
@@ -63,6 +64,15 @@ pub struct StepOptions {
     pub stay: u32,
 }
 
+/// Wall-clock seconds of the two halves of one [`overlap_assignment_timed`] step.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StepTimes {
+    /// Building the overlap cost with its bonus (parallel).
+    pub cost: f64,
+    /// Solving the assignment and completing the rows it leaves out (the auction is sequential).
+    pub assign: f64,
+}
+
 /// The map maximising the overlap cost one-to-one (see [`bonus_cost`]); rows the assignment
 /// leaves out (A larger than B) take their best column. `keep` (one column per row, e.g. an
 /// injective completion of `f`) is stored in every row, so a full assignment exists; `hint` is
@@ -76,6 +86,19 @@ pub fn overlap_assignment<A: Rows, B: Rows>(
     hint: &[i64],
     opts: StepOptions,
 ) -> Result<Vec<i64>> {
+    overlap_assignment_timed(nbrs_a, nbrs_b, f, witnesses, keep, hint, opts).map(|(g, _)| g)
+}
+
+/// [`overlap_assignment`] and the time each of its halves took (a per-step profile).
+pub fn overlap_assignment_timed<A: Rows, B: Rows>(
+    nbrs_a: &A,
+    nbrs_b: &B,
+    f: &[u32],
+    witnesses: &[bool],
+    keep: &[u32],
+    hint: &[i64],
+    opts: StepOptions,
+) -> Result<(Vec<i64>, StepTimes)> {
     let StepOptions {
         top_k,
         floor_div,
@@ -84,7 +107,9 @@ pub fn overlap_assignment<A: Rows, B: Rows>(
     if hint.len() != nbrs_a.n_rows() {
         return invalid("hint must hold one entry per vertex of A");
     }
+    let t0 = Instant::now();
     let cost = step_cost(nbrs_a, nbrs_b, f, witnesses, top_k, keep, stay)?;
+    let t1 = Instant::now();
     let view = cost.view();
     let mut g = auction_assignment_int_hinted(&view, true, floor_div, Some(hint))?;
     g.par_iter_mut().enumerate().for_each(|(r, q)| {
@@ -93,7 +118,11 @@ pub fn overlap_assignment<A: Rows, B: Rows>(
             *q = best_in_row(&view, r).map_or(-1, |c| c as i64);
         }
     });
-    Ok(g)
+    let times = StepTimes {
+        cost: (t1 - t0).as_secs_f64(),
+        assign: t1.elapsed().as_secs_f64(),
+    };
+    Ok((g, times))
 }
 
 /// Each vertex's best column of the overlap cost (see [`bonus_cost`]), without the one-to-one
@@ -166,6 +195,10 @@ mod tests {
                 stay: 0,
             };
             let g = overlap_assignment(&rows, &rows, &f, &w, &keep, &hint, opts).unwrap();
+            let (timed, t) =
+                overlap_assignment_timed(&rows, &rows, &f, &w, &keep, &hint, opts).unwrap();
+            assert_eq!(g, timed, "k={k}: timing a step changes nothing");
+            assert!(t.cost >= 0.0 && t.assign >= 0.0, "{t:?}");
             let opts = OverlapOptions {
                 top_k: None,
                 keep: Some(&keep),

@@ -49,6 +49,20 @@ def test_faust_pair_with_default_parameters(faust_pair):
     assert set(res.timings) >= {"descriptors", "init", "refine", "total"}
 
 
+def test_every_step_reports_its_cost_and_assignment_seconds(faust_pair):
+    a, b = faust_pair
+    res = hope_rs.match(a, b, spectral=False)
+    steps = [h for h in res.history if h.k > 0 and not h.polish]
+    assert steps and all(h.cost_seconds > 0 and h.assign_seconds > 0 for h in steps)
+    assert all(h.cost_seconds + h.assign_seconds <= h.seconds for h in steps)
+    # The repair steps build no overlap cost.
+    assert all(h.cost_seconds == h.assign_seconds == 0 for h in res.history if h.k == 0)
+    t = res.timings
+    assert t["refine.cost"] == pytest.approx(sum(h.cost_seconds for h in steps))
+    assert t["refine.assign"] == pytest.approx(sum(h.assign_seconds for h in steps))
+    assert t["refine.cost"] + t["refine.assign"] < t["refine"]
+
+
 def test_a_right_map_whose_distances_a_pose_bends_is_kept():
     # FAUST 018 -> 019: the long-range check of the global repair flagged right vertices whose
     # geodesics the pose bends, and re-placed them a few edges off (85.1% exact); flagged

@@ -121,6 +121,9 @@ def test_a_partial_shape_of_the_same_triangulation_becomes_exact(faust_pair):
     without = hope_rs.match(sa, sb, shared_faces=False, config=cfg)
     res = hope_rs.match(sa, sb, config=cfg)
     assert "faces" in res.timings and "faces" not in without.timings
+    # The finish's HOPE steps are profiled like the refinement's.
+    assert 0 < res.timings["faces.cost"] + res.timings["faces.assign"] < res.timings["faces"]
+    assert "faces.cost" not in without.timings
     assert (without.map == idx).mean() < 0.95  # measured 93.1%
     assert (res.map == idx).mean() > 0.999  # measured 100% (99.98% before the growth)
 

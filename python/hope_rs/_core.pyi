@@ -65,7 +65,7 @@ def overlap_assignment_graphs(
     hint: npt.NDArray[np.int64],
     floor_div: int,
     stay: int,
-) -> npt.NDArray[np.int64]: ...
+) -> tuple[npt.NDArray[np.int64], float, float]: ...
 def local_map_distortion_graphs(
     a: MeshGraph,
     b: MeshGraph,

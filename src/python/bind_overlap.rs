@@ -4,7 +4,7 @@ use super::bind_graph::MeshGraph;
 use super::convert::{owned, pattern, plain_vec, u32_vec, PyCsr};
 use super::detached;
 use crate::overlap::{overlap_rows, BallsAt, OverlapOptions, OverlapRows};
-use crate::step::{best_overlap, overlap_assignment, StepOptions};
+use crate::step::{best_overlap, overlap_assignment_timed, StepOptions};
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -106,7 +106,7 @@ pub(super) fn best_overlap_graphs<'py>(
 
 /// One HOPE step between two prebuilt graphs at hop radius k: the overlap cost with the
 /// current-match bonus, solved exactly (see `step::overlap_assignment`), without the cost ever
-/// reaching Python.
+/// reaching Python. Returns the map and the seconds spent building the cost and solving it.
 #[pyfunction]
 #[pyo3(signature = (a, b, k, f, witnesses, top_k, keep, hint, floor_div, stay))]
 #[allow(clippy::too_many_arguments)]
@@ -122,7 +122,7 @@ pub(super) fn overlap_assignment_graphs<'py>(
     hint: PyReadonlyArray1<'py, i64>,
     floor_div: i64,
     stay: u32,
-) -> PyResult<Bound<'py, PyArray1<i64>>> {
+) -> PyResult<(Bound<'py, PyArray1<i64>>, f64, f64)> {
     let (ra, rb, f, w) = step_inputs(a, b, k, &f, &witnesses)?;
     let keep = u32_vec(&keep, "keep")?;
     let hint = plain_vec(&hint);
@@ -131,8 +131,8 @@ pub(super) fn overlap_assignment_graphs<'py>(
         floor_div,
         stay,
     };
-    let g = detached(py, || {
-        overlap_assignment(&ra, &rb, &f, &w, &keep, &hint, opts)
+    let (g, t) = detached(py, || {
+        overlap_assignment_timed(&ra, &rb, &f, &w, &keep, &hint, opts)
     })?;
-    Ok(owned(py, &g))
+    Ok((owned(py, &g), t.cost, t.assign))
 }

@@ -42,6 +42,8 @@ def _summary(res) -> dict:
                 "seconds": h.seconds,
                 "pass": h.n_pass,
                 "polish": h.polish,
+                "cost_seconds": h.cost_seconds,
+                "assign_seconds": h.assign_seconds,
             }
             for h in res.history
         ],

@@ -21,7 +21,7 @@ from .config import LandmarkConfig, RefineConfig, RepairConfig
 from .landmarks import LandmarkCoordinates, pin
 from .lmd import LmdTracker
 from .progress import StageLog, step_detail
-from .state import Iteration, MatchState, Stage
+from .state import Iteration, MatchState, Stage, StepClock
 
 __all__ = [
     "Iteration",
@@ -64,6 +64,7 @@ def refine(
     last_pass_if=None,
     landmarks: np.ndarray | None = None,
     landmark_config: LandmarkConfig = LandmarkConfig(),
+    clock: StepClock | None = None,
 ) -> RefineResult:
     """Refine the map ``f0`` (A → B) with HOPE.
 
@@ -104,7 +105,11 @@ def refine(
     and always witnesses; a vertex whose match fits its distances to them far worse than it
     could (``landmark_config.max_gap``) is never one, and the global repair and the swapped
     region step take them as anchors (:mod:`hope_rs.pipeline.landmarks`).
+
+    ``clock``, if given, adds up the k-hop steps' cost and assignment seconds (each step's
+    own are in its :class:`Iteration`).
     """
+    clock = StepClock() if clock is None else clock
     k_max = min(a.k_max, b.k_max)
     cfg, min_consistent = config, config.min_consistent
     schedule = list(cfg.schedule) if cfg.schedule is not None else default_schedule(k_max)
@@ -176,11 +181,23 @@ def refine(
             t0 = time.perf_counter()
             w = trusted(voters(lmd, f, min_consistent, cfg.min_witness_fraction), f)
             stay = cfg.stay_counts if n_pass >= cfg.stay_pass and not w.all() else 0
-            f_new = pin(assign_by_overlap(a, b, k, f, w, config=cfg, stay=stay), landmarks)
+            ran = clock.cost, clock.assign
+            f_new = assign_by_overlap(a, b, k, f, w, config=cfg, stay=stay, clock=clock)
+            f_new = pin(f_new, landmarks)
             changed = int(np.count_nonzero(f_new != f))
             changed_in_pass += changed
             f = f_new
-            history.append(Iteration(k, float(w.mean()), changed, time.perf_counter() - t0, n_pass))
+            history.append(
+                Iteration(
+                    k,
+                    float(w.mean()),
+                    changed,
+                    time.perf_counter() - t0,
+                    n_pass,
+                    cost_seconds=clock.cost - ran[0],
+                    assign_seconds=clock.assign - ran[1],
+                )
+            )
             if callback is not None:
                 callback(history[-1])
             if on_last_pass is not None and n_pass == last_pass and step == 0:
@@ -251,6 +268,7 @@ def assign_by_overlap(
     *,
     config: RefineConfig = RefineConfig(),
     stay: int = 0,
+    clock: StepClock | None = None,
 ) -> np.ndarray:
     """One HOPE step: the one-to-one map maximising the k-hop overlap of the witnesses.
 
@@ -260,7 +278,8 @@ def assign_by_overlap(
     of A that the assignment leaves out (when A has more vertices than B) take their best
     candidate. With ``stay`` > 0, the current match of each witness is worth that many overlap
     counts more (see ``RefineConfig.stay_pass``). ``config`` gives ``top_k``,
-    ``auction_floor_div`` and ``nearest_unused_k``.
+    ``auction_floor_div`` and ``nearest_unused_k``. ``clock``, if given, adds the step's
+    seconds of building the cost and of solving it.
     """
     if not 0 <= stay <= 1000:
         raise ValueError(f"stay must be in [0, 1000] overlap counts, got {stay}")
@@ -270,7 +289,7 @@ def assign_by_overlap(
     hint = keep if a.n_vertices <= b.n_vertices else hint_rows(keep)
     # The cost is built and solved in one Rust call (src/step.rs), so it never makes the round
     # trip through NumPy; rows left out take their best column there.
-    return _core.overlap_assignment_graphs(
+    g, cost_seconds, assign_seconds = _core.overlap_assignment_graphs(
         *_step_args(a, b, k, f, witnesses),
         config.top_k,
         keep,
@@ -278,6 +297,9 @@ def assign_by_overlap(
         config.auction_floor_div,
         stay,
     )
+    if clock is not None:
+        clock.add(cost_seconds, assign_seconds)
+    return g
 
 
 def best_overlap(a: Shape, b: Shape, k: int, f, witnesses, *, top_k: int) -> np.ndarray:
@@ -314,6 +336,7 @@ class RefineStage(Stage):
     def run(self, state: MatchState) -> None:
         a, b, cfg, hooks = state.a, state.b, state.config.refine, state.hooks
         steps = _RefineSteps(a, b, state.log, cfg, state.callback)
+        clock = StepClock()
         t = state.log.start("refine", steps.total, f"pass 1/{steps.n_passes}")
         hooks.emit("refine_start", state)
         res = None
@@ -332,10 +355,12 @@ class RefineStage(Stage):
                 ),
                 landmarks=state.landmarks,
                 landmark_config=state.config.landmarks,
+                clock=clock,
             )
         finally:
             hooks.emit("refine_end", state, res)
         state.timings["refine"] = time.perf_counter() - t
+        clock.record(state.timings, "refine")
         steps.finished(state.timings["refine"])
         state.f = state.hope_map = res.map
         state.history = res.history

@@ -30,7 +30,10 @@ class MatchResult:
     timings : dict
         Seconds per stage ("shapes", "descriptors", "init" or, with ``multiscale``,
         "coarse"; "refine", "spectral", "faces" (the finishing rounds of
-        :mod:`hope_rs.pipeline.shared_faces`, when they ran), "confidence", "total"). The spectral pass's eigenbases are solved
+        :mod:`hope_rs.pipeline.shared_faces`, when they ran), "confidence", "total"), and
+        within "refine" and "faces" the seconds their HOPE steps spent building overlap costs
+        ("refine.cost", "faces.cost") and solving the assignments ("refine.assign",
+        "faces.assign"). The spectral pass's eigenbases are solved
         in a background thread during "refine" and count there, as does its ZoomOut when the
         refinement reaches its last pass (:class:`~hope_rs.pipeline.spectral.EarlyZoomOut`).
     coarse : MatchResult or None

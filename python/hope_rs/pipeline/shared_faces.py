@@ -34,7 +34,7 @@ from .config import FinishConfig, RefineConfig
 from .growth import grow
 from .handles import face_handles, large_patches
 from .refine import assign_by_overlap
-from .state import MatchState, Stage
+from .state import MatchState, Stage, StepClock
 
 
 def applies(a: Shape, b: Shape, config: FinishConfig = FinishConfig()) -> bool:
@@ -107,10 +107,12 @@ def finish(
     config: FinishConfig = FinishConfig(),
     *,
     refine: RefineConfig = RefineConfig(),
+    clock: StepClock | None = None,
 ) -> tuple[np.ndarray, int]:
     """The map after the finishing rounds and, if any ran, the growth from their trusted
     patches (:func:`hope_rs.pipeline.growth.grow`), in the internal numbering; and how many
-    rounds ran. ``refine``: the settings of the HOPE steps after each round (``top_k``...)."""
+    rounds ran. ``refine``: the settings of the HOPE steps after each round (``top_k``...);
+    ``clock``: adds up those steps' seconds (see :func:`~hope_rs.pipeline.refine.assign_by_overlap`)."""
     cfg = config
     f = np.asarray(f, dtype=np.int64)
     n_a = a.n_vertices
@@ -132,7 +134,7 @@ def finish(
         g = tree.query(arap.fit(b.points[f], handles))[1].astype(np.int64)
         g[handles] = f[handles]
         for _ in range(cfg.steps):
-            g = assign_by_overlap(a, b, k, g, every, config=refine)
+            g = assign_by_overlap(a, b, k, g, every, config=refine, clock=clock)
         f = g
         done += 1
     if done:
@@ -173,9 +175,11 @@ class FinishStage(Stage):
     def run(self, state: MatchState) -> None:
         a, b, cfg = state.a, state.b, state.config.finish
         t = state.log.start("faces", detail="shared-face finish")
-        f, rounds = finish(a, b, state.f, cfg, refine=state.config.refine)
+        clock = StepClock()
+        f, rounds = finish(a, b, state.f, cfg, refine=state.config.refine, clock=clock)
         if rounds:
             state.timings["faces"] = time.perf_counter() - t
+            clock.record(state.timings, "faces")
             state.log.ran(
                 "faces",
                 state.timings["faces"],

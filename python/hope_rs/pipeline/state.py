@@ -19,7 +19,7 @@ from ..shape import Shape
 from .config import MatchConfig
 from .progress import StageLog
 
-__all__ = ["EVENTS", "QUIET", "Hooks", "Iteration", "MatchState", "Stage"]
+__all__ = ["EVENTS", "QUIET", "Hooks", "Iteration", "MatchState", "Stage", "StepClock"]
 
 #: The events of :class:`Hooks` and their arguments. "stop_refining" is a question: the
 #: refinement ends after the current pass when any subscriber answers True.
@@ -49,6 +49,31 @@ class Iteration:
     n_pass: int = 0
     #: The final polishing step (see ``polish_k``), not a step of a pass.
     polish: bool = False
+    #: Of ``seconds``, those spent building the overlap cost and solving its assignment (0 for
+    #: a repair step; the polish's solve is its best-column scan).
+    cost_seconds: float = 0.0
+    assign_seconds: float = 0.0
+
+
+@dataclass
+class StepClock:
+    """Seconds the HOPE steps of a stage spent in their two halves, summed over its steps:
+    building the overlap cost (parallel) and solving the assignment (sequential)."""
+
+    cost: float = 0.0
+    assign: float = 0.0
+    steps: int = 0
+
+    def add(self, cost: float, assign: float) -> None:
+        self.cost += cost
+        self.assign += assign
+        self.steps += 1
+
+    def record(self, timings: dict, stage: str) -> None:
+        """Adds ``stage + ".cost"`` and ``stage + ".assign"`` to ``timings`` when a step ran."""
+        if self.steps:
+            timings[f"{stage}.cost"] = self.cost
+            timings[f"{stage}.assign"] = self.assign
 
 
 class Hooks:
