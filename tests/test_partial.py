@@ -182,6 +182,10 @@ def test_whole_to_part_inverts_the_part_match_and_says_which_vertices_have_a_par
     assert (res.confidence[~counterpart] == 0).all()
     unmatched = res.map_or_unmatched(0.5) == -1
     assert unmatched[~counterpart].all()
+    # The others are judged at the whole's scale, on the vertices that have a partner: a right
+    # map is trusted there, and the pair is not reported as failed for the rest.
+    assert (res.confidence[has & counterpart] >= 0.5).mean() > 0.9
+    assert not res.quality.likely_failed
     # The part matched the other way: every vertex has its partner.
     res_a = run_match(sb, sa, "shot", MatchConfig(), on_stage=lambda st, name: seen.update(st=st))
     assert seen["st"].partial.counterpart.all()

@@ -87,18 +87,22 @@ def confidence_features(
     *,
     min_consistent: float = RefineConfig.min_consistent,
     repair: RepairConfig = RepairConfig(),
+    among: np.ndarray | None = None,
 ) -> np.ndarray:
     """The features of :data:`~hope_rs.pipeline.config.CONFIDENCE_FEATURES` per vertex of A,
     (n_a, n_features) float64, for the map ``f`` and the stages' maps ``hope`` and ``zoomout``
     (internal numbering; ``None``: not available). ``repair`` says when two geodesic
-    distances agree; ``min_consistent`` which vertices can be anchors."""
+    distances agree; ``min_consistent`` which vertices can be anchors. ``among`` (bool per
+    vertex of A, or ``None`` for all): the vertices the pair-level feature averages over (a
+    whole's vertices with a counterpart on the part; the others have no right match)."""
     f = np.asarray(f, dtype=np.int64)
     n = a.n_vertices
     mean, consistent = local_map_distortion(a, b, f)
     mean = mean.astype(np.float64)
     consistent = consistent.astype(np.float64)
     # Anchors among the consistent vertices; the anchors whose own images are wrong drop out.
-    cand = np.flatnonzero(consistent >= min_consistent)
+    among = np.ones(n, dtype=bool) if among is None else np.asarray(among, dtype=bool)
+    cand = np.flatnonzero((consistent >= min_consistent) & among)
     if cand.size < 4:
         cand = np.arange(n)
     anchors, da = farthest_witnesses(a, cand, config.n_anchors)
@@ -136,7 +140,7 @@ def confidence_features(
         "log_hope_shift_smooth": smooth(np.log(fl + hope_shift)),
         "log_zoomout_shift_smooth": smooth(np.log(fl + zoom_shift)),
         "log_stretch_smooth": smooth(np.log(fl + stretch)),
-        "pair_consistent": np.full(n, consistent.mean()),
+        "pair_consistent": np.full(n, consistent[among].mean() if among.any() else 0.0),
     }
     return np.column_stack([cols[name] for name in CONFIDENCE_FEATURES])
 
@@ -169,6 +173,7 @@ class ConfidenceStage(Stage):
     def run(self, state: MatchState) -> None:
         cfg = state.config.confidence
         t = state.log.start("confidence", detail="per-vertex confidence of the final map")
+        counterpart = getattr(state.partial, "counterpart", None)
         x = confidence_features(
             state.a,
             state.b,
@@ -178,9 +183,9 @@ class ConfidenceStage(Stage):
             cfg,
             min_consistent=state.config.refine.min_consistent,
             repair=state.config.refine.repair,
+            among=counterpart,
         )
         state.confidence = predict_confidence(x, cfg)
-        counterpart = getattr(state.partial, "counterpart", None)
         if counterpart is not None:
             # A vertex of the whole without a counterpart on the part has no right match.
             state.confidence = np.where(counterpart, state.confidence, 0.0)

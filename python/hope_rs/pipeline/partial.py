@@ -163,6 +163,10 @@ class PartialStage(Stage):
             f, has = invert_part_map(state.a, g, cfg.counterpart_edges * mean_edge(state.a))
             info = dataclasses.replace(info, counterpart=has)
             state.f0 = state.f = state.hope_map = f
+            # The stages after this one (the confidence) measure the part at the whole's scale,
+            # as the nested match did.
+            if info.scale != state.b.scale:
+                state.b = state.b.at_scale(info.scale)
             state.timings.update({k: v for k, v in back.timings.items() if k != "total"})
             state.done = "the map is the inverse of the match of the part B to the whole A"
         elif info.scale != state.b.scale:

@@ -81,7 +81,11 @@ def run_match(
     confidence = quality = None
     if state.confidence is not None:
         confidence = state.confidence[a.rank]
-        quality = match_quality(confidence, config.confidence)
+        # A whole's vertices without a counterpart on the part have no right match to find:
+        # the pair is judged on the others.
+        counterpart = getattr(state.partial, "counterpart", None)
+        judged = confidence if counterpart is None else confidence[counterpart[a.rank]]
+        quality = match_quality(judged, config.confidence)
     return MatchResult(
         a.map_out(b, state.f).astype(np.int64),
         a.map_out(b, state.f0).astype(np.int64),
