@@ -192,3 +192,53 @@ def test_the_spectral_basis_is_cached_once_per_shape_and_reused(folder, tmp_path
     none = hope_rs.match_many(shapes, pairs, jobs=1, cache=tmp_path / "d", spectral=False)
     assert all(r.ok for r in none)
     assert not list((tmp_path / "d").rglob("basis-*.npz"))
+
+
+def test_per_pair_landmarks_from_the_pairs_file_and_match_many(folder, tmp_path, capsys):
+    """A third field of a pairs line names the pair's landmark file: the batch's map keeps its
+    landmarks (as ``match(..., landmarks=)`` does); other pairs run without."""
+    m = (folder / "m").resolve()
+    s0, s1 = (hope_rs.load_mesh(m / f"s{i}.off") for i in (0, 1))
+    free = hope_rs.match(s0, s1).map
+    # Two landmarks the free map does not keep: vertex 0 and 7 sent to other vertices.
+    lm = np.array([[0, free[5]], [7, free[40]]], dtype=np.int64)
+    want = hope_rs.match(s0, s1, landmarks=lm).map
+    assert (want[lm[:, 0]] == lm[:, 1]).all() and not np.array_equal(want, free)
+    (tmp_path / "lm.txt").write_text("".join(f"{a} {b}\n" for a, b in lm))
+    pairs_file = tmp_path / "pairs.txt"
+    pairs_file.write_text(f"{m / 's0.off'} {m / 's1.off'} lm.txt\n{m / 's1.off'} {m / 's2.off'}\n")
+    pairs, marks = read_pairs(pairs_file, with_landmarks=True)
+    assert pairs == [(m / "s0.off", m / "s1.off"), (m / "s1.off", m / "s2.off")]
+    assert marks[0].tolist() == lm.tolist() and marks[1] is None
+    with pytest.raises(ValueError, match=r"pairs.txt:1: expected two mesh paths"):
+        read_pairs(pairs_file)  # a third field only with with_landmarks
+    cache = ["--cache", str(tmp_path / "c"), "-q", "-j", "1"]
+    assert main(["batch", str(pairs_file), "--out", str(tmp_path / "o")] + cache) == 0
+    np.testing.assert_array_equal(np.loadtxt(tmp_path / "o" / "s0__s1.txt", dtype=np.int64), want)
+    np.testing.assert_array_equal(
+        np.loadtxt(tmp_path / "o" / "s1__s2.txt", dtype=np.int64),
+        hope_rs.match(s1, hope_rs.load_mesh(m / "s2.off")).map,
+    )
+    # A missing landmark file: one line naming the pairs file's line, before any work.
+    pairs_file.write_text(f"{m / 's0.off'} {m / 's1.off'} nowhere.txt\n")
+    assert main(["batch", str(pairs_file), "--out", str(tmp_path / "o3")] + cache) == 2
+    err = capsys.readouterr().err.strip()
+    assert "pairs.txt:1: no such landmark file" in err and len(err.splitlines()) == 1
+    assert not (tmp_path / "o3").exists()
+
+
+def test_match_many_landmarks_are_checked_per_pair(folder, tmp_path):
+    m = (folder / "m").resolve()
+    shapes = [m / "s0.off", m / "s1.off"]
+    n = hope_rs.load_mesh(shapes[1]).n_vertices
+    with pytest.raises(ValueError, match="give the pairs they are for"):
+        hope_rs.match_many(shapes, landmarks=[None], jobs=1, cache=False)
+    with pytest.raises(ValueError, match="2 entries for 1 pairs"):
+        hope_rs.match_many(shapes, [(0, 1)], landmarks=[None, None], jobs=1, cache=False)
+    with pytest.raises(ValueError, match=r"landmarks of pair 0: .*shape \(m, 2\)"):
+        hope_rs.match_many(shapes, [(0, 1)], landmarks=[[1, 2, 3]], jobs=1, cache=False)
+    # Out of range for this pair's shapes: that pair fails, the others are matched.
+    res = hope_rs.match_many(
+        shapes, [(0, 1), (1, 0)], landmarks=[[[0, n]], None], jobs=1, cache=False
+    )
+    assert not res[0].ok and "vertex 300 is not a vertex of B" in res[0].error and res[1].ok

@@ -28,10 +28,17 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry.map_io import check_writable_folder, read_map, text_map_is_complete, write_map
+from ..geometry.map_io import (
+    check_writable_folder,
+    read_landmarks,
+    read_map,
+    text_map_is_complete,
+    write_map,
+)
 from ..geometry.mesh import as_mesh
 from ..matching import check_match_options
 from ..pipeline.config import KEYWORDS, MatchConfig
+from ..pipeline.landmarks import check_landmarks
 from ..shape import Shape, ShapeConfig
 from .cache import ShapeCache
 from .ray_backend import RayBackend
@@ -89,7 +96,7 @@ def _pair_fields(line: str) -> list[str]:
     return shlex.split(line, comments=True)
 
 
-def read_pairs(path: str | os.PathLike, *, ext: str = "") -> list[tuple[Path, Path]]:
+def read_pairs(path: str | os.PathLike, *, ext: str = "", with_landmarks: bool = False):
     """Read a pairs file: one pair per line, two mesh paths.
 
     The two paths are separated by white space (quote a path holding spaces, as in a shell:
@@ -98,6 +105,20 @@ def read_pairs(path: str | os.PathLike, *, ext: str = "") -> list[tuple[Path, Pa
     is appended to names that do not already end with it, so the ``pairs.txt`` of the shared
     benchmark sets (``tr_reg_002 tr_reg_007``) work as they are. Blank lines and ``#`` comments
     are ignored. A malformed line raises ValueError naming the file and line.
+
+    With ``with_landmarks``, a line may name a third file: the pair's landmarks (read with
+    :func:`hope_rs.read_landmarks`, relative paths against the pairs file's folder, no ``ext``
+    added), and the result is ``(pairs, landmarks)`` with one (m, 2) array or ``None`` per pair.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> folder = pathlib.Path(tempfile.mkdtemp())
+    >>> _ = (folder / "scan.lm").write_text("0 5\\n17 3\\n")
+    >>> _ = (folder / "pairs.txt").write_text("template scan scan.lm\\ntemplate other\\n")
+    >>> pairs, landmarks = read_pairs(folder / "pairs.txt", ext=".off", with_landmarks=True)
+    >>> [(a.name, b.name) for a, b in pairs], landmarks[0].tolist(), landmarks[1]
+    ([('template.off', 'scan.off'), ('template.off', 'other.off')], [[0, 5], [17, 3]], None)
     """
     path = Path(path)
     if not path.is_file():
@@ -109,7 +130,7 @@ def read_pairs(path: str | os.PathLike, *, ext: str = "") -> list[tuple[Path, Pa
         text = path.read_text()
     except UnicodeDecodeError:
         raise ValueError(f"{path} is not a text file of mesh paths") from None
-    out = []
+    out, marks = [], []
     for no, line in enumerate(text.splitlines(), 1):
         try:
             tokens = _pair_fields(line)
@@ -117,13 +138,22 @@ def read_pairs(path: str | os.PathLike, *, ext: str = "") -> list[tuple[Path, Pa
             raise ValueError(f"{path}:{no}: {e}: {line.strip()!r}") from None
         if not tokens:
             continue
-        if len(tokens) != 2:
+        if len(tokens) != 2 and not (with_landmarks and len(tokens) == 3):
+            want = "two mesh paths (and a landmark file)" if with_landmarks else "two mesh paths"
             raise ValueError(
-                f"{path}:{no}: expected two mesh paths separated by white space or a tab, got "
+                f"{path}:{no}: expected {want} separated by white space or a tab, got "
                 f"{len(tokens)} field(s) (quote paths holding spaces): {line.strip()!r}"
             )
+        if len(tokens) == 3:
+            lm = Path(tokens[2])
+            try:
+                marks.append(read_landmarks(lm if lm.is_absolute() else folder / lm))
+            except (OSError, ValueError) as e:
+                raise ValueError(f"{path}:{no}: {e}") from None
+        else:
+            marks.append(None)
         pair = []
-        for t in tokens:
+        for t in tokens[:2]:
             if ext and not t.endswith(ext):
                 t += ext
             p = Path(t)
@@ -131,7 +161,7 @@ def read_pairs(path: str | os.PathLike, *, ext: str = "") -> list[tuple[Path, Pa
         out.append((pair[0], pair[1]))
     if not out:
         raise ValueError(f"{path} lists no pairs (expected lines of two mesh paths)")
-    return out
+    return (out, marks) if with_landmarks else out
 
 
 def all_pairs(n: int) -> list[tuple[int, int]]:
@@ -419,6 +449,7 @@ def imatch_many(
     progress=None,
     ray_options: dict | None = None,
     map_format: str = "txt",
+    landmarks=None,
     **match_options,
 ) -> Iterator[PairResult]:
     """Like :func:`match_many`, but yields each :class:`PairResult` as soon as it is done
@@ -443,6 +474,7 @@ def imatch_many(
         )
     _check_backend(backend, jobs)
     ij = _resolve_pairs(pairs, names)
+    marks = _pair_landmarks(landmarks, pairs, len(ij))
     specs = [_spec(s) for s in shapes]
     out = check_writable_folder(out_dir, create=True) if out_dir is not None else None
     tmp = None
@@ -536,7 +568,16 @@ def imatch_many(
                             prepare(i, True)
                             prepare(j, True)
                         if i in ready and j in ready:
-                            handles[ex.submit(pair_task, job, ready[i], ready[j])] = ("pair", t)
+                            try:  # the indices, now that both sizes are known
+                                lm = check_landmarks(marks[n], sizes[i], sizes[j])
+                            except (TypeError, ValueError) as e:
+                                r = PairResult(n, names[i], names[j], path=path)
+                                r.error = f"ValueError: {e}"
+                                report(r)
+                                yield r
+                                continue
+                            h = ex.submit(pair_task, job, ready[i], ready[j], lm)
+                            handles[h] = ("pair", t)
                         else:
                             still.append(t)
                     waiting = still
@@ -558,6 +599,32 @@ def imatch_many(
         ex.close(abort=not finished)
         if tmp is not None:
             tmp.cleanup()
+
+
+def _pair_landmarks(landmarks, pairs, n_pairs: int) -> list:
+    """One landmark array (form checked; indices are checked per pair once its shapes are
+    read) or ``None`` per pair."""
+    if landmarks is None:
+        return [None] * n_pairs
+    if pairs is None:
+        raise ValueError("landmarks belong to pairs: give the pairs they are for as well")
+    try:
+        marks = list(landmarks)
+    except TypeError:
+        raise TypeError(
+            "landmarks must be a list with one entry per pair: None or an (m, 2) array"
+        ) from None
+    if len(marks) != n_pairs:
+        raise ValueError(
+            f"landmarks has {len(marks)} entries for {n_pairs} pairs; give one per pair"
+        )
+    big = np.iinfo(np.int64).max
+    for n, lm in enumerate(marks):
+        try:
+            check_landmarks(lm, big, big)
+        except (TypeError, ValueError) as e:
+            raise type(e)(f"landmarks of pair {n}: {e}") from None
+    return marks
 
 
 def match_many(shapes, pairs=None, **kwargs) -> list[PairResult]:
@@ -586,6 +653,10 @@ def match_many(shapes, pairs=None, **kwargs) -> list[PairResult]:
     cache : ShapeCache, path, True or False
         Per-shape cache (default :func:`hope_rs.batch.cache.default_cache_dir`); False keeps it in a
         temporary folder for this batch only.
+    landmarks : list, optional
+        One entry per pair of ``pairs`` (which must then be given): ``None`` or an (m, 2)
+        array of (vertex of a, vertex of b) that the pair's map keeps, as for
+        :func:`hope_rs.match`. Indices out of range fail that pair only, before it is matched.
     init, k_max, **match_options
         As for :func:`hope_rs.match` (``init`` must name descriptors).
     progress : bool or callable

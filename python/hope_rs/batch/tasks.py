@@ -106,8 +106,9 @@ def _shape(token, cache_root: str | None, kinds: tuple, k_max: int, basis: int =
     return shape
 
 
-def pair_task(job: dict, a, b) -> dict:
-    """Match one pair; ``a``/``b`` are cache digests or dicts of arrays."""
+def pair_task(job: dict, a, b, landmarks=None) -> dict:
+    """Match one pair; ``a``/``b`` are cache digests or dicts of arrays; ``landmarks``: the
+    pair's, or ``None``."""
     limit_threads(job.get("threads"))
     try:
         t0 = time.perf_counter()
@@ -115,7 +116,9 @@ def pair_task(job: dict, a, b) -> dict:
         sa = _shape(a, job["cache_root"], job["kinds"], job["k_max"], basis)
         sb = _shape(b, job["cache_root"], job["kinds"], job["k_max"], basis)
         load = time.perf_counter() - t0
-        res = match(sa, sb, init=job["init"], k_max=job["k_max"], **job["options"])
+        res = match(
+            sa, sb, init=job["init"], k_max=job["k_max"], landmarks=landmarks, **job["options"]
+        )
         return {"map": res.map, "timings": {"load": load, **res.timings}}
     except Exception as e:  # noqa: BLE001 - reported per pair, the batch goes on
         return {"error": error_text(e)}

@@ -56,7 +56,8 @@ def add_batch_parser(sub) -> None:
         description=textwrap.fill(
             "Match every pair listed in PAIRS_FILE (one pair per line: two mesh paths, relative "
             "ones resolved against the file's folder; quote paths holding spaces or separate "
-            "the two with a tab). Each map is written atomically to OUT/<a>__<b>.txt (or .npy) as soon as "
+            "the two with a tab; an optional third field names the pair's landmark file, as "
+            "hope-rs match --landmarks reads it). Each map is written atomically to OUT/<a>__<b>.txt (or .npy) as soon as "
             "it is done; a rerun (e.g. after Ctrl-C or a crash) skips pairs whose map file is "
             "whole and redoes the others. Exit status 1 when some pair failed (the others still "
             "finish).",
@@ -65,7 +66,11 @@ def add_batch_parser(sub) -> None:
         epilog=environment_help(),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("pairs", metavar="PAIRS_FILE", help="text file, one pair of mesh paths a line")
+    p.add_argument(
+        "pairs",
+        metavar="PAIRS_FILE",
+        help="text file, one pair of mesh paths a line (and optionally a landmark file)",
+    )
     p.add_argument("--out", required=True, help="output folder (created if missing)")
     p.add_argument(
         "--format", default="txt", choices=["txt", "npy"],
@@ -104,7 +109,7 @@ def cmd_batch(args) -> int:
         raise ValueError("--ray-address needs --backend ray")
     if args.jobs is not None and args.jobs < 1:
         raise ValueError(f"--jobs must be a positive integer, got {args.jobs}")
-    pairs = read_pairs(args.pairs, ext=args.ext)
+    pairs, landmarks = read_pairs(args.pairs, ext=args.ext, with_landmarks=True)
     shapes = list(dict.fromkeys(p for pair in pairs for p in pair))
     index = {p: i for i, p in enumerate(shapes)}
     t0 = time.perf_counter()
@@ -125,6 +130,7 @@ def cmd_batch(args) -> int:
         progress=not args.quiet,
         ray_options={"address": args.ray_address} if args.backend == "ray" else None,
         map_format=args.format,
+        landmarks=None if all(lm is None for lm in landmarks) else landmarks,
     )
     interrupted = started = False
     try:
