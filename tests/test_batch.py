@@ -223,7 +223,8 @@ def test_per_pair_landmarks_from_the_pairs_file_and_match_many(folder, tmp_path,
     pairs_file.write_text(f"{m / 's0.off'} {m / 's1.off'} nowhere.txt\n")
     assert main(["batch", str(pairs_file), "--out", str(tmp_path / "o3")] + cache) == 2
     err = capsys.readouterr().err.strip()
-    assert "pairs.txt:1: no such landmark file" in err and len(err.splitlines()) == 1
+    assert "pairs.txt:1: a third field names the pair's landmark file: no such landmark file" in err
+    assert len(err.splitlines()) == 1
     assert not (tmp_path / "o3").exists()
 
 

@@ -174,9 +174,13 @@ def test_usage_errors_exit_2(meshes, tmp_path, capsys):
     assert e.value.code == 2
     capsys.readouterr()
     pairs = tmp_path / "p.txt"
-    pairs.write_text(f"{a} {a} {a}\n")
+    pairs.write_text(f"{a} {a} {a} {a}\n")
     assert main(["batch", str(pairs), "--out", str(tmp_path / "o")]) == 2
     assert "p.txt:1: expected two mesh paths" in one_line_error(capsys.readouterr().err)
+    pairs.write_text(f"{a} {a} {a}\n")  # a mesh where the landmark file goes
+    assert main(["batch", str(pairs), "--out", str(tmp_path / "o")]) == 2
+    err = one_line_error(capsys.readouterr().err)
+    assert "p.txt:1: a third field names the pair's landmark file" in err
     pairs.write_text(f"{a} {a}\n")
     assert main(["batch", str(pairs), "--out", str(tmp_path / "o"), "-j", "0"]) == 2
     assert "--jobs must be a positive integer" in one_line_error(capsys.readouterr().err)

@@ -149,7 +149,9 @@ def read_pairs(path: str | os.PathLike, *, ext: str = "", with_landmarks: bool =
             try:
                 marks.append(read_landmarks(lm if lm.is_absolute() else folder / lm))
             except (OSError, ValueError) as e:
-                raise ValueError(f"{path}:{no}: {e}") from None
+                raise ValueError(
+                    f"{path}:{no}: a third field names the pair's landmark file: {e}"
+                ) from None
         else:
             marks.append(None)
         pair = []
