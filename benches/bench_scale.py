@@ -184,7 +184,8 @@ def table(rows: list[dict]) -> str:
 def steps_table(rows: list[dict]) -> str:
     """Where the HOPE steps' time goes: building overlap costs (parallel) against solving the
     assignments (the exact auction, sequential), and the rest of the refinement (LMD, the
-    global repair, the map bookkeeping)."""
+    global repair, the polish, the map bookkeeping, and what the spectral pass's background
+    eigensolve takes from them)."""
     head = (
         "| case | refine (s) | steps | overlap cost (s) | assignment (s) | rest (s) "
         "| faces (s) | faces' steps: cost / assignment (s) | assignment share of all steps |\n"

@@ -73,7 +73,8 @@ def main() -> int:
         "28k are FAUST registrations subdivided (scored on their original vertices). The "
         "second table splits the HOPE steps (the refinement's and the shared-face finish's) "
         "into building the overlap cost (parallel) and solving the assignment exactly (the "
-        "auction, sequential); *rest* is the refinement's LMD, global repair and bookkeeping.\n\n"
+        "auction, sequential); *rest* is the refinement's LMD, global repair, polish and "
+        "bookkeeping, slowed by the spectral pass's eigensolve running beside them.\n\n"
         + _tables(scale)
         + (
             "\n## Per stage, `multiscale=True`\n\nThe descr column is the coarse match and "

@@ -195,10 +195,9 @@ mod tests {
                 stay: 0,
             };
             let g = overlap_assignment(&rows, &rows, &f, &w, &keep, &hint, opts).unwrap();
-            let (timed, t) =
+            let (timed, _) =
                 overlap_assignment_timed(&rows, &rows, &f, &w, &keep, &hint, opts).unwrap();
             assert_eq!(g, timed, "k={k}: timing a step changes nothing");
-            assert!(t.cost >= 0.0 && t.assign >= 0.0, "{t:?}");
             let opts = OverlapOptions {
                 top_k: None,
                 keep: Some(&keep),

@@ -236,10 +236,33 @@ def test_match_many_landmarks_are_checked_per_pair(folder, tmp_path):
         hope_rs.match_many(shapes, landmarks=[None], jobs=1, cache=False)
     with pytest.raises(ValueError, match="2 entries for 1 pairs"):
         hope_rs.match_many(shapes, [(0, 1)], landmarks=[None, None], jobs=1, cache=False)
-    with pytest.raises(ValueError, match=r"landmarks of pair 0: .*shape \(m, 2\)"):
+    with pytest.raises(ValueError, match=r"landmarks\[0\] \(for pairs\[0\]\): .*shape \(m, 2\)"):
         hope_rs.match_many(shapes, [(0, 1)], landmarks=[[1, 2, 3]], jobs=1, cache=False)
     # Out of range for this pair's shapes: that pair fails, the others are matched.
     res = hope_rs.match_many(
         shapes, [(0, 1), (1, 0)], landmarks=[[[0, n]], None], jobs=1, cache=False
     )
-    assert not res[0].ok and "vertex 300 is not a vertex of B" in res[0].error and res[1].ok
+    assert not res[0].ok and f"vertex {n} is not a vertex of B" in res[0].error and res[1].ok
+
+
+def test_a_rerun_redoes_a_map_that_does_not_keep_its_new_landmarks(folder, tmp_path):
+    m = (folder / "m").resolve()
+    shapes = [m / "s0.off", m / "s1.off"]
+    out, cache = tmp_path / "out", tmp_path / "cache"
+    (free,) = hope_rs.match_many(shapes, [(0, 1)], out_dir=out, jobs=1, cache=cache)
+    lm = np.array([[0, free.map[5]]])  # not kept by the map already written
+    with pytest.warns(RuntimeWarning, match="does not keep the pair's landmarks"):
+        (again,) = hope_rs.match_many(
+            shapes, [(0, 1)], out_dir=out, jobs=1, cache=cache, landmarks=[lm]
+        )
+    assert not again.skipped and again.map[0] == lm[0, 1]
+    np.testing.assert_array_equal(np.loadtxt(again.path, dtype=np.int64), again.map)
+    # Kept now: the next rerun skips it, and a landmark out of range fails the pair.
+    (third,) = hope_rs.match_many(
+        shapes, [(0, 1)], out_dir=out, jobs=1, cache=cache, landmarks=[lm]
+    )
+    assert third.skipped
+    (bad,) = hope_rs.match_many(
+        shapes, [(0, 1)], out_dir=out, jobs=1, cache=cache, landmarks=[[[10**6, 0]]]
+    )
+    assert not bad.ok and "is not a vertex of A" in bad.error

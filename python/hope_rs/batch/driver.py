@@ -25,6 +25,7 @@ import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Literal, overload
 
 import numpy as np
 
@@ -96,6 +97,14 @@ def _pair_fields(line: str) -> list[str]:
     return shlex.split(line, comments=True)
 
 
+@overload
+def read_pairs(
+    path: str | os.PathLike, *, ext: str = "", with_landmarks: Literal[False] = False
+) -> list[tuple[Path, Path]]: ...
+@overload
+def read_pairs(
+    path: str | os.PathLike, *, ext: str = "", with_landmarks: Literal[True]
+) -> tuple[list[tuple[Path, Path]], list[np.ndarray | None]]: ...
 def read_pairs(path: str | os.PathLike, *, ext: str = "", with_landmarks: bool = False):
     """Read a pairs file: one pair per line, two mesh paths.
 
@@ -147,8 +156,12 @@ def read_pairs(path: str | os.PathLike, *, ext: str = "", with_landmarks: bool =
         if len(tokens) == 3:
             lm = Path(tokens[2])
             try:
-                marks.append(read_landmarks(lm if lm.is_absolute() else folder / lm))
-            except (OSError, ValueError) as e:
+                marks.append(
+                    check_landmarks(
+                        read_landmarks(lm if lm.is_absolute() else folder / lm), None, None
+                    )
+                )
+            except (OSError, TypeError, ValueError) as e:
                 raise ValueError(
                     f"{path}:{no}: a third field names the pair's landmark file: {e}"
                 ) from None
@@ -560,6 +573,17 @@ def imatch_many(
                                 still.append(t)
                                 continue
                             m, why = existing_map(path, sizes[i], sizes[j])
+                            if why is None and marks[n] is not None:
+                                try:
+                                    lm = check_landmarks(marks[n], sizes[i], sizes[j])
+                                except (TypeError, ValueError) as e:
+                                    r = PairResult(n, names[i], names[j], path=path)
+                                    r.error = error_text(e)
+                                    report(r)
+                                    yield r
+                                    continue
+                                if lm is not None and (m[lm[:, 0]] != lm[:, 1]).any():
+                                    why = f"{path} does not keep the pair's landmarks"
                             if why is None:
                                 r = PairResult(n, names[i], names[j], m, skipped=True, path=path)
                                 report(r)
@@ -574,7 +598,7 @@ def imatch_many(
                                 lm = check_landmarks(marks[n], sizes[i], sizes[j])
                             except (TypeError, ValueError) as e:
                                 r = PairResult(n, names[i], names[j], path=path)
-                                r.error = f"ValueError: {e}"
+                                r.error = error_text(e)
                                 report(r)
                                 yield r
                                 continue
@@ -620,12 +644,11 @@ def _pair_landmarks(landmarks, pairs, n_pairs: int) -> list:
         raise ValueError(
             f"landmarks has {len(marks)} entries for {n_pairs} pairs; give one per pair"
         )
-    big = np.iinfo(np.int64).max
     for n, lm in enumerate(marks):
         try:
-            check_landmarks(lm, big, big)
+            check_landmarks(lm, None, None)
         except (TypeError, ValueError) as e:
-            raise type(e)(f"landmarks of pair {n}: {e}") from None
+            raise type(e)(f"landmarks[{n}] (for pairs[{n}]): {e}") from None
     return marks
 
 

@@ -93,8 +93,9 @@ def confidence_features(
     (n_a, n_features) float64, for the map ``f`` and the stages' maps ``hope`` and ``zoomout``
     (internal numbering; ``None``: not available). ``repair`` says when two geodesic
     distances agree; ``min_consistent`` which vertices can be anchors. ``among`` (bool per
-    vertex of A, or ``None`` for all): the vertices the pair-level feature averages over (a
-    whole's vertices with a counterpart on the part; the others have no right match)."""
+    vertex of A, or ``None`` for all): the vertices that can be anchors and that the pair-level
+    feature averages over (a whole's vertices with a counterpart on the part; the others have
+    no right match)."""
     f = np.asarray(f, dtype=np.int64)
     n = a.n_vertices
     mean, consistent = local_map_distortion(a, b, f)

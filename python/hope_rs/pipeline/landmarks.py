@@ -42,10 +42,11 @@ __all__ = [
 _CHUNK = 512
 
 
-def check_landmarks(landmarks, n_a: int, n_b: int) -> np.ndarray | None:
+def check_landmarks(landmarks, n_a: int | None, n_b: int | None) -> np.ndarray | None:
     """``landmarks`` as an (m, 2) int64 array of (vertex of A, vertex of B), 0-based, checked
-    against shapes of ``n_a`` and ``n_b`` vertices; ``None`` when there are none (``None`` or
-    an empty array). Rows given twice count once.
+    against shapes of ``n_a`` and ``n_b`` vertices (``None``: not known yet, only negative
+    indices are refused); ``None`` when there are none (``None`` or an empty array). Rows given
+    twice count once.
 
     Raises
     ------
@@ -73,12 +74,16 @@ def check_landmarks(landmarks, n_a: int, n_b: int) -> np.ndarray | None:
         )
     # Checked in the given dtype, so that huge unsigned values are not wrapped first.
     for col, n, name in ((0, n_a, "A"), (1, n_b, "B")):
-        bad = np.flatnonzero((arr[:, col] < 0) | (arr[:, col] >= n))
+        out = arr[:, col] < 0
+        if n is not None:
+            out |= arr[:, col] >= n
+        bad = np.flatnonzero(out)
         if bad.size:
             r = int(bad[0])
+            has = f"which has {n} (0-based indices 0..{n - 1})" if n is not None else "0-based"
             raise ValueError(
                 f"landmark row {r} ({arr[r, 0]}, {arr[r, 1]}): vertex {arr[r, col]} is not a "
-                f"vertex of {name}, which has {n} (0-based indices 0..{n - 1})"
+                f"vertex of {name}, {has}"
             )
     arr = np.unique(arr.astype(np.int64), axis=0)
     for col, name, other in ((0, "A", "B"), (1, "B", "A")):

@@ -156,17 +156,25 @@ class PartialStage(Stage):
             info = self._rescale_part(state, info)
         elif reverse:
             # The nested match detects B as the part of its pair and scales it itself.
+            nested = {}
             back = state.run(
-                state.b, state.a, state.init, state.config, landmarks=_landmarks(state, swap=True)
+                state.b,
+                state.a,
+                state.init,
+                state.config,
+                landmarks=_landmarks(state, swap=True),
+                on_stage=lambda st, name: nested.update(partial=st.partial),
             )
             g = state.b.map_in(state.a, back.map)
             f, has = invert_part_map(state.a, g, cfg.counterpart_edges * mean_edge(state.a))
-            info = dataclasses.replace(info, counterpart=has)
+            # The scale the nested match measured the part at (it may have rescaled it).
+            part = nested.get("partial")
+            scale = part.scale if part is not None and part.part == "a" else info.scale
+            info = dataclasses.replace(info, counterpart=has, scale=scale)
             state.f0 = state.f = state.hope_map = f
-            # The stages after this one (the confidence) measure the part at the whole's scale,
-            # as the nested match did.
-            if info.scale != state.b.scale:
-                state.b = state.b.at_scale(info.scale)
+            # The stages after this one (the confidence) measure the part at that scale too.
+            if scale != state.b.scale:
+                state.b = state.b.at_scale(scale)
             state.timings.update({k: v for k, v in back.timings.items() if k != "total"})
             state.done = "the map is the inverse of the match of the part B to the whole A"
         elif info.scale != state.b.scale:

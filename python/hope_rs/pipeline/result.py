@@ -56,8 +56,8 @@ class MatchResult:
         ``confidence=False``.
     quality : MatchQuality or None
         The pair-level summary of ``confidence`` (``quality.likely_failed``: look at the
-        pair before using its map); when B is a part of A, over the vertices of A that have
-        a counterpart on B.
+        pair before using its map); when B is a part of A matched in reverse (the default,
+        ``PartialConfig.whole_to_part``), over the vertices of A that have a counterpart on B.
     """
 
     map: np.ndarray

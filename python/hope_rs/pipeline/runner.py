@@ -112,6 +112,7 @@ def _nested_run(stages: list[Stage] | None) -> Callable:
         callback=None,
         progress=None,
         landmarks=None,
+        on_stage=None,
     ):
         fresh = None if stages is None else [type(s)() for s in stages]
         return run_match(
@@ -123,6 +124,7 @@ def _nested_run(stages: list[Stage] | None) -> Callable:
             progress=progress,
             stages=fresh,
             landmarks=landmarks,
+            on_stage=on_stage,
         )
 
     return run

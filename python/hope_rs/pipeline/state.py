@@ -50,7 +50,7 @@ class Iteration:
     #: The final polishing step (see ``polish_k``), not a step of a pass.
     polish: bool = False
     #: Of ``seconds``, those spent building the overlap cost and solving its assignment (0 for
-    #: a repair step; the polish's solve is its best-column scan).
+    #: a repair step and for the polish, which is not one to one).
     cost_seconds: float = 0.0
     assign_seconds: float = 0.0
 
@@ -117,8 +117,9 @@ class MatchState:
     callback : callable or None
         The caller's per-step callback.
     run : callable
-        The runner itself, ``run(a, b, init, config, progress=..., landmarks=...)`` →
-        MatchResult, for stages that match other shapes (the multiscale stage's coarse copies).
+        The runner itself, ``run(a, b, init, config, progress=..., landmarks=...,
+        on_stage=...)`` → MatchResult, for stages that match other shapes (the multiscale
+        stage's coarse copies, the partial stage's reverse match).
     f0, f : ndarray or None
         The initial map, and the current map.
     hope_map : ndarray or None
