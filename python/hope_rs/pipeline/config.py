@@ -236,6 +236,12 @@ class SpectralConfig:
     margin : float
         HOPE's map is kept where its smoothed distortion exceeds ZoomOut's by at most this
         (A's mean edge lengths).
+    slanted : bool
+        When one shape is measured at the other's scale (a part, see
+        :mod:`hope_rs.pipeline.partial`), ZoomOut fits the smaller shape's first
+        k·(its area / the other's) eigenfunctions against the larger's first k
+        (:func:`hope_rs.pipeline.spectral.basis_slope`); shapes each in their own units are
+        unaffected.
     """
 
     enabled: bool = True
@@ -252,6 +258,7 @@ class SpectralConfig:
     early_from_pass: int = 3
     smoothing_steps: int = 32
     margin: float = 0.05
+    slanted: bool = True
 
 
 @dataclass(frozen=True)
