@@ -14,7 +14,9 @@ distortion, smoothed over a few rings of A so the choice is made by regions, not
 vertex): faust_reg keeps HOPE's exact map, remeshed pairs take the spectral one, and the TOSCA
 cat, exact in some regions and slid in others, takes each where it is better. A last check
 on distances to far-apart anchors (:func:`long_range_discrepancy`) keeps HOPE's map when the
-chosen one bends them, as ZoomOut does between a partial shape and a whole one.
+chosen one bends them, as ZoomOut does between a partial shape and a whole one. When one shape
+is a part measured at the whole's scale, ZoomOut's functional map is a slanted rectangle, not a
+square (:func:`basis_slope`, ``SpectralConfig.slanted``).
 """
 
 from __future__ import annotations
