@@ -13,6 +13,13 @@ A shape is a part when its boundary is longer than the other shape's by at least
 pairs with boundaries of about the same length and pairs of two cut shapes are matched
 exactly as before.
 
+Which region of the whole a part's refinement settles on can change with a few percent of
+its scale: with nothing on the part competing for the whole's missing side, a region of the
+part can settle there. So a part is matched at the guessed scale and at the multiples
+``PartialConfig.scale_trials`` of it, once more from the merge of those maps (each vertex
+from the map of highest smoothed confidence there), and the map of highest mean confidence
+is kept.
+
 Matching a whole A to its part B asks every vertex of A for a partner, also where B has
 none, and the refinement's overlaps then pull the vertices that do have one off their place.
 So the stage matches B → A instead (a part to a whole, which works) and inverts that map:
