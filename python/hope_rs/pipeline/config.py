@@ -18,6 +18,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import math
 from dataclasses import dataclass, field
 
 from ..kernels.search import SearchConfig
@@ -236,6 +237,12 @@ class SpectralConfig:
     margin : float
         HOPE's map is kept where its smoothed distortion exceeds ZoomOut's by at most this
         (A's mean edge lengths).
+    slanted : bool
+        When one shape is measured at the other's scale (a part, see
+        :mod:`hope_rs.pipeline.partial`), ZoomOut fits the smaller shape's first
+        k·(its area / the other's) eigenfunctions against the larger's first k
+        (:func:`hope_rs.pipeline.spectral.basis_slope`); shapes each in their own units are
+        unaffected.
     """
 
     enabled: bool = True
@@ -252,6 +259,7 @@ class SpectralConfig:
     early_from_pass: int = 3
     smoothing_steps: int = 32
     margin: float = 0.05
+    slanted: bool = True
 
 
 @dataclass(frozen=True)
@@ -381,6 +389,17 @@ class PartialConfig:
         sizes).
     min_covered : float
         The covered share is taken as at least this (a map gone wrong covers little).
+    scale_trials : tuple of float
+        A part (A) is also matched at these multiples of the guessed scale. Which region of
+        the whole a part's refinement settles on changes with small changes of its scale, and
+        regions can settle where the whole has no counterpart (the part has no other side to
+        compete for them); of all the maps, their merge (``merge_rings``) refined once more
+        included, the one with the highest mean confidence is kept. Empty: one match at the
+        guessed scale (and at the covered share's scale, see ``rescale_tolerance``), the one
+        whose descriptors lie nearer their images kept.
+    merge_rings : int
+        With ``scale_trials``, each vertex of the merge takes its image from the map whose
+        confidence, averaged over this many rounds of 1-ring averaging, is highest there.
     """
 
     enabled: bool = True
@@ -390,8 +409,22 @@ class PartialConfig:
     min_covered: float = 0.2
     whole_to_part: str = "reverse"
     counterpart_edges: float = 1.0
+    scale_trials: tuple[float, ...] = (0.95, 1.05)
+    merge_rings: int = 32
 
     def __post_init__(self):
+        try:
+            trials = tuple(float(x) for x in self.scale_trials)
+        except (TypeError, ValueError):
+            raise TypeError(
+                "PartialConfig.scale_trials must be a sequence of positive numbers, "
+                f"got {self.scale_trials!r}"
+            ) from None
+        if not all(math.isfinite(x) and x > 0 for x in trials):
+            raise ValueError(
+                f"PartialConfig.scale_trials must be positive numbers, got {self.scale_trials!r}"
+            )
+        object.__setattr__(self, "scale_trials", trials)
         if self.whole_to_part not in ("reverse", "direct"):
             raise ValueError(
                 f"PartialConfig.whole_to_part must be 'reverse' or 'direct', got {self.whole_to_part!r}"

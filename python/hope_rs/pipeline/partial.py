@@ -13,6 +13,13 @@ A shape is a part when its boundary is longer than the other shape's by at least
 pairs with boundaries of about the same length and pairs of two cut shapes are matched
 exactly as before.
 
+Which region of the whole a part's refinement settles on can change with a few percent of
+its scale: with nothing on the part competing for the whole's missing side, a region of the
+part can settle there. So a part is matched at the guessed scale and at the multiples
+``PartialConfig.scale_trials`` of it, once more from the merge of those maps (each vertex
+from the map of highest smoothed confidence there), and the map of highest mean confidence
+is kept.
+
 Matching a whole A to its part B asks every vertex of A for a partner, also where B has
 none, and the refinement's overlaps then pull the vertices that do have one off their place.
 So the stage matches B → A instead (a part to a whole, which works) and inverts that map:
@@ -188,14 +195,22 @@ class PartialStage(Stage):
     @staticmethod
     def _rescale_part(state: MatchState, info: PartialInfo) -> PartialInfo:
         """A (the part) matched at the guessed scale and, when the share of B its map covers
-        puts A's whole at a scale off by more than ``rescale_tolerance``, again at that scale;
-        of the two maps the one whose vertices' descriptors (at the second scale) lie nearer
-        their images' wins. A left-right mirror keeps every distance, so only the
-        descriptors, which see orientation, tell it from the true map. Sets the map and
-        ``state.done``."""
+        puts A's whole at a scale off by more than ``rescale_tolerance``, again at that scale.
+        With ``scale_trials`` also at those multiples of the guessed scale and once more from
+        the merge of these maps (:func:`_refined_merge`); the map of highest mean confidence
+        wins. Without, of the two maps the one whose vertices' descriptors (at the second
+        scale) lie nearer their images' wins: a left-right mirror keeps every distance, so
+        only the descriptors, which see orientation, tell it from the true map. Sets the map
+        and ``state.done``."""
         cfg = state.config
         a, b = state.a, state.b
+        trials = cfg.partial.scale_trials
         off = dataclasses.replace(cfg, partial=dataclasses.replace(cfg.partial, enabled=False))
+        if trials:
+            # The trials are compared by their confidence (the map does not depend on it).
+            off = dataclasses.replace(
+                off, confidence=dataclasses.replace(off.confidence, enabled=True)
+            )
         # The nested runs take a given initial map in the input numbering.
         init = state.init if isinstance(state.init, str) else a.map_out(b, state.init)
         guess = a.at_scale(info.scale) if info.scale != a.scale else a
@@ -204,7 +219,17 @@ class PartialStage(Stage):
         share = covered_share(b, guess.map_in(b, first.map))
         scale = a.internal.scale / np.sqrt(max(share, cfg.partial.min_covered))
         chosen = first
-        if abs(scale / info.scale - 1.0) > cfg.partial.rescale_tolerance:
+        rescale = abs(scale / info.scale - 1.0) > cfg.partial.rescale_tolerance
+        if trials:
+            scales = [info.scale * t for t in trials] + ([scale] if rescale else [])
+            runs = [(guess, first)]
+            for s in scales:
+                view = a.at_scale(s)
+                runs.append((view, state.run(view, b, init, off, landmarks=landmarks)))
+            runs.append(_refined_merge(state, runs, off, landmarks, cfg.partial.merge_rings))
+            best, chosen = max(runs, key=lambda r: float(np.mean(r[1].confidence)))
+            info = dataclasses.replace(info, scale=float(best.scale))
+        elif rescale:
             again = a.at_scale(scale)
             second = state.run(again, b, init, off, landmarks=landmarks)
             kind = state.init if isinstance(state.init, str) else "shot"
@@ -225,6 +250,22 @@ class PartialStage(Stage):
         state.timings.update({k: v for k, v in chosen.timings.items() if k != "total"})
         state.done = "the map is the part's match at the whole's scale"
         return info
+
+
+def _refined_merge(state: MatchState, runs: list, config, landmarks, rings: int) -> tuple:
+    """(view, result) of the part's match from the merge of the maps of ``runs`` ((view,
+    result) pairs of one part at several scales): each vertex takes its image from the map
+    whose confidence, averaged over ``rings`` rounds of 1-ring averaging, is highest there;
+    matched at the scale of the run of highest mean confidence."""
+    a, b = state.a, state.b
+    maps = np.stack([view.map_in(b, r.map) for view, r in runs])  # internal numbering
+    conf = np.stack([r.confidence[a.order] for _, r in runs], axis=1)
+    p = a.ring_average()
+    for _ in range(rings):
+        conf = p @ conf
+    merged = maps[np.argmax(conf, axis=1), np.arange(a.n_vertices)]
+    view = max(runs, key=lambda r: float(np.mean(r[1].confidence)))[0]
+    return view, state.run(view, b, a.map_out(b, merged), config, landmarks=landmarks)
 
 
 def _landmarks(state: MatchState, swap: bool = False) -> np.ndarray | None:

@@ -14,7 +14,9 @@ distortion, smoothed over a few rings of A so the choice is made by regions, not
 vertex): faust_reg keeps HOPE's exact map, remeshed pairs take the spectral one, and the TOSCA
 cat, exact in some regions and slid in others, takes each where it is better. A last check
 on distances to far-apart anchors (:func:`long_range_discrepancy`) keeps HOPE's map when the
-chosen one bends them, as ZoomOut does between a partial shape and a whole one.
+chosen one bends them, as ZoomOut does between a partial shape and a whole one. When one shape
+is a part measured at the whole's scale, ZoomOut's functional map is a slanted rectangle, not a
+square (:func:`basis_slope`, ``SpectralConfig.slanted``).
 """
 
 from __future__ import annotations
@@ -89,24 +91,42 @@ def _zoomout(
     pa, wa = phi_a[sa], mass_a[sa]
     gram = pa.T @ (wa[:, None] * pa)  # the identity when every vertex is a sample
     t = np.asarray(f, dtype=np.int64)[sa]  # vertices of B
+    slope = basis_slope(a, b) if cfg.slanted else (1.0, 1.0)
     for k in basis_sizes(cfg.k_start, k_end, cfg.k_step):
         if stop is not None and stop.is_set():
             return None
-        c = functional_map(pa[:, :k], wa, phi_b[t, :k], gram[:k, :k])
-        eb = phi_b[:, :k] @ c.T
+        # C is ka x kb: A's first ka functions against B's first kb (k x k for whole shapes).
+        ka, kb = (max(1, round(k * s)) for s in slope)
+        c = functional_map(pa[:, :ka], wa, phi_b[t, :kb], gram[:ka, :ka])
+        eb = phi_b[:, :kb] @ c.T
         if k >= cfg.local_from and not sampled:
-            t = near_b.best(pa[:, :k], eb, t, cfg.local_candidates)
+            t = near_b.best(pa[:, :ka], eb, t, cfg.local_candidates)
             continue
-        t = sb[nearest_rows(pa[:, :k], eb[sb])]
+        t = sb[nearest_rows(pa[:, :ka], eb[sb])]
         if sampled:
             # Down from B's samples to its vertices: the map the next fit reads must be as
             # sharp as the basis, or the high frequencies of C blur.
-            t = near_b.best(pa[:, :k], eb, t, cfg.candidates)
+            t = near_b.best(pa[:, :ka], eb, t, cfg.candidates)
     if not sampled:
         return t
     # Every vertex of A, near the image of its nearest sample.
     _, own = cKDTree(a.points[sa]).query(a.points, workers=2)
-    return near_b.best(phi_a[:, :k], eb, t[own], cfg.candidates)
+    return near_b.best(phi_a[:, :ka], eb, t[own], cfg.candidates)
+
+
+def basis_slope(a: Shape, b: Shape) -> tuple[float, float]:
+    """The shares (of A's, of B's) of a basis size ZoomOut uses at each step: 1 for the
+    larger shape and (its area / the larger's area) for the smaller, both measured in the
+    units each shape is matched in. Eigenvalue i of a surface grows like i / area (Weyl's
+    law), so a part's first k·area_part/area_whole eigenfunctions span the frequencies of
+    the whole's first k: the functional map between them is a slanted diagonal (partial
+    functional maps, Rodolà et al. 2017), not a square one. Whole shapes, each in units of
+    its own sqrt(area), get (1, 1)."""
+    area_a = (a.internal.scale / a.scale) ** 2
+    area_b = (b.internal.scale / b.scale) ** 2
+    if area_a == area_b:
+        return 1.0, 1.0
+    return min(1.0, area_a / area_b), min(1.0, area_b / area_a)
 
 
 def functional_map(
