@@ -46,7 +46,7 @@ PARTIAL = {
     "cut30_rev": "the whole A matched to B cut by a plane removing 30% (scored where A has a counterpart)",
 }
 PARTIAL_SOURCES = ("faust_r", "tosca_r")
-PARTIAL_PAIRS = 4
+PARTIAL_PAIRS = 9
 PARTIAL_METHODS = ["init", "hope"]
 MARK_START, MARK_END = "<!-- results:start -->", "<!-- results:end -->"
 
