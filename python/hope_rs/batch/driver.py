@@ -523,6 +523,14 @@ def imatch_many(
             "cache_root": str(cache.root), "kinds": kinds, "k_max": k_max, "init": init,
             "options": match_options, "threads": getattr(ex, "threads", None), "basis": basis,
         }  # fmt: skip
+
+        def failed_pair(n: int, i: int, j: int, path, error: str) -> PairResult:
+            """The reported result of pair ``n`` that failed before it was matched."""
+            r = PairResult(n, names[i], names[j], path=path)
+            r.error = error
+            report(r)
+            return r
+
         handles: dict = {}  # handle -> ("prepare" | "size" | "pair", shape index or pair)
         submitted: dict[int, str] = {}  # shape -> "prepare" or "size"
 
@@ -563,10 +571,7 @@ def imatch_many(
                     for t in waiting:
                         n, i, j, path, check = t
                         if i in failed or j in failed:
-                            r = PairResult(n, names[i], names[j], path=path)
-                            r.error = failed.get(i) or failed.get(j)
-                            report(r)
-                            yield r
+                            yield failed_pair(n, i, j, path, failed.get(i) or failed.get(j))
                             continue
                         if check:
                             if i not in sizes or j not in sizes:
@@ -574,13 +579,9 @@ def imatch_many(
                                 continue
                             m, why = existing_map(path, sizes[i], sizes[j])
                             if why is None and marks[n] is not None:
-                                try:
-                                    lm = check_landmarks(marks[n], sizes[i], sizes[j])
-                                except (TypeError, ValueError) as e:
-                                    r = PairResult(n, names[i], names[j], path=path)
-                                    r.error = error_text(e)
-                                    report(r)
-                                    yield r
+                                lm, bad = _checked_landmarks(marks[n], sizes[i], sizes[j])
+                                if bad is not None:
+                                    yield failed_pair(n, i, j, path, bad)
                                     continue
                                 if lm is not None and (m[lm[:, 0]] != lm[:, 1]).any():
                                     why = f"{path} does not keep the pair's landmarks"
@@ -594,13 +595,10 @@ def imatch_many(
                             prepare(i, True)
                             prepare(j, True)
                         if i in ready and j in ready:
-                            try:  # the indices, now that both sizes are known
-                                lm = check_landmarks(marks[n], sizes[i], sizes[j])
-                            except (TypeError, ValueError) as e:
-                                r = PairResult(n, names[i], names[j], path=path)
-                                r.error = error_text(e)
-                                report(r)
-                                yield r
+                            # The indices, now that both sizes are known.
+                            lm, bad = _checked_landmarks(marks[n], sizes[i], sizes[j])
+                            if bad is not None:
+                                yield failed_pair(n, i, j, path, bad)
                                 continue
                             h = ex.submit(pair_task, job, ready[i], ready[j], lm)
                             handles[h] = ("pair", t)
@@ -625,6 +623,14 @@ def imatch_many(
         ex.close(abort=not finished)
         if tmp is not None:
             tmp.cleanup()
+
+
+def _checked_landmarks(landmarks, n_a: int, n_b: int) -> tuple:
+    """(the pair's landmarks checked against its shapes' sizes, None) or (None, the error)."""
+    try:
+        return check_landmarks(landmarks, n_a, n_b), None
+    except (TypeError, ValueError) as e:
+        return None, error_text(e)
 
 
 def _pair_landmarks(landmarks, pairs, n_pairs: int) -> list:
