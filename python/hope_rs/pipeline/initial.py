@@ -99,7 +99,7 @@ class InitialStage(Stage):
 
     def run(self, state: MatchState) -> None:
         a, b, kind = state.a, state.b, state.init
-        detail = f"nearest {kind.upper()} descriptors, one to one"
+        detail = f"nearest {kind.upper()} descriptors"
         t = state.log.start("init", detail=detail)
         da, db = a.internal_descriptors(kind), b.internal_descriptors(kind)
         state.f0 = shapes_initial_map(a, b, da, db, kind, state.config.initial.search)
