@@ -4,9 +4,10 @@ For every pair of each set, four well-spread landmarks are taken from the ground
 farthest-point samples on A (edge-graph geodesics) among the vertices with a ground-truth
 match, the first sample (the one nearest the centroid) left out so that the four sit on the
 extremities, each mapped to B through the ground truth. Each pair is matched without and with
-them, and a table per set prints the mean geodesic error (sqrt(area) units, edge-graph
-geodesics), the worst pair's mean error, and how many pairs have a swapped region (more than
-``--swap-share`` of the scored vertices farther than ``--swap-error`` from their match).
+them, and a table per set prints the mean geodesic error (sqrt(area) units; edge-graph
+geodesics, or surface ones with ``--geodesics surface`` as ``hope-rs bench`` uses), the worst
+pair's mean error, and how many pairs have a swapped region (more than ``--swap-share`` of the
+scored vertices farther than ``--swap-error`` from their match).
 
     python benches/bench_landmarks.py                        # faust_r, tosca_r, tosca_nonisometric_r
     python benches/bench_landmarks.py --sets faust_r --max-pairs 3
@@ -46,7 +47,13 @@ def ground_truth_landmarks(sa: hope_rs.Shape, ai: np.ndarray, bi: np.ndarray, n:
     return np.stack([a_in, [first[int(x)] for x in a_in]], axis=1).astype(np.int64)
 
 
-def run_pair(pair: Pair, n_landmarks: int, swap_error: float, without: dict | None = None) -> dict:
+def run_pair(
+    pair: Pair,
+    n_landmarks: int,
+    swap_error: float,
+    without: dict | None = None,
+    geodesics: str = "graph",
+) -> dict:
     ma, mb = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
     sa, sb = hope_rs.Shape(ma), hope_rs.Shape(mb)
     ai, bi = pair.ground_truth(ma.n_vertices, mb.n_vertices, max_points=None)
@@ -60,7 +67,7 @@ def run_pair(pair: Pair, n_landmarks: int, swap_error: float, without: dict | No
         t0 = time.perf_counter()
         res = hope_rs.match(sa, sb, landmarks=given)
         seconds = time.perf_counter() - t0
-        err = geodesic_errors(sb, res.map, a_idx=ai, b_idx=bi)
+        err = geodesic_errors(sb, res.map, a_idx=ai, b_idx=bi, method=geodesics)
         row[name] = {
             "mean": float(err.mean()),
             "far": float((err > swap_error).mean()),
@@ -95,6 +102,7 @@ def main(argv=None) -> int:
     p.add_argument("--landmarks", type=int, default=4, help="landmarks per pair (default 4)")
     p.add_argument("--swap-error", type=float, default=0.3, help="sqrt(area) units")
     p.add_argument("--swap-share", type=float, default=0.05)
+    p.add_argument("--geodesics", choices=("graph", "surface"), default="graph")
     p.add_argument("--rows", type=Path, default=None, help="JSON lines of per-pair results")
     p.add_argument(
         "--reuse-without", type=Path, default=None,
@@ -115,7 +123,7 @@ def main(argv=None) -> int:
             if (pair.dataset, pair.name) in done:
                 continue
             key = (pair.dataset, pair.name)
-            row = run_pair(pair, args.landmarks, args.swap_error, earlier.get(key))
+            row = run_pair(pair, args.landmarks, args.swap_error, earlier.get(key), args.geodesics)
             rows.append(row)
             w, o = row["with"], row["without"]
             print(

@@ -1,13 +1,16 @@
 """Regenerate docs/benchmarks.md and the README's results table from one run of the current code.
 
 Runs ``hope-rs bench`` (surface geodesic errors over every pair of every shared data set, HOPE
-and ZoomOut from the same SHOT initial map, wall time from meshes to map), then writes
+and ZoomOut from the same SHOT initial map, wall time from meshes to map), the same on the
+partial-shape sets, and ``benches/bench_landmarks.py`` (each remeshed pair without and with
+four landmarks), then writes
 ``docs/benchmarks.md`` with the commit, date and machine, and replaces the table between the
 ``results:start`` / ``results:end`` markers of README.md.
 
     python scripts/benchmarks.py                 # run, then write both documents
     python scripts/benchmarks.py --render-only   # rewrite them from the last run's CSVs
     python scripts/benchmarks.py --partial-only  # the partial-shape sets only, then rewrite
+    python scripts/benchmarks.py --landmarks-only  # the landmark bench only, then rewrite
 
 Needs the eval extra (pyFM, potpourri3d) and ../shared/data (or HOPE_DATA).
 """
@@ -16,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 import os
 import shutil
 import subprocess
@@ -48,32 +52,38 @@ PARTIAL = {
 PARTIAL_SOURCES = ("faust_r", "tosca_r")
 PARTIAL_PAIRS = 9
 PARTIAL_METHODS = ["init", "hope"]
+#: The landmark bench: its sets, landmarks per pair, and the swap rule (share of the scored
+#: vertices farther than SWAP_ERROR from their match, sqrt(area) units).
+LANDMARK_SETS = ("faust_r", "tosca_r", "tosca_nonisometric_r")
+LANDMARKS, SWAP_ERROR, SWAP_SHARE = 4, 0.3, 0.05
 MARK_START, MARK_END = "<!-- results:start -->", "<!-- results:end -->"
 
 
-def run(partial_only: bool = False) -> None:
-    """Every shared set (unless ``partial_only``), then the partial-shape sets, each with its
-    provenance lines."""
-    RUN.mkdir(parents=True, exist_ok=True)
-    names = [f"{s}_{c}" for s in PARTIAL_SOURCES for c in PARTIAL]
-    if partial_only:
-        stale = [RUN / f"{n}.{ext}" for n in names for ext in ("csv", "md")]
-        stale.append(RUN / "partial-data")
-    else:
-        stale = list(RUN.glob("*"))
-    for f in stale:
+def _remove(paths) -> None:
+    for f in paths:
         if f.is_dir():
             shutil.rmtree(f)
         elif f.exists():
             f.unlink()
-    if not partial_only:
-        start = header()
-        cmd = [
-            sys.executable, "-m", "hope_rs.cli", "bench", str(DATA), "--methods",
-            ",".join(METHODS), "--sets", ",".join(SETS), "--no-render", "--out", str(RUN),
-        ]  # fmt: skip
-        subprocess.run(cmd, check=True)
-        (RUN / "provenance.txt").write_text(start + f"{load()} at the end\n")
+
+
+def run_shared() -> None:
+    """Every shared set; the CSVs and provenance of every earlier run are removed first."""
+    _remove(RUN.glob("*"))
+    start = header()
+    cmd = [
+        sys.executable, "-m", "hope_rs.cli", "bench", str(DATA), "--methods",
+        ",".join(METHODS), "--sets", ",".join(SETS), "--no-render", "--out", str(RUN),
+    ]  # fmt: skip
+    subprocess.run(cmd, check=True)
+    (RUN / "provenance.txt").write_text(start + f"{load()} at the end\n")
+
+
+def run_partial() -> None:
+    """The partial-shape sets, written afresh from the source sets, with their provenance."""
+    names = [f"{s}_{c}" for s in PARTIAL_SOURCES for c in PARTIAL]
+    _remove([RUN / f"{n}.{ext}" for n in names for ext in ("csv", "md")])
+    _remove([RUN / "partial-data"])
     start = header()
     parts = RUN / "partial-data"
     sources = ",".join(str(DATA / s) for s in PARTIAL_SOURCES)
@@ -89,6 +99,20 @@ def run(partial_only: bool = False) -> None:
         check=True,
     )  # fmt: skip
     (RUN / "provenance_partial.txt").write_text(start + f"{load()} at the end\n")
+
+
+def run_landmarks() -> None:
+    """``benches/bench_landmarks.py`` on the remeshed sets (surface geodesics), afresh."""
+    rows = RUN / "landmarks.jsonl"
+    _remove([rows])
+    start = header()
+    subprocess.run(
+        [sys.executable, str(ROOT / "benches" / "bench_landmarks.py"), "--data", str(DATA),
+         "--sets", *LANDMARK_SETS, "--landmarks", str(LANDMARKS), "--geodesics", "surface",
+         "--swap-error", str(SWAP_ERROR), "--swap-share", str(SWAP_SHARE), "--rows", str(rows)],
+        check=True,
+    )  # fmt: skip
+    (RUN / "provenance_landmarks.txt").write_text(start + f"{load()} at the end\n")
 
 
 def _rows(name: str) -> list[dict]:
@@ -195,6 +219,36 @@ def partial() -> str:
     return "\n".join(out)
 
 
+def landmarks() -> str:
+    """The landmark section's table: a row per set, without → with landmarks."""
+    path = RUN / "landmarks.jsonl"
+    if not path.exists():
+        return ""
+    rows = [json.loads(line) for line in path.read_text().splitlines() if line]
+    head = (
+        "| data set | pairs | mean error without → with | worst pair's mean without → with "
+        "| pairs ≤ 0.03 with | pairs with a swapped region without → with "
+        "| landmarks kept | median s / pair with |"
+    )
+    out = [head, "|---|---|---|---|---|---|---|---|"]
+    for name in dict.fromkeys(r["set"] for r in rows):
+        mine = [r for r in rows if r["set"] == name]
+
+        def col(run: str, key: str, mine=mine) -> np.ndarray:
+            return np.array([r[run][key] for r in mine], dtype=float)
+
+        wo, wi = col("without", "mean"), col("with", "mean")
+        swaps = [int((col(run, "far") > SWAP_SHARE).sum()) for run in ("without", "with")]
+        kept = sum(bool(r["with"]["pinned"]) for r in mine)
+        out.append(
+            f"| {name} | {len(mine)} | {wo.mean():.4f} → **{wi.mean():.4f}** "
+            f"| {wo.max():.4f} → {wi.max():.4f} | {int((wi <= 0.03).sum())} "
+            f"| {swaps[0]} → {swaps[1]} | {kept} of {len(mine)} "
+            f"| {np.median(col('with', 'seconds')):.1f} |"
+        )
+    return "\n".join(out) + "\n"
+
+
 def _provenance(name: str) -> list[str]:
     path = RUN / name
     return path.read_text().strip().splitlines() if path.exists() else []
@@ -203,6 +257,8 @@ def _provenance(name: str) -> list[str]:
 def render() -> None:
     prov = _provenance("provenance.txt")
     prov_partial = _provenance("provenance_partial.txt")
+    prov_landmarks = _provenance("provenance_landmarks.txt")
+    lm_table = landmarks()
     doc = (
         "# Benchmarks\n\n"
         "Generated by `python scripts/benchmarks.py` from one run of the code; do not edit by "
@@ -230,7 +286,21 @@ def render() -> None:
         "of the whole with a counterpart on the part are scored.\n\n"
         + partial()
         + "\nThe confidence AUROC ranks the vertices with error above 0.05 below the others "
-        "(`MatchResult.confidence`; 1 is perfect, 0.5 is chance).\n"
+        "(`MatchResult.confidence`; 1 is perfect, 0.5 is chance), per pair, averaged over "
+        "pairs.\n"
+        + (
+            "\n## Landmarks\n\n"
+            + "".join(f"- {line}\n" for line in prov_landmarks)
+            + "\n`benches/bench_landmarks.py`: every pair of each remeshed set matched without "
+            f"and with {LANDMARKS} landmarks (`match(a, b, landmarks=L)`), farthest-point "
+            "samples among the ground-truth vertices of A (the one nearest the centroid left "
+            "out) with their ground-truth matches on B. Surface geodesic errors ÷ sqrt(area) of "
+            "B over the ground-truth vertices; a pair has a swapped region when more than "
+            f"{SWAP_SHARE:.0%} of them lie farther than {SWAP_ERROR} from their match; "
+            "*landmarks kept*: pairs whose map sends every landmark to its partner.\n\n" + lm_table
+            if lm_table
+            else ""
+        )
     )
     (ROOT / "docs" / "benchmarks.md").write_text(doc)
     readme = ROOT / "README.md"
@@ -250,14 +320,25 @@ def render() -> None:
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--render-only", action="store_true", help="reuse the last run's CSVs")
-    p.add_argument(
+    only = p.add_mutually_exclusive_group()
+    only.add_argument(
         "--partial-only",
         action="store_true",
-        help="run the partial-shape sets again, reuse the shared sets' CSVs",
+        help="run the partial-shape sets again, reuse the other results",
+    )
+    only.add_argument(
+        "--landmarks-only",
+        action="store_true",
+        help="run the landmark bench again, reuse the other results",
     )
     args = p.parse_args()
     if not args.render_only:
-        run(partial_only=args.partial_only)
+        if not (args.partial_only or args.landmarks_only):
+            run_shared()
+        if not args.landmarks_only:
+            run_partial()
+        if not args.partial_only:
+            run_landmarks()
     render()
     return 0
 
