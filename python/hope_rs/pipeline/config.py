@@ -79,15 +79,21 @@ class LandmarkConfig:
         the nearest this many to the vertex's own.
     refine_trust : bool
         An off match is never a witness of the refinement.
-    anchors : bool
-        The refinement's global repair and swapped-region step take the landmarks as anchors.
+    swap_anchors : bool
+        The refinement's swapped-region step takes the landmarks as anchors (what moves a
+        mirrored region back).
+    repair_anchors : bool
+        The global repair takes them as anchors too. Off: on non-isometric pairs the
+        landmarks' distance fields bend with the shape and the repair re-placed right
+        matches by them (docs/decisions.md#landmarks).
     """
 
     max_gap: float = 0.25
     init: bool = True
     candidates: int = 64
     refine_trust: bool = True
-    anchors: bool = True
+    swap_anchors: bool = True
+    repair_anchors: bool = False
 
 
 @dataclass(frozen=True)

@@ -103,8 +103,9 @@ def refine(
 
     ``landmarks`` ((m, 2) internal vertex pairs, or None) are mapped exactly after every step
     and always witnesses; a vertex whose match fits its distances to them far worse than it
-    could (``landmark_config.max_gap``) is never one, and the global repair and the swapped
-    region step take them as anchors (:mod:`hope_rs.pipeline.landmarks`).
+    could (``landmark_config.max_gap``) is never one, and the swapped-region step (and with
+    ``landmark_config.repair_anchors`` the global repair) takes them as anchors
+    (:mod:`hope_rs.pipeline.landmarks`).
 
     ``clock``, if given, adds up the k-hop steps' cost and assignment seconds (each step's
     own are in its :class:`Iteration`).
@@ -120,7 +121,7 @@ def refine(
     coords = fixed = None
     if landmarks is not None:
         coords = LandmarkCoordinates(a, b, landmarks, cfg.repair)
-        fixed = (coords.da, coords.db) if landmark_config.anchors else None
+        fixed = coords.da, coords.db
         f = pin(f, landmarks)
 
     def trusted(w: np.ndarray, f: np.ndarray) -> np.ndarray:
@@ -155,7 +156,8 @@ def refine(
             f_new = f
             if n_pass >= cfg.region_check_pass:
                 consistent = lmd.local_map_distortion(f)[1]
-                f_new = pin(swapped_regions(a, b, f, consistent, cfg.repair, fixed), landmarks)
+                anchors = fixed if landmark_config.swap_anchors else None
+                f_new = pin(swapped_regions(a, b, f, consistent, cfg.repair, anchors), landmarks)
                 if f_new is not f:
                     w = trusted(lmd.witnesses(f_new, min_consistent=min_consistent), f_new)
             check = n_pass >= cfg.global_check_pass
@@ -168,7 +170,7 @@ def refine(
                 global_check=check,
                 lmd=lmd,
                 config=cfg.repair,
-                fixed=fixed,
+                fixed=fixed if landmark_config.repair_anchors else None,
             )
             f_new = pin(f_new, landmarks)
             changed = int(np.count_nonzero(f_new != f))
