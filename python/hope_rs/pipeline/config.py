@@ -86,6 +86,11 @@ class LandmarkConfig:
         The global repair takes them as anchors too. Off: on non-isometric pairs the
         landmarks' distance fields bend with the shape and the repair re-placed right
         matches by them (docs/decisions.md#landmarks).
+    zoomout_weight : float
+        The spectral pass's ZoomOut matches each vertex by its spectral embedding extended by
+        its landmark coordinates times this weight, each landmark's field first scaled to
+        the same mean over A and over B (a non-isometric pair stretches the distances from
+        one landmark more than from another); 0 leaves ZoomOut as without landmarks.
     """
 
     max_gap: float = 0.25
@@ -94,6 +99,7 @@ class LandmarkConfig:
     refine_trust: bool = True
     swap_anchors: bool = True
     repair_anchors: bool = False
+    zoomout_weight: float = 3.0
 
 
 @dataclass(frozen=True)

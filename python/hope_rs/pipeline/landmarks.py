@@ -11,6 +11,8 @@ descriptors they tell a left limb from its mirror image. They act in three place
 * the refinement (:func:`hope_rs.pipeline.refine.refine`) pins the landmarks after every step,
   counts them as witnesses, never trusts such a match (:class:`LandmarkCoordinates`), and its
   global repair takes the landmarks as anchors;
+* the spectral pass's ZoomOut matches by landmark coordinates besides its spectral embedding
+  (:func:`landmark_embedding`);
 * after every later stage (the spectral pass, the finish), the stage re-pins them.
 
 Without landmarks none of this runs and the map is the one ``match`` makes without them.
@@ -33,6 +35,7 @@ __all__ = [
     "LandmarkStage",
     "check_landmarks",
     "coarse_landmarks",
+    "landmark_embedding",
     "landmark_initial_map",
     "pin",
 ]
@@ -148,6 +151,30 @@ class LandmarkCoordinates:
     def off(self, f: np.ndarray, max_gap: float) -> np.ndarray:
         """Whether each vertex's match fits more than ``max_gap`` worse than ``best``."""
         return self.gap(f) > max_gap
+
+
+def landmark_embedding(
+    a: Shape,
+    b: Shape,
+    landmarks: np.ndarray,
+    weight: float,
+    repair: RepairConfig = RepairConfig(),
+) -> tuple[np.ndarray, np.ndarray]:
+    """Landmark coordinates of A's and of B's vertices, (n_a, m) and (n_b, m) float64, that
+    ZoomOut appends to its spectral embeddings: landmark ``k``'s distance field on each shape
+    scaled to the mean of its two means over the shapes' reachable vertices (sqrt(area)
+    units; a non-isometric pair stretches the distances from one landmark more than from
+    another), unreachable vertices at ``repair.unreachable``, all times ``weight``."""
+    da, db = distance_fields(a, landmarks[:, 0]), distance_fields(b, landmarks[:, 1])
+    ma = np.array([row[np.isfinite(row)].mean() for row in da])
+    mb = np.array([row[np.isfinite(row)].mean() for row in db])
+    target = 0.5 * (ma + mb)
+    out = []
+    for d, m in ((da, ma), (db, mb)):
+        # A landmark alone in its component has mean 0: its field is left unscaled.
+        scale = np.divide(target, m, out=np.ones_like(m), where=m > 0)
+        out.append(np.ascontiguousarray(weight * reachable(d * scale[:, None], repair).T))
+    return out[0], out[1]
 
 
 def landmark_initial_map(

@@ -36,6 +36,7 @@ from ..kernels.search import nearest_one
 from ..shape import Shape
 from .anchors import distance_fields, farthest_witnesses, reachable
 from .config import RefineConfig, RepairConfig, SpectralConfig
+from .landmarks import landmark_embedding
 from .lmd import local_map_distortion
 from .refine import RefineResult
 from .state import MatchState, Stage
@@ -56,6 +57,7 @@ def zoomout(
     config: SpectralConfig = SpectralConfig(),
     *,
     stop: threading.Event | None = None,
+    extra: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray | None:
     """ZoomOut (Melzi et al. 2019) from the map ``f`` (A → B, internal numbering).
 
@@ -64,14 +66,16 @@ def zoomout(
     vertex of A then takes the vertex of B whose spectral embedding mapped by C is nearest
     its own, over the basis sizes ``config.k_start`` to ``config.k_end`` in steps of
     ``config.k_step``. Returns the map at ``k_end`` (internal numbering), or None when ``stop`` was set
-    (checked before each basis size).
+    (checked before each basis size). ``extra``: (n_a, j) and (n_b, j) columns appended to
+    A's and to B's embeddings in every nearest-vertex search, not to the fit (the caller's
+    landmark coordinates, :func:`hope_rs.pipeline.landmarks.landmark_embedding`).
     """
     phi_a, mass_a = a.spectral_basis(config.k_end)
     phi_b, _ = b.spectral_basis(config.k_end)
     # Small products (k x k fits, n x k embeddings): one BLAS thread is faster here; the
     # nearest-neighbour search splits its rows between threads itself.
     with single_threaded_blas():
-        return _zoomout(a, b, f, phi_a, mass_a, phi_b, config, stop)
+        return _zoomout(a, b, f, phi_a, mass_a, phi_b, config, stop, extra)
 
 
 def _zoomout(
@@ -83,6 +87,7 @@ def _zoomout(
     phi_b: np.ndarray,
     cfg: SpectralConfig,
     stop: threading.Event | None = None,
+    extra: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray | None:
     k_end = min(cfg.k_end, phi_a.shape[1], phi_b.shape[1])
     sa, sb = _samples(a.n_vertices, cfg.max_samples), _samples(b.n_vertices, cfg.max_samples)
@@ -98,20 +103,23 @@ def _zoomout(
         # C is ka x kb: A's first ka functions against B's first kb (k x k for whole shapes).
         ka, kb = (max(1, round(k * s)) for s in slope)
         c = functional_map(pa[:, :ka], wa, phi_b[t, :kb], gram[:ka, :ka])
-        eb = phi_b[:, :kb] @ c.T
+        ea, eb = pa[:, :ka], phi_b[:, :kb] @ c.T
+        if extra is not None:
+            ea, eb = np.hstack([ea, extra[0][sa]]), np.hstack([eb, extra[1]])
         if k >= cfg.local_from and not sampled:
-            t = near_b.best(pa[:, :ka], eb, t, cfg.local_candidates)
+            t = near_b.best(ea, eb, t, cfg.local_candidates)
             continue
-        t = sb[nearest_rows(pa[:, :ka], eb[sb])]
+        t = sb[nearest_rows(ea, eb[sb])]
         if sampled:
             # Down from B's samples to its vertices: the map the next fit reads must be as
             # sharp as the basis, or the high frequencies of C blur.
-            t = near_b.best(pa[:, :ka], eb, t, cfg.candidates)
+            t = near_b.best(ea, eb, t, cfg.candidates)
     if not sampled:
         return t
     # Every vertex of A, near the image of its nearest sample.
     _, own = cKDTree(a.points[sa]).query(a.points, workers=2)
-    return near_b.best(phi_a[:, :ka], eb, t[own], cfg.candidates)
+    ea = phi_a[:, :ka] if extra is None else np.hstack([phi_a[:, :ka], extra[0]])
+    return near_b.best(ea, eb, t[own], cfg.candidates)
 
 
 def basis_slope(a: Shape, b: Shape) -> tuple[float, float]:
@@ -283,8 +291,16 @@ class EarlyZoomOut:
     the basis again and reports a failure as usual. :attr:`result` is ZoomOut's map, or None.
     """
 
-    def __init__(self, a: Shape, b: Shape, prefetch: BasisPrefetch, config: SpectralConfig):
+    def __init__(
+        self,
+        a: Shape,
+        b: Shape,
+        prefetch: BasisPrefetch,
+        config: SpectralConfig,
+        extra: tuple[np.ndarray, np.ndarray] | None = None,
+    ):
         self.a, self.b, self.prefetch, self.config = a, b, prefetch, config
+        self.extra = extra
         self.thread: threading.Thread | None = None
         self.result: np.ndarray | None = None
         self.stop = threading.Event()
@@ -305,7 +321,9 @@ class EarlyZoomOut:
         if not (self.a.has_spectral_basis(k) and self.b.has_spectral_basis(k)):
             return
         try:
-            self.result = zoomout(self.a, self.b, f, self.config, stop=self.stop)
+            self.result = zoomout(
+                self.a, self.b, f, self.config, stop=self.stop, extra=self.extra
+            )
         except Exception:  # noqa: BLE001 - spectral_refine runs it again and reports it
             return
 
@@ -328,18 +346,20 @@ def spectral_refine(
     *,
     min_consistent: float = RefineConfig.min_consistent,
     repair: RepairConfig = RepairConfig(),
+    extra: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """(the map chosen by region between ``h`` and ZoomOut from it, the ZoomOut map), maps in
     internal numbering. The ZoomOut map is ``None``, and ``h`` is returned unchanged, when a
     shape is too large (``config.max_vertices``), too small for a basis of ``config.k_start``
     functions, or its eigenbasis cannot be computed (a warning says so). ``z``: a ZoomOut map
     computed already (:class:`EarlyZoomOut`), used instead of one from ``h``. The anchors of
-    :func:`long_range_discrepancy` are vertices both maps keep LMD-consistent (``min_consistent``)."""
+    :func:`long_range_discrepancy` are vertices both maps keep LMD-consistent (``min_consistent``).
+    ``extra``: columns appended to ZoomOut's embeddings (see :func:`zoomout`)."""
     if not applies(a, b, config):
         return h, None
     try:
         if z is None:
-            z = zoomout(a, b, h, config)
+            z = zoomout(a, b, h, config, extra=extra)
     except RuntimeError as e:  # ARPACK did not converge, or a singular factorisation
         warnings.warn(f"spectral pass skipped, HOPE's map kept: {e}", RuntimeWarning, stacklevel=3)
         return h, None
@@ -408,6 +428,7 @@ class SpectralStage(Stage):
         self.early: EarlyZoomOut | None = None
         self.blas: ExitStack | None = None
         self.zoomout: np.ndarray | None = None
+        self.extra: tuple[np.ndarray, np.ndarray] | None = None
 
     def attach(self, state: MatchState) -> None:
         cfg = state.config.spectral
@@ -421,8 +442,13 @@ class SpectralStage(Stage):
         # One BLAS thread from before the solves start to after they end (see BasisPrefetch).
         self.blas = ExitStack()
         self.blas.enter_context(single_threaded_blas())
+        lm = state.config.landmarks
+        if state.landmarks is not None and lm.zoomout_weight > 0:
+            self.extra = landmark_embedding(
+                state.a, state.b, state.landmarks, lm.zoomout_weight, state.config.refine.repair
+            )
         self.prefetch = BasisPrefetch(state.a, state.b, cfg.k_end)
-        self.early = EarlyZoomOut(state.a, state.b, self.prefetch, cfg)
+        self.early = EarlyZoomOut(state.a, state.b, self.prefetch, cfg, self.extra)
         self.prefetch.start()
 
     def _last_pass(self, f: np.ndarray, n_pass: int) -> None:
@@ -476,6 +502,7 @@ class SpectralStage(Stage):
             cfg,
             min_consistent=state.config.refine.min_consistent,
             repair=state.config.refine.repair,
+            extra=self.extra,
         )
         if z is None:
             if not applies(a, b, cfg):
