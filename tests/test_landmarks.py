@@ -18,8 +18,14 @@ from hope_rs.cli import main
 from hope_rs.evaluation.datasets import pairs_of
 from hope_rs.evaluation.evaluate import geodesic_errors
 from hope_rs.geometry.map_io import read_landmarks
-from hope_rs.pipeline.anchors import farthest_witnesses
-from hope_rs.pipeline.landmarks import check_landmarks, coarse_landmarks, landmark_initial_map
+from hope_rs.pipeline.anchors import distance_fields, farthest_witnesses
+from hope_rs.pipeline.config import LandmarkConfig, MatchConfig
+from hope_rs.pipeline.landmarks import (
+    check_landmarks,
+    coarse_landmarks,
+    landmark_embedding,
+    landmark_initial_map,
+)
 
 FAST = {"max_passes": 2, "spectral": False}
 
@@ -232,6 +238,14 @@ def test_coarse_landmarks_drop_rows_that_share_a_cell():
     assert coarse_landmarks(lm[:2], owner_a, owner_b) is None
 
 
+def ground_truth_landmarks(sa: hope_rs.Shape, ai: np.ndarray, bi: np.ndarray) -> np.ndarray:
+    """Four farthest-point samples of A among its ground-truth vertices (the centroid start
+    left out), each with its first ground-truth partner (input numbering)."""
+    first = dict(zip(ai.tolist()[::-1], bi.tolist()[::-1]))  # each vertex's first partner
+    chosen, _ = farthest_witnesses(sa, np.sort(sa.rank[np.array(sorted(first))]), 5)
+    return np.array([[int(v), first[int(v)]] for v in sa.order[chosen[1:]]])
+
+
 @pytest.mark.slow
 def test_landmarks_do_not_mislead_a_non_isometric_pair():
     # Gorilla -> woman: distances to the landmarks bend with the shape. Used by the global
@@ -245,13 +259,50 @@ def test_landmarks_do_not_mislead_a_non_isometric_pair():
     a, b = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
     sa, sb = hope_rs.Shape(a), hope_rs.Shape(b)
     ai, bi = pair.ground_truth(a.n_vertices, b.n_vertices, max_points=None)
-    first = dict(zip(ai.tolist()[::-1], bi.tolist()[::-1]))  # each vertex's first partner
-    chosen, _ = farthest_witnesses(sa, np.sort(sa.rank[np.array(sorted(first))]), 5)
-    lm = np.array([[int(v), first[int(v)]] for v in sa.order[chosen[1:]]])
+    lm = ground_truth_landmarks(sa, ai, bi)
     without = geodesic_errors(sb, hope_rs.match(sa, sb).map, a_idx=ai, b_idx=bi).mean()
     res = hope_rs.match(sa, sb, landmarks=lm)
     np.testing.assert_array_equal(res.map[lm[:, 0]], lm[:, 1])
     assert geodesic_errors(sb, res.map, a_idx=ai, b_idx=bi).mean() < 1.05 * without
+
+
+def test_landmark_embedding_gives_each_landmark_the_same_mean_on_both_shapes(spheres):
+    sa = hope_rs.Shape(spheres[0])
+    # B scaled by 1.5 along x: distances from each landmark stretch by different factors.
+    stretched = hope_rs.Shape(hope_rs.Mesh(spheres[1].vertices * [1.5, 1, 1], spheres[1].faces))
+    lm = np.array([[0, 0], [100, 120], [250, 300]])
+    xa, xb = landmark_embedding(sa, stretched, lm, 2.0)
+    assert xa.shape == (sa.n_vertices, 3) and xb.shape == (stretched.n_vertices, 3)
+    np.testing.assert_allclose(xa.mean(axis=0), xb.mean(axis=0), rtol=1e-12)
+    np.testing.assert_array_equal(xa[lm[:, 0], range(3)], 0)
+    # The weight scales every column; unscaled fields of B would not have A's means.
+    xa1, xb1 = landmark_embedding(sa, stretched, lm, 1.0)
+    np.testing.assert_allclose(xa, 2.0 * xa1)
+    np.testing.assert_allclose(xb, 2.0 * xb1)
+    raw = distance_fields(stretched, lm[:, 1]).mean(axis=1)
+    assert not np.allclose(raw / raw[0], xb1.mean(axis=0) / xb1.mean(axis=0)[0], rtol=1e-3)
+
+
+@pytest.mark.slow
+def test_landmark_coordinates_in_zoomout_help_a_non_isometric_pair():
+    # Gorilla -> woman: ZoomOut's spectral embedding alone assumes an isometry; the landmarks'
+    # scaled distance fields pull each vertex towards its place along the stretched limbs.
+    pair = next(
+        p
+        for p in pairs_of(data_path("tosca_nonisometric_r"))
+        if p.name == "8_gorilla_02->8_woman_02"
+    )
+    a, b = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
+    sa, sb = hope_rs.Shape(a), hope_rs.Shape(b)
+    ai, bi = pair.ground_truth(a.n_vertices, b.n_vertices, max_points=None)
+    lm = ground_truth_landmarks(sa, ai, bi)
+    errors = {}
+    for weight in (0.0, LandmarkConfig().zoomout_weight):
+        cfg = MatchConfig(landmarks=LandmarkConfig(zoomout_weight=weight))
+        res = hope_rs.match(sa, sb, landmarks=lm, config=cfg)
+        np.testing.assert_array_equal(res.map[lm[:, 0]], lm[:, 1])
+        errors[weight] = geodesic_errors(sb, res.map, a_idx=ai, b_idx=bi).mean()
+    assert errors[LandmarkConfig().zoomout_weight] < 0.93 * errors[0.0]
 
 
 @pytest.mark.slow

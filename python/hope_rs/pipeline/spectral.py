@@ -321,9 +321,7 @@ class EarlyZoomOut:
         if not (self.a.has_spectral_basis(k) and self.b.has_spectral_basis(k)):
             return
         try:
-            self.result = zoomout(
-                self.a, self.b, f, self.config, stop=self.stop, extra=self.extra
-            )
+            self.result = zoomout(self.a, self.b, f, self.config, stop=self.stop, extra=self.extra)
         except Exception:  # noqa: BLE001 - spectral_refine runs it again and reports it
             return
 
