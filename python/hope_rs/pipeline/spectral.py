@@ -437,14 +437,15 @@ class SpectralStage(Stage):
 
     def _start(self, state: MatchState) -> None:
         cfg = state.config.spectral
-        # One BLAS thread from before the solves start to after they end (see BasisPrefetch).
-        self.blas = ExitStack()
-        self.blas.enter_context(single_threaded_blas())
         lm = state.config.landmarks
         if state.landmarks is not None and lm.zoomout_weight > 0:
+            # Before the BLAS setting below, which only _stop restores.
             self.extra = landmark_embedding(
                 state.a, state.b, state.landmarks, lm.zoomout_weight, state.config.refine.repair
             )
+        # One BLAS thread from before the solves start to after they end (see BasisPrefetch).
+        self.blas = ExitStack()
+        self.blas.enter_context(single_threaded_blas())
         self.prefetch = BasisPrefetch(state.a, state.b, cfg.k_end)
         self.early = EarlyZoomOut(state.a, state.b, self.prefetch, cfg, self.extra)
         self.prefetch.start()
