@@ -17,6 +17,7 @@ from hope_rs.pipeline import refine as refine_module
 from hope_rs.pipeline import shared_faces as finish_module
 from hope_rs.pipeline.config import (
     KEYWORDS,
+    LandmarkConfig,
     PartialConfig,
     RefineConfig,
     RepairConfig,
@@ -166,6 +167,11 @@ def test_spectral_settings_reach_the_pass(bundled):
             r"refine\.repair\.agree_rel",
         ),
         (MatchConfig(spectral=RefineConfig()), TypeError, r"spectral must be a SpectralConfig"),
+        (
+            MatchConfig(landmarks=LandmarkConfig(zoomout_weight=float("inf"))),
+            ValueError,
+            r"landmarks\.zoomout_weight must be a finite number",
+        ),
     ],
 )
 def test_a_bad_setting_in_a_config_is_refused_before_any_work(bundled, config, exc, message):

@@ -99,7 +99,8 @@ class LandmarkConfig:
     refine_trust: bool = True
     swap_anchors: bool = True
     repair_anchors: bool = False
-    zoomout_weight: float = 3.0
+    # A weight of inf would make every coordinate inf or NaN: check_config refuses it.
+    zoomout_weight: float = field(default=3.0, metadata={"finite": True})
 
 
 @dataclass(frozen=True)

@@ -120,7 +120,8 @@ def _check_schedule(schedule, k_max: int) -> None:
 def check_config(config, path: str = "MatchConfig") -> None:
     """Raise ``TypeError`` or ``ValueError`` (one line, naming the field) for a setting of a
     config dataclass that cannot be right: a number of another kind than its default, not
-    NaN, or negative where the default is not (pass indices, counts, sizes, tolerances).
+    NaN, or negative where the default is not (pass indices, counts, sizes, tolerances), nor
+    infinite where the field's metadata says ``finite``.
     Nested configs are checked too; fields whose default is ``None``, a string or a tuple are
     left to their own checks."""
     default = type(config)()
@@ -145,6 +146,8 @@ def check_config(config, path: str = "MatchConfig") -> None:
                 raise TypeError(f"{name} must be a number, got {type(value).__name__} {value!r}")
             if math.isnan(value) or (ref >= 0 and value < 0):
                 raise ValueError(f"{name} must be {_sign(ref, 'a number')}, got {value}")
+            if f.metadata.get("finite") and not math.isfinite(value):
+                raise ValueError(f"{name} must be a finite number (default {ref}), got {value}")
 
 
 def _sign(ref, what: str) -> str:
