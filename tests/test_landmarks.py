@@ -17,6 +17,7 @@ from hope_rs import matching
 from hope_rs.cli import main
 from hope_rs.evaluation.datasets import pairs_of
 from hope_rs.evaluation.evaluate import geodesic_errors
+from hope_rs.evaluation.partial import cut_by_plane, plane_normal
 from hope_rs.geometry.map_io import read_landmarks
 from hope_rs.pipeline.anchors import distance_fields, farthest_witnesses
 from hope_rs.pipeline.config import LandmarkConfig, MatchConfig
@@ -303,6 +304,26 @@ def test_landmark_coordinates_in_zoomout_help_a_non_isometric_pair():
         np.testing.assert_array_equal(res.map[lm[:, 0]], lm[:, 1])
         errors[weight] = geodesic_errors(sb, res.map, a_idx=ai, b_idx=bi).mean()
     assert errors[LandmarkConfig().zoomout_weight] < 0.93 * errors[0.0]
+
+
+@pytest.mark.slow
+def test_landmarks_on_a_part_are_kept_and_do_not_hurt():
+    # A part and its whole: the partial path's nested matches (several scales and a merge)
+    # get the landmarks too.
+    a = hope_rs.load_mesh(data_path("faust_r", "tr_reg_000.off"))
+    b = hope_rs.load_mesh(data_path("faust_r", "tr_reg_001.off"))
+    gta = hope_rs.load_vts(data_path("faust_r", "corres", "tr_reg_000.vts"))
+    gtb = hope_rs.load_vts(data_path("faust_r", "corres", "tr_reg_001.vts"))
+    part = cut_by_plane(a, plane_normal(1), 0.3)
+    on_part = part.inverse(a.n_vertices)[gta]
+    ai, bi = on_part[on_part >= 0], gtb[on_part >= 0]
+    sp = hope_rs.Shape(part.mesh)
+    lm = ground_truth_landmarks(sp, ai, bi)
+    without = geodesic_errors(b, hope_rs.match(sp, b).map, a_idx=ai, b_idx=bi).mean()
+    res = hope_rs.match(sp, b, landmarks=lm)
+    assert res.stage("partial").ran
+    np.testing.assert_array_equal(res.map[lm[:, 0]], lm[:, 1])
+    assert geodesic_errors(b, res.map, a_idx=ai, b_idx=bi).mean() < 1.05 * without
 
 
 @pytest.mark.slow
