@@ -51,8 +51,9 @@ impl<'a> EdgeGraph<'a> {
         }
     }
 
+    /// The straight-line distance between vertices `a` and `b`.
     #[inline]
-    fn len(&self, a: usize, b: usize) -> f64 {
+    pub fn straight_line(&self, a: usize, b: usize) -> f64 {
         distance(self.vertices[a], self.vertices[b])
     }
 
@@ -62,7 +63,7 @@ impl<'a> EdgeGraph<'a> {
         if row.is_empty() {
             return 0.0;
         }
-        row.iter().map(|&b| self.len(v, b as usize)).sum::<f64>() / row.len() as f64
+        row.iter().map(|&b| self.straight_line(v, b as usize)).sum::<f64>() / row.len() as f64
     }
 
     /// Mean length of the graph's edges (0 for a graph without edges).
@@ -71,7 +72,7 @@ impl<'a> EdgeGraph<'a> {
         for a in 0..self.adj.n_rows {
             for &b in self.adj.row(a) {
                 if (b as usize) > a {
-                    sum += self.len(a, b as usize);
+                    sum += self.straight_line(a, b as usize);
                     count += 1;
                 }
             }
@@ -94,7 +95,26 @@ pub struct Dijkstra {
     heap: BinaryHeap<Reverse<(u64, u32)>>,
 }
 
+thread_local! {
+    /// Each thread's workspace for [`Dijkstra::with_local`].
+    static WORKSPACE: std::cell::Cell<Option<Dijkstra>> = const { std::cell::Cell::new(None) };
+}
+
 impl Dijkstra {
+    /// Runs `work` with this thread's workspace for graphs of at most `n` vertices, kept for
+    /// the thread's next call. Many short searches spread over rayon's tasks would otherwise
+    /// allocate (and the kernel zero, page by page as the searches touch them) a workspace
+    /// of the graph's size per task, again on every call. A nested call gets a fresh one.
+    pub fn with_local<R>(n: usize, work: impl FnOnce(&mut Dijkstra) -> R) -> R {
+        let mut dj = match WORKSPACE.take() {
+            Some(dj) if dj.dist.len() >= n => dj,
+            _ => Dijkstra::new(n),
+        };
+        let out = work(&mut dj);
+        WORKSPACE.set(Some(dj));
+        out
+    }
+
     pub fn new(n: usize) -> Self {
         Dijkstra {
             dist: vec![0.0; n],
@@ -404,7 +424,7 @@ mod tests {
         for a in 0..v.len() {
             let (lo, hi) = (adj.indptr[a], adj.indptr[a + 1]);
             for e in lo..hi {
-                assert_eq!(g.lengths[e], g.len(a, adj.indices[e] as usize));
+                assert_eq!(g.lengths[e], g.straight_line(a, adj.indices[e] as usize));
             }
         }
     }
