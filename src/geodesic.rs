@@ -63,7 +63,10 @@ impl<'a> EdgeGraph<'a> {
         if row.is_empty() {
             return 0.0;
         }
-        row.iter().map(|&b| self.straight_line(v, b as usize)).sum::<f64>() / row.len() as f64
+        row.iter()
+            .map(|&b| self.straight_line(v, b as usize))
+            .sum::<f64>()
+            / row.len() as f64
     }
 
     /// Mean length of the graph's edges (0 for a graph without edges).
@@ -249,7 +252,8 @@ impl Dijkstra {
     /// at the cost of searching only the region the source takes over.
     pub fn lower(&mut self, g: &EdgeGraph, src: usize, bound: &mut [f64]) {
         self.heap.clear();
-        if !(bound[src] > 0.0) {
+        // Nothing to lower at a sample already (or a NaN bound).
+        if bound[src].partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
             return;
         }
         bound[src] = 0.0;

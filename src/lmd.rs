@@ -480,6 +480,72 @@ mod tests {
         assert!(local_map_distortion(&balls, &rings, &gb, &g, 1.0, 2.3, None, short).is_err());
     }
 
+    /// LMD as defined, one full search per vertex to every image of its 2-ring.
+    fn plain_lmd(
+        balls: &HopBalls,
+        rings: &RingDistances,
+        b: &EdgeGraph,
+        f: &[u32],
+        scale_a: f64,
+        scale_b: f64,
+    ) -> (Vec<f32>, Vec<f32>) {
+        let unit = lmd_unit(rings, scale_a);
+        let mut dj = Dijkstra::new(b.adj.n_rows);
+        let mut db = Vec::new();
+        (0..balls.n)
+            .map(|p| {
+                let ring = &balls.ball(p, 2)[1..];
+                let da = rings.of(p);
+                let reach = lmd_reach(da, scale_a, unit);
+                let targets: Vec<u32> = ring.iter().map(|&r| f[r as usize]).collect();
+                let q = f[p] as usize;
+                dj.run(b, q, &targets, reach * scale_b, &mut db);
+                let tol = tolerance(
+                    unit,
+                    rings.local_edge[p] / scale_a,
+                    b.local_edge_length(q) / scale_b,
+                );
+                let (mut sum, mut good) = (0.0, 0usize);
+                for (&x, &y) in da.iter().zip(db.iter()) {
+                    let dist = (x / scale_a - (y / scale_b).min(reach)).abs();
+                    sum += dist;
+                    good += (dist < tol) as usize;
+                }
+                let m = ring.len() as f64;
+                ((sum / unit / m) as f32, (good as f64 / m) as f32)
+            })
+            .unzip()
+    }
+
+    #[test]
+    fn skipping_far_images_and_short_rows_changes_nothing() {
+        // A scrambled map sends most 2-rings far beyond the cutoff (no search for those), and
+        // rows of 8 entries answer only for the images they list.
+        let (va, fa) = grid(20, 16, 1.0);
+        let (mut vb, _) = grid(20, 16, 1.9);
+        for (i, v) in vb.iter_mut().enumerate() {
+            v[2] += ((i * 53) % 7) as f64 * 0.11;
+        }
+        let adj = adjacency_from_faces(&fa, va.len()).unwrap();
+        let balls = HopBalls::new(&adj.view(), 2).unwrap();
+        let (ga, gb) = (graph(&va, &adj), graph(&vb, &adj));
+        let rings = RingDistances::new(&ga, &balls).unwrap();
+        let n = va.len();
+        let f: Vec<u32> = (0..n)
+            .map(|i| match i % 4 {
+                0 => ((i * 7919 + 13) % n) as u32,
+                1 => ((i + 21) % n) as u32,
+                _ => i as u32,
+            })
+            .collect();
+        let want = plain_lmd(&balls, &rings, &gb, &f, 1.0, 1.9);
+        let cutoff = lmd_table_cutoff(&rings, 1.0, 1.9);
+        for table in [None, Some(LocalDistances::with_cap(&gb, cutoff, 8))] {
+            let got = local_map_distortion(&balls, &rings, &gb, &f, 1.0, 1.9, table.as_ref(), None);
+            assert_eq!(got.unwrap(), want, "table {}", table.is_some());
+        }
+    }
+
     #[test]
     fn tolerance_follows_the_local_edges() {
         assert_eq!(tolerance(1.0, 1.0, 1.0), TOLERANCE);

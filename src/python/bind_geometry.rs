@@ -77,6 +77,9 @@ pub(super) fn greedy_pairs<'py>(
     Ok((owned(py, &widen(r)), owned(py, &widen(c))))
 }
 
+/// The nearest point of each query and whether another is about as near.
+type NearestOut<'py> = (Bound<'py, PyArray1<i64>>, Bound<'py, PyArray1<bool>>);
+
 /// Exact nearest points of a fixed set for many queries (see `nearest::PointClusters`).
 #[pyclass(module = "hope_rs._core", frozen, name = "PointClusters")]
 pub(super) struct PyPointClusters {
@@ -110,7 +113,7 @@ impl PyPointClusters {
         &self,
         py: Python<'py>,
         queries: PyReadonlyArray2<'py, f64>,
-    ) -> PyResult<(Bound<'py, PyArray1<i64>>, Bound<'py, PyArray1<bool>>)> {
+    ) -> PyResult<NearestOut<'py>> {
         let (q, dim) = f64_rows(&queries);
         if dim != self.inner.dim() {
             return Err(PyValueError::new_err(format!(

@@ -26,6 +26,9 @@ fn ones(p: Csr<()>) -> crate::error::Result<Csr<u8>> {
     })
 }
 
+/// Farthest-point samples and their distance fields.
+type SamplesOut<'py> = (Bound<'py, PyArray1<i64>>, Bound<'py, PyArray2<f64>>);
+
 /// A mesh's edge graph and hop balls up to `k_max`, built once and reused by every iteration.
 #[pyclass(module = "hope_rs._core", frozen)]
 pub(super) struct MeshGraph {
@@ -156,7 +159,7 @@ impl MeshGraph {
         start: u32,
         n: usize,
         scale: f64,
-    ) -> PyResult<(Bound<'py, PyArray1<i64>>, Bound<'py, PyArray2<f64>>)> {
+    ) -> PyResult<SamplesOut<'py>> {
         let c = u32_vec(&candidates, "candidates")?;
         let (chosen, d) = detached(py, || {
             farthest_point_fields(&self.edge_graph(), &c, start, n, scale)
