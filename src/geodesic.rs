@@ -51,8 +51,9 @@ impl<'a> EdgeGraph<'a> {
         }
     }
 
+    /// The straight-line distance between vertices `a` and `b`.
     #[inline]
-    fn len(&self, a: usize, b: usize) -> f64 {
+    pub fn straight_line(&self, a: usize, b: usize) -> f64 {
         distance(self.vertices[a], self.vertices[b])
     }
 
@@ -62,7 +63,10 @@ impl<'a> EdgeGraph<'a> {
         if row.is_empty() {
             return 0.0;
         }
-        row.iter().map(|&b| self.len(v, b as usize)).sum::<f64>() / row.len() as f64
+        row.iter()
+            .map(|&b| self.straight_line(v, b as usize))
+            .sum::<f64>()
+            / row.len() as f64
     }
 
     /// Mean length of the graph's edges (0 for a graph without edges).
@@ -71,7 +75,7 @@ impl<'a> EdgeGraph<'a> {
         for a in 0..self.adj.n_rows {
             for &b in self.adj.row(a) {
                 if (b as usize) > a {
-                    sum += self.len(a, b as usize);
+                    sum += self.straight_line(a, b as usize);
                     count += 1;
                 }
             }
@@ -94,7 +98,26 @@ pub struct Dijkstra {
     heap: BinaryHeap<Reverse<(u64, u32)>>,
 }
 
+thread_local! {
+    /// Each thread's workspace for [`Dijkstra::with_local`].
+    static WORKSPACE: std::cell::Cell<Option<Dijkstra>> = const { std::cell::Cell::new(None) };
+}
+
 impl Dijkstra {
+    /// Runs `work` with this thread's workspace for graphs of at most `n` vertices, kept for
+    /// the thread's next call. Many short searches spread over rayon's tasks would otherwise
+    /// allocate (and the kernel zero, page by page as the searches touch them) a workspace
+    /// of the graph's size per task, again on every call. A nested call gets a fresh one.
+    pub fn with_local<R>(n: usize, work: impl FnOnce(&mut Dijkstra) -> R) -> R {
+        let mut dj = match WORKSPACE.take() {
+            Some(dj) if dj.dist.len() >= n => dj,
+            _ => Dijkstra::new(n),
+        };
+        let out = work(&mut dj);
+        WORKSPACE.set(Some(dj));
+        out
+    }
+
     pub fn new(n: usize) -> Self {
         Dijkstra {
             dist: vec![0.0; n],
@@ -222,6 +245,34 @@ impl Dijkstra {
         }
         cutoff
     }
+    /// Lowers `bound` to the distance from `src` wherever that is smaller, leaving every other
+    /// entry as it is: a search that never enters a vertex it cannot improve. When `bound` is
+    /// the minimum of earlier [`Dijkstra::ball`] fields, the result is exactly the minimum with
+    /// this source's full field (a vertex improved lies on a path of improved vertices only),
+    /// at the cost of searching only the region the source takes over.
+    pub fn lower(&mut self, g: &EdgeGraph, src: usize, bound: &mut [f64]) {
+        self.heap.clear();
+        // Nothing to lower at a sample already (or a NaN bound).
+        if bound[src].partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+            return;
+        }
+        bound[src] = 0.0;
+        self.heap.push(Reverse((0f64.to_bits(), src as u32)));
+        while let Some(Reverse((bits, u))) = self.heap.pop() {
+            let (du, u) = (f64::from_bits(bits), u as usize);
+            if du > bound[u] {
+                continue;
+            }
+            let (lo, hi) = (g.adj.indptr[u], g.adj.indptr[u + 1]);
+            for (&w, &l) in g.adj.indices[lo..hi].iter().zip(&g.lengths[lo..hi]) {
+                let nd = du + l;
+                if nd < bound[w as usize] {
+                    bound[w as usize] = nd;
+                    self.heap.push(Reverse((nd.to_bits(), w)));
+                }
+            }
+        }
+    }
 }
 
 /// Edge-graph distance between each pair `(sources[i], targets[i])` (infinite when not
@@ -273,6 +324,63 @@ pub fn distance_fields(g: &EdgeGraph, sources: &[u32]) -> Result<Vec<f64>> {
     Ok(out)
 }
 
+/// Farthest-point samples of `candidates` and their distance fields: `start` first, then
+/// repeatedly the candidate farthest from every sample so far (distances divided by `scale`,
+/// the first of equal ones; candidates unreachable from all samples count as -1), until `n`
+/// samples or until the farthest candidate is a sample. Returns the samples and their fields
+/// (unscaled, `samples.len() x n_vertices` row-major, as [`distance_fields`] gives them).
+///
+/// The nearest-sample distance is kept up to date by [`Dijkstra::lower`], which searches only
+/// the region each new sample takes over; the full fields of the samples are then searched in
+/// parallel.
+pub fn farthest_point_fields(
+    g: &EdgeGraph,
+    candidates: &[u32],
+    start: u32,
+    n: usize,
+    scale: f64,
+) -> Result<(Vec<u32>, Vec<f64>)> {
+    let n_v = g.adj.n_rows;
+    if let Some(&s) = candidates
+        .iter()
+        .chain([&start])
+        .find(|&&s| s as usize >= n_v)
+    {
+        return invalid(format!("vertex {s} out of range for {n_v} vertices"));
+    }
+    if !(scale > 0.0 && scale.is_finite()) {
+        return invalid("the scale must be positive and finite");
+    }
+    let first = distance_fields(g, &[start])?;
+    let mut nearest = first.clone();
+    let mut chosen = vec![start];
+    let mut dj = Dijkstra::new(n_v);
+    for _ in 1..n.min(candidates.len()) {
+        // The first candidate of the largest scaled distance (unreachable ones count as -1).
+        let mut best = (0usize, f64::NEG_INFINITY);
+        for (i, &c) in candidates.iter().enumerate() {
+            let d = nearest[c as usize] / scale;
+            let d = if d.is_finite() { d } else { -1.0 };
+            if d > best.1 {
+                best = (i, d);
+            }
+        }
+        let next = candidates[best.0];
+        if nearest[next as usize] / scale <= 0.0 {
+            break;
+        }
+        dj.lower(g, next as usize, &mut nearest);
+        chosen.push(next);
+    }
+    let mut fields = try_filled_vec(chosen.len().saturating_mul(n_v), 0.0, "the distance fields")?;
+    fields[..n_v].copy_from_slice(&first);
+    if chosen.len() > 1 {
+        let rest = distance_fields(g, &chosen[1..])?;
+        fields[n_v..].copy_from_slice(&rest);
+    }
+    Ok((chosen, fields))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -320,7 +428,7 @@ mod tests {
         for a in 0..v.len() {
             let (lo, hi) = (adj.indptr[a], adj.indptr[a + 1]);
             for e in lo..hi {
-                assert_eq!(g.lengths[e], g.len(a, adj.indices[e] as usize));
+                assert_eq!(g.lengths[e], g.straight_line(a, adj.indices[e] as usize));
             }
         }
     }
@@ -357,5 +465,83 @@ mod tests {
         }
         assert!(fields[13 * 2 + 12] == 0.0 && fields[13 * 2].is_infinite());
         assert!(distance_fields(&g, &[13]).is_err());
+    }
+    /// The farthest-point samples as one would pick them with every full field at hand.
+    fn naive_farthest(g: &EdgeGraph, cand: &[u32], start: u32, n: usize, scale: f64) -> Vec<u32> {
+        let n_v = g.adj.n_rows;
+        let mut chosen = vec![start];
+        let mut nearest = distance_fields(g, &[start]).unwrap();
+        for _ in 1..n.min(cand.len()) {
+            let d: Vec<f64> = cand
+                .iter()
+                .map(|&c| nearest[c as usize] / scale)
+                .map(|d| if d.is_finite() { d } else { -1.0 })
+                .collect();
+            let i = (0..d.len()).fold(0, |b, i| if d[i] > d[b] { i } else { b });
+            if nearest[cand[i] as usize] / scale <= 0.0 {
+                break;
+            }
+            chosen.push(cand[i]);
+            let field = distance_fields(g, &[cand[i]]).unwrap();
+            for v in 0..n_v {
+                nearest[v] = nearest[v].min(field[v]);
+            }
+        }
+        chosen
+    }
+
+    #[test]
+    fn farthest_points_match_full_searches() {
+        // A bumpy 30 x 20 grid with irregular edge lengths, and a second component.
+        let w = 30u32;
+        let mut v: Vec<[f64; 3]> = (0..w * 20)
+            .map(|i| {
+                let (x, y) = ((i % w) as f64, (i / w) as f64);
+                [
+                    x + ((i * 13) % 7) as f64 * 0.05,
+                    y * 0.9,
+                    ((i * 7) % 5) as f64 * 0.3,
+                ]
+            })
+            .collect();
+        let mut f = Vec::new();
+        for y in 0..19 {
+            for x in 0..w - 1 {
+                let i = y * w + x;
+                f.push([i, i + 1, i + w]);
+                f.push([i + 1, i + w + 1, i + w]);
+            }
+        }
+        let off = v.len() as u32;
+        v.extend([[50.0, 0.0, 0.0], [51.0, 0.0, 0.0], [50.0, 1.0, 0.0]]);
+        f.push([off, off + 1, off + 2]);
+        let adj = adjacency_from_faces(&f, v.len()).unwrap();
+        let g = EdgeGraph::new(&v, adj.view());
+        let every: Vec<u32> = (0..v.len() as u32).collect();
+        let odd: Vec<u32> = every.iter().copied().filter(|c| c % 3 != 0).collect();
+        for (cand, start, n, scale) in [
+            (&every[..], 0u32, 40usize, 1.0),
+            (&odd[..], 301, 25, 0.37),
+            (&every[..], off, 10, 2.0),
+            (&odd[..5], 1, 9, 1.0),
+        ] {
+            let (chosen, fields) = farthest_point_fields(&g, cand, start, n, scale).unwrap();
+            assert_eq!(chosen, naive_farthest(&g, cand, start, n, scale));
+            assert_eq!(fields, distance_fields(&g, &chosen).unwrap());
+        }
+        // `lower` gives exactly the minimum with each further full field.
+        let mut bound = distance_fields(&g, &[7]).unwrap();
+        let mut want = bound.clone();
+        let mut dj = Dijkstra::new(v.len());
+        for s in [590u32, 7, 301, off + 1, 44] {
+            dj.lower(&g, s as usize, &mut bound);
+            let field = distance_fields(&g, &[s]).unwrap();
+            for (w, d) in want.iter_mut().zip(&field) {
+                *w = w.min(*d);
+            }
+            assert_eq!(bound, want, "after source {s}");
+        }
+        assert!(farthest_point_fields(&g, &[0, 9999], 0, 4, 1.0).is_err());
+        assert!(farthest_point_fields(&g, &[0, 1], 0, 4, 0.0).is_err());
     }
 }

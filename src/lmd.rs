@@ -123,19 +123,25 @@ impl LocalDistances {
     }
 
     /// Writes into `out` the distances from `q` to `targets` as `Dijkstra::run` with this
-    /// `cutoff` would give them (infinite beyond it); false, writing nothing, when q's row does
-    /// not reach that far.
+    /// `cutoff` would give them (infinite beyond it); false, with `out` unspecified, when q's
+    /// row cannot tell: a target is not listed and the row is not complete up to `cutoff`.
+    /// A row cut short still answers for the targets it lists, whose distances are exact: the
+    /// images of a 2-ring under a right map lie close to q even where the mesh is too fine for
+    /// the row to reach the cutoff.
     fn lookup(&self, q: usize, targets: &[u32], cutoff: f64, out: &mut Vec<f64>) -> bool {
-        if cutoff > self.complete[q] {
-            return false;
-        }
         let lo = self.offsets[q];
         let (ids, dist) = (&self.ids[lo..self.offsets[q + 1]], &self.dist[lo..]);
+        // Every vertex nearer than `complete[q]` is listed, so an unlisted one is farther.
+        let unlisted_beyond = cutoff <= self.complete[q];
         out.clear();
-        out.extend(targets.iter().map(|t| match ids.binary_search(t) {
-            Ok(i) if dist[i] <= cutoff => dist[i],
-            _ => f64::INFINITY,
-        }));
+        for t in targets {
+            out.push(match ids.binary_search(t) {
+                Ok(i) if dist[i] <= cutoff => dist[i],
+                Ok(_) => f64::INFINITY,
+                Err(_) if unlisted_beyond => f64::INFINITY,
+                Err(_) => return false,
+            });
+        }
         true
     }
 }
@@ -274,6 +280,18 @@ pub fn local_map_distortion(
     Ok((mean, frac))
 }
 
+/// Buffers of one worker's LMD rows.
+#[derive(Default)]
+struct Scratch {
+    /// Per 2-ring vertex: whether its image may be within the cutoff of f(p).
+    near: Vec<bool>,
+    /// Those images, and their distances from f(p).
+    targets: Vec<u32>,
+    found: Vec<f64>,
+    /// The distance of every image (infinite beyond the cutoff).
+    db: Vec<f64>,
+}
+
 /// Everything the LMD of one vertex needs.
 struct Job<'a> {
     balls_a: &'a HopBalls,
@@ -290,35 +308,49 @@ impl Job<'_> {
     /// (mean, consistent fraction) of each vertex of `rows`, in parallel.
     fn rows(&self, rows: impl IndexedParallelIterator<Item = u32>) -> Vec<(f32, f32)> {
         let n_b = self.b.adj.n_rows;
-        rows.map_init(
-            || (Dijkstra::new(n_b), Vec::new(), Vec::new()),
-            |(djb, db, ftargets), p| self.vertex(p as usize, djb, db, ftargets),
-        )
+        rows.map_init(Scratch::default, |scratch, p| {
+            Dijkstra::with_local(n_b, |djb| self.vertex(p as usize, djb, scratch))
+        })
         .collect()
     }
 
-    fn vertex(
-        &self,
-        p: usize,
-        djb: &mut Dijkstra,
-        db: &mut Vec<f64>,
-        ftargets: &mut Vec<u32>,
-    ) -> (f32, f32) {
+    fn vertex(&self, p: usize, djb: &mut Dijkstra, s: &mut Scratch) -> (f32, f32) {
         let ring = &self.balls_a.ball(p, 2)[1..];
         if ring.is_empty() {
             return (0.0, 1.0);
         }
         let da = self.rings_a.of(p);
         let reach = lmd_reach(da, self.scale_a, self.unit);
-        ftargets.clear();
-        ftargets.extend(ring.iter().map(|&r| self.f[r as usize]));
         let q = self.f[p] as usize;
+        let cutoff = reach * self.scale_b;
+        // No path is shorter than the straight line between its ends: an image farther than
+        // the cutoff in space is beyond it on the graph too (the margin dwarfs any rounding),
+        // so only the others are looked up or searched for. A wrong match's images lie
+        // scattered, and the search for them would otherwise cover the whole cutoff ball.
+        let beyond = cutoff * (1.0 + 1e-9);
+        s.near.clear();
+        s.targets.clear();
+        for &r in ring {
+            let t = self.f[r as usize];
+            let near = self.b.straight_line(q, t as usize) <= beyond;
+            s.near.push(near);
+            if near {
+                s.targets.push(t);
+            }
+        }
         if !self
             .table
-            .is_some_and(|t| t.lookup(q, ftargets, reach * self.scale_b, db))
+            .is_some_and(|t| t.lookup(q, &s.targets, cutoff, &mut s.found))
         {
-            djb.run(self.b, q, ftargets, reach * self.scale_b, db);
+            djb.run(self.b, q, &s.targets, cutoff, &mut s.found);
         }
+        let mut found = s.found.iter();
+        s.db.clear();
+        s.db.extend(s.near.iter().map(|&near| match near {
+            true => *found.next().expect("one distance per near target"),
+            false => f64::INFINITY,
+        }));
+        let db = &s.db;
         let tol = tolerance(
             self.unit,
             self.rings_a.local_edge[p] / self.scale_a,
@@ -446,6 +478,72 @@ mod tests {
         assert_eq!(got.unwrap(), full);
         let short = Some((&f[1..], prev.0.as_slice(), prev.1.as_slice()));
         assert!(local_map_distortion(&balls, &rings, &gb, &g, 1.0, 2.3, None, short).is_err());
+    }
+
+    /// LMD as defined, one full search per vertex to every image of its 2-ring.
+    fn plain_lmd(
+        balls: &HopBalls,
+        rings: &RingDistances,
+        b: &EdgeGraph,
+        f: &[u32],
+        scale_a: f64,
+        scale_b: f64,
+    ) -> (Vec<f32>, Vec<f32>) {
+        let unit = lmd_unit(rings, scale_a);
+        let mut dj = Dijkstra::new(b.adj.n_rows);
+        let mut db = Vec::new();
+        (0..balls.n)
+            .map(|p| {
+                let ring = &balls.ball(p, 2)[1..];
+                let da = rings.of(p);
+                let reach = lmd_reach(da, scale_a, unit);
+                let targets: Vec<u32> = ring.iter().map(|&r| f[r as usize]).collect();
+                let q = f[p] as usize;
+                dj.run(b, q, &targets, reach * scale_b, &mut db);
+                let tol = tolerance(
+                    unit,
+                    rings.local_edge[p] / scale_a,
+                    b.local_edge_length(q) / scale_b,
+                );
+                let (mut sum, mut good) = (0.0, 0usize);
+                for (&x, &y) in da.iter().zip(db.iter()) {
+                    let dist = (x / scale_a - (y / scale_b).min(reach)).abs();
+                    sum += dist;
+                    good += (dist < tol) as usize;
+                }
+                let m = ring.len() as f64;
+                ((sum / unit / m) as f32, (good as f64 / m) as f32)
+            })
+            .unzip()
+    }
+
+    #[test]
+    fn skipping_far_images_and_short_rows_changes_nothing() {
+        // A scrambled map sends most 2-rings far beyond the cutoff (no search for those), and
+        // rows of 8 entries answer only for the images they list.
+        let (va, fa) = grid(20, 16, 1.0);
+        let (mut vb, _) = grid(20, 16, 1.9);
+        for (i, v) in vb.iter_mut().enumerate() {
+            v[2] += ((i * 53) % 7) as f64 * 0.11;
+        }
+        let adj = adjacency_from_faces(&fa, va.len()).unwrap();
+        let balls = HopBalls::new(&adj.view(), 2).unwrap();
+        let (ga, gb) = (graph(&va, &adj), graph(&vb, &adj));
+        let rings = RingDistances::new(&ga, &balls).unwrap();
+        let n = va.len();
+        let f: Vec<u32> = (0..n)
+            .map(|i| match i % 4 {
+                0 => ((i * 7919 + 13) % n) as u32,
+                1 => ((i + 21) % n) as u32,
+                _ => i as u32,
+            })
+            .collect();
+        let want = plain_lmd(&balls, &rings, &gb, &f, 1.0, 1.9);
+        let cutoff = lmd_table_cutoff(&rings, 1.0, 1.9);
+        for table in [None, Some(LocalDistances::with_cap(&gb, cutoff, 8))] {
+            let got = local_map_distortion(&balls, &rings, &gb, &f, 1.0, 1.9, table.as_ref(), None);
+            assert_eq!(got.unwrap(), want, "table {}", table.is_some());
+        }
     }
 
     #[test]

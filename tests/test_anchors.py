@@ -6,11 +6,18 @@ from conftest import data_path
 from meshes import corrupted, random_isometric_copy
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
+from scipy.spatial import cKDTree
 
 import hope_rs
 from hope_rs import MatchConfig
 from hope_rs.evaluation.datasets import Pair
-from hope_rs.pipeline.anchors import anchor_step, distance_fields, swapped_regions
+from hope_rs.pipeline.anchors import (
+    AnchorPlacement,
+    anchor_step,
+    distance_fields,
+    farthest_witnesses,
+    swapped_regions,
+)
 from hope_rs.pipeline.config import RefineConfig
 from hope_rs.pipeline.lmd import local_map_distortion
 from hope_rs.pipeline.refine import refine
@@ -52,6 +59,33 @@ def scrambled_copy(mesh, seed: int, share: float):
     truth = a.map_in(b, truth)  # the anchor step works in the shapes' internal numbering
     f, bad = corrupted(truth, share, b.n_vertices, rng)
     return a, b, truth, bad, f
+
+
+def test_farthest_witnesses_are_farthest_point_samples(faust_pair):
+    a = Shape(faust_pair[0], k_max=2)
+    cand = np.flatnonzero(np.arange(a.n_vertices) % 3 > 0)
+    chosen, fields = farthest_witnesses(a, cand, 12)
+    np.testing.assert_array_equal(fields, distance_fields(a, chosen))
+    assert np.isin(chosen, cand).all() and len(set(chosen.tolist())) == 12
+    for i in range(1, 12):  # each sample is the candidate farthest from those before it
+        nearest = fields[:i, cand].min(axis=0)
+        assert chosen[i] == cand[np.argmax(nearest)]
+
+
+def test_anchor_placement_gives_the_k_d_tree_answers():
+    # B's coordinates along a curved sheet in 12-D, two of them equal (a tie only the k-d
+    # tree's order settles); A's far from them, as when the two shapes' distances differ.
+    rng = np.random.default_rng(3)
+    u = rng.uniform(0, 3, size=(2, 3000))
+    db = np.vstack([np.sin((t + 1) * u[0]) + np.cos(u[1] * (t % 4)) for t in range(16)])
+    db[:, 7] = db[:, 1234]
+    da = db[:, rng.integers(0, 3000, size=2500)] + rng.normal(0, 0.3, size=(16, 2500))
+    da[:, :5] = db[:, [1234] * 5]
+    placement = AnchorPlacement(da, db, search_dims=12)
+    want = cKDTree(placement.points).query((da.T - placement.mu) @ placement.basis)[1]
+    got = placement.place(np.arange(2500))
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(placement.place(np.arange(2000, 2500)), want[2000:])
 
 
 def test_anchor_step_places_untrusted_vertices_of_an_isometric_copy(faust_pair):

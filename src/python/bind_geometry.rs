@@ -76,3 +76,53 @@ pub(super) fn greedy_pairs<'py>(
     let widen = |v: Vec<u32>| v.into_iter().map(i64::from).collect::<Vec<i64>>();
     Ok((owned(py, &widen(r)), owned(py, &widen(c))))
 }
+
+/// The nearest point of each query and whether another is about as near.
+type NearestOut<'py> = (Bound<'py, PyArray1<i64>>, Bound<'py, PyArray1<bool>>);
+
+/// Exact nearest points of a fixed set for many queries (see `nearest::PointClusters`).
+#[pyclass(module = "hope_rs._core", frozen, name = "PointClusters")]
+pub(super) struct PyPointClusters {
+    inner: crate::nearest::PointClusters,
+}
+
+/// Rows of an (n, d) float array, row-major, and d.
+fn f64_rows(a: &PyReadonlyArray2<'_, f64>) -> (Vec<f64>, usize) {
+    let v = a.as_array();
+    let flat = match v.as_slice() {
+        Some(s) => s.to_vec(),
+        None => v.iter().copied().collect(),
+    };
+    (flat, v.ncols())
+}
+
+#[pymethods]
+impl PyPointClusters {
+    /// The clusters of `points`, an (n, d) float array with d > 0.
+    #[new]
+    fn new(py: Python<'_>, points: PyReadonlyArray2<'_, f64>) -> PyResult<Self> {
+        let (p, dim) = f64_rows(&points);
+        let inner = detached(py, || crate::nearest::PointClusters::new(&p, dim))?;
+        Ok(PyPointClusters { inner })
+    }
+
+    /// For each row of `queries` ((m, d) floats), the index of its nearest point (int64) and
+    /// whether another point is about as near (bool): only unflagged answers are certain to be
+    /// the one any exact search gives.
+    fn nearest<'py>(
+        &self,
+        py: Python<'py>,
+        queries: PyReadonlyArray2<'py, f64>,
+    ) -> PyResult<NearestOut<'py>> {
+        let (q, dim) = f64_rows(&queries);
+        if dim != self.inner.dim() {
+            return Err(PyValueError::new_err(format!(
+                "queries must have {} columns like the points, got {dim}",
+                self.inner.dim()
+            )));
+        }
+        let (ids, tie) = detached(py, || self.inner.nearest(&q))?;
+        let ids: Vec<i64> = ids.into_iter().map(i64::from).collect();
+        Ok((owned(py, &ids), owned(py, &tie)))
+    }
+}

@@ -3,7 +3,7 @@
 use super::convert::{csr_out, faces_vec, owned, points_vec, u32_vec, PyCsr};
 use super::detached;
 use crate::csr::Csr;
-use crate::geodesic::{distance_fields, pair_distances, EdgeGraph};
+use crate::geodesic::{distance_fields, farthest_point_fields, pair_distances, EdgeGraph};
 use crate::graph::adjacency_from_faces;
 use crate::khop::{khop_csr, HopBalls};
 use crate::lmd::{LocalDistances, RingDistances};
@@ -25,6 +25,9 @@ fn ones(p: Csr<()>) -> crate::error::Result<Csr<u8>> {
         data,
     })
 }
+
+/// Farthest-point samples and their distance fields.
+type SamplesOut<'py> = (Bound<'py, PyArray1<i64>>, Bound<'py, PyArray2<f64>>);
 
 /// A mesh's edge graph and hop balls up to `k_max`, built once and reused by every iteration.
 #[pyclass(module = "hope_rs._core", frozen)]
@@ -144,6 +147,29 @@ impl MeshGraph {
         let d = detached(py, || distance_fields(&self.edge_graph(), &s))?;
         let n = self.balls.n;
         owned(py, &d).reshape([s.len(), n])
+    }
+
+    /// Farthest-point samples of `candidates` from `start` (at most `n`) and their distance
+    /// fields, (len(samples), n_vertices) (see `geodesic::farthest_point_fields`; `scale`
+    /// divides the distances compared).
+    fn farthest_fields<'py>(
+        &self,
+        py: Python<'py>,
+        candidates: PyReadonlyArray1<'py, i64>,
+        start: u32,
+        n: usize,
+        scale: f64,
+    ) -> PyResult<SamplesOut<'py>> {
+        let c = u32_vec(&candidates, "candidates")?;
+        let (chosen, d) = detached(py, || {
+            farthest_point_fields(&self.edge_graph(), &c, start, n, scale)
+        })?;
+        let k = chosen.len();
+        let chosen: Vec<i64> = chosen.into_iter().map(i64::from).collect();
+        Ok((
+            owned(py, &chosen),
+            owned(py, &d).reshape([k, self.balls.n])?,
+        ))
     }
 
     /// Mean edge length of the mesh graph.

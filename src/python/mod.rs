@@ -12,7 +12,7 @@ mod convert;
 use crate::error::CoreError;
 use bind_assignment::{py_auction_assignment_float, py_auction_assignment_int};
 use bind_descriptors::{py_nearest_among, py_shot_descriptors};
-use bind_geometry::{closest_rotations, greedy_pairs, grow_across_faces};
+use bind_geometry::{closest_rotations, greedy_pairs, grow_across_faces, PyPointClusters};
 use bind_graph::{khop_neighbourhoods, MeshGraph};
 use bind_lmd::local_map_distortion_graphs;
 use bind_overlap::{best_overlap_graphs, overlap_assignment_graphs, overlap_cost_csr};
@@ -56,6 +56,7 @@ fn detached<T: Send>(
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<MeshGraph>()?;
+    m.add_class::<PyPointClusters>()?;
     m.add("DuplicateEntries", m.py().get_type::<DuplicateEntries>())?;
     m.add_function(wrap_pyfunction!(khop_neighbourhoods, m)?)?;
     m.add_function(wrap_pyfunction!(overlap_cost_csr, m)?)?;

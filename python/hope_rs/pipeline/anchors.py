@@ -16,6 +16,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
+from .. import _core
 from .._blas import single_threaded_blas
 from ..shape import Shape
 from .config import RepairConfig
@@ -48,19 +49,15 @@ def farthest_witnesses(a: Shape, candidates: np.ndarray, n: int) -> tuple[np.nda
     # Start at the candidate nearest the centroid: a choice that does not depend on vertex
     # numbering, so relabelling the meshes relabels the result.
     v = a.points[candidates]
-    chosen = [int(candidates[np.argmin(((v - v.mean(axis=0)) ** 2).sum(axis=1))])]
-    fields = [distance_fields(a, chosen[0])[0]]
-    nearest = fields[0].copy()
-    for _ in range(1, min(n, candidates.size)):
-        d = nearest[candidates]
-        d[~np.isfinite(d)] = -1.0  # other components: never anchors of this one
-        nxt = int(candidates[int(np.argmax(d))])
-        if nearest[nxt] <= 0:
-            break
-        chosen.append(nxt)
-        fields.append(distance_fields(a, nxt)[0])
-        nearest = np.minimum(nearest, fields[-1])
-    return np.array(chosen), np.vstack(fields)
+    start = int(candidates[np.argmin(((v - v.mean(axis=0)) ** 2).sum(axis=1))])
+    # Each next sample is the candidate farthest from all before it (the first of equal ones;
+    # other components count as -1), searched in Rust: only the region a new sample takes
+    # over is searched to update the nearest-sample distance, and the samples' full fields
+    # are then searched in parallel.
+    chosen, fields = a.graph.farthest_fields(
+        np.ascontiguousarray(candidates, dtype=np.int64), start, n, a.scale
+    )
+    return chosen, fields / a.scale
 
 
 def reachable(d: np.ndarray, config: RepairConfig = RepairConfig()) -> np.ndarray:
@@ -171,12 +168,23 @@ class AnchorPlacement:
         with single_threaded_blas():
             _, vecs = np.linalg.eigh(centred.T @ centred)
         self.basis = vecs[:, ::-1][:, :search_dims]
-        self.tree = cKDTree(centred @ self.basis)
+        self.points = np.ascontiguousarray(centred @ self.basis)
+        # Queries lie far from B's points (A's distances are not B's), so a k-d tree visits
+        # thousands of cells per query, more the finer the mesh: the exact search among
+        # clusters of points (Rust) answers instead, and the k-d tree only the rare queries
+        # whose nearest points are equal up to rounding, as it always did.
+        self.clusters = _core.PointClusters(self.points)
+        self._tree = None
 
     def place(self, moved: np.ndarray) -> np.ndarray:
         """For each vertex ``moved`` of A, the vertex of B whose distances to the anchors'
         images are nearest its own distances to the anchors."""
-        _, q = self.tree.query((self.da[:, moved].T - self.mu) @ self.basis, workers=2)
+        x = np.ascontiguousarray((self.da[:, moved].T - self.mu) @ self.basis)
+        q, near_tie = self.clusters.nearest(x)
+        if near_tie.any():
+            if self._tree is None:
+                self._tree = cKDTree(self.points)
+            q[near_tie] = self._tree.query(x[near_tie], workers=2)[1]
         return q
 
 
