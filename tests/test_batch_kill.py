@@ -35,6 +35,18 @@ def pairs_file(tmp_path_factory):
     return d / "pairs.txt", len(lines)
 
 
+@pytest.fixture(scope="module")
+def many_pairs_file(tmp_path_factory):
+    """Every pair of 8 shapes (28): a batch that cannot finish while a busy test process
+    notices its first map."""
+    d = tmp_path_factory.mktemp("many")
+    for s in range(8):
+        write_off(d / f"s{s}.off", *bumpy_sphere(N, 40 + s))
+    lines = [f"s{i} s{j}" for i in range(8) for j in range(i + 1, 8)]
+    (d / "pairs.txt").write_text("\n".join(lines) + "\n")
+    return d / "pairs.txt", len(lines)
+
+
 def tagged(tag: str) -> list[str]:
     """Processes whose environment carries ``tag``: the batch and everything it started."""
     found = []
@@ -134,8 +146,8 @@ def test_sigkill_of_a_ray_driver_leaves_no_ray_process(pairs_file, tmp_path):
     assert_no_survivors(tag, grace=240)
 
 
-def test_ctrl_c_of_a_pool_batch_prints_the_summary_and_ends_its_workers(pairs_file, tmp_path):
-    pairs, total = pairs_file
+def test_ctrl_c_of_a_pool_batch_prints_the_summary_and_ends_its_workers(many_pairs_file, tmp_path):
+    pairs, total = many_pairs_file
     out, tag = tmp_path / "out", uuid.uuid4().hex
     cmd = batch_command(pairs, out, tmp_path / "cache", 2)
     # A terminal's Ctrl-C sends SIGINT to the whole foreground process group.

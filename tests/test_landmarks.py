@@ -19,8 +19,9 @@ from hope_rs.evaluation.datasets import pairs_of
 from hope_rs.evaluation.evaluate import geodesic_errors
 from hope_rs.evaluation.partial import cut_by_plane, plane_normal
 from hope_rs.geometry.map_io import read_landmarks
+from hope_rs.pipeline import spectral as spectral_module
 from hope_rs.pipeline.anchors import distance_fields, farthest_witnesses
-from hope_rs.pipeline.config import LandmarkConfig, MatchConfig
+from hope_rs.pipeline.config import LandmarkConfig, MatchConfig, SpectralConfig
 from hope_rs.pipeline.landmarks import (
     check_landmarks,
     coarse_landmarks,
@@ -249,9 +250,8 @@ def ground_truth_landmarks(sa: hope_rs.Shape, ai: np.ndarray, bi: np.ndarray) ->
 
 @pytest.mark.slow
 def test_landmarks_do_not_mislead_a_non_isometric_pair():
-    # Gorilla -> woman: distances to the landmarks bend with the shape. Used by the global
-    # repair as anchors they re-placed right matches (0.082 -> 0.100); only the swapped-region
-    # step takes them now.
+    # Gorilla -> woman: distances to the landmarks bend with the shape, so as anchors of the
+    # global repair they would re-place right matches (docs/decisions.md#landmarks).
     pair = next(
         p
         for p in pairs_of(data_path("tosca_nonisometric_r"))
@@ -282,6 +282,29 @@ def test_landmark_embedding_gives_each_landmark_the_same_mean_on_both_shapes(sph
     np.testing.assert_allclose(xb, 2.0 * xb1)
     raw = distance_fields(stretched, lm[:, 1]).mean(axis=1)
     assert not np.allclose(raw / raw[0], xb1.mean(axis=0) / xb1.mean(axis=0)[0], rtol=1e-3)
+
+
+def test_landmark_coordinates_reach_zoomout_on_sampled_shapes(spheres, monkeypatch):
+    # Shapes above SpectralConfig.max_samples: ZoomOut fits on samples, then searches every
+    # vertex; the landmark columns follow both paths.
+    a, b = spheres
+    rows = np.array([[0, 5], [17, 300], [250, 40], [499, 449]])
+    widths = []
+    real = spectral_module._SpectralNeighbours.best
+
+    def spy(self, emb_a, emb_b, guess, k):
+        widths.append((emb_a.shape[1], emb_b.shape[1]))
+        return real(self, emb_a, emb_b, guess, k)
+
+    monkeypatch.setattr(spectral_module._SpectralNeighbours, "best", spy)
+    cfg = MatchConfig(spectral=SpectralConfig(max_samples=200, k_end=40))
+    res = hope_rs.match(a, b, landmarks=rows, config=cfg, max_passes=1)
+    assert res.stage("spectral").ran
+    np.testing.assert_array_equal(res.map[rows[:, 0]], rows[:, 1])
+    # Each search compares A's and B's embeddings of equal width, the 4 landmark columns
+    # included: k + 4 for the basis sizes 20..40 in steps of 5.
+    assert widths and all(wa == wb for wa, wb in widths)
+    assert {wa - 4 for wa, _ in widths} <= set(range(20, 41, 5))
 
 
 @pytest.mark.slow
