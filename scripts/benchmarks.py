@@ -332,6 +332,7 @@ def main() -> int:
         help="run the landmark bench again, reuse the other results",
     )
     args = p.parse_args()
+    RUN.mkdir(parents=True, exist_ok=True)
     if not args.render_only:
         if not (args.partial_only or args.landmarks_only):
             run_shared()

@@ -87,12 +87,12 @@ const CLUSTER: usize = 16;
 const QUERY_GROUP: usize = 32;
 
 /// Exact nearest-point search for queries that lie far from a point set sampled densely along a
-/// surface: the global repair's anchor coordinates, where a query's nearest point is often a
-/// hundred sample spacings away and thousands of points lie within a few percent of that
-/// distance. A k-d tree then visits most of its cells near that sphere, and the cells it
-/// visits grow with the sampling density; here the points are cut into small clusters bounded
-/// by balls, each group of nearby queries first keeps the clusters that can hold any of its
-/// nearest points, and each query then scans those in order of their lower bound.
+/// surface: the global repair's anchor coordinates, where a query's nearest point is often many
+/// sample spacings away and many points lie within a few percent of that distance. A k-d tree
+/// then visits most of its cells near that sphere, and the cells it visits grow with the
+/// sampling density; here the points are cut into small clusters bounded by balls, each group
+/// of nearby queries first keeps the clusters that can hold any of its nearest points, and
+/// each query then scans those in order of their lower bound.
 ///
 /// Each answer comes with a flag saying whether another point lies within rounding distance of
 /// the nearest one (see [`PointClusters::nearest`]), so that a caller bound to another search's

@@ -28,7 +28,22 @@ class MeshGraph:
         self, sources: npt.NDArray[np.int64], targets: npt.NDArray[np.int64]
     ) -> npt.NDArray[np.float64]: ...
     def distance_fields(self, sources: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]: ...
+    def farthest_fields(
+        self, candidates: npt.NDArray[np.int64], start: int, n: int, scale: float
+    ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]:
+        """Farthest-point samples of ``candidates`` from ``start`` (at most ``n``) and their
+        distance fields, (len(samples), n_vertices); ``scale`` divides the distances compared."""
     def mean_edge_length(self) -> float: ...
+
+class PointClusters:
+    """Exact nearest points of a fixed (n, d) float point set, d > 0, for many queries."""
+
+    def __init__(self, points: npt.NDArray[np.float64]) -> None: ...
+    def nearest(
+        self, queries: npt.NDArray[np.float64]
+    ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.bool_]]:
+        """Per query row, its nearest point and whether another is about as near (only
+        unflagged answers are certain to be the one any exact search gives)."""
 
 def khop_neighbourhoods(faces: npt.NDArray[np.int64], k: int, n_vertices: int) -> _Csr:
     """k-hop pattern of the mesh graph; ``n_vertices`` at least the largest face index + 1 and

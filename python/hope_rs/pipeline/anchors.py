@@ -169,10 +169,10 @@ class AnchorPlacement:
             _, vecs = np.linalg.eigh(centred.T @ centred)
         self.basis = vecs[:, ::-1][:, :search_dims]
         self.points = np.ascontiguousarray(centred @ self.basis)
-        # Queries lie far from B's points (A's distances are not B's), so a k-d tree visits
-        # thousands of cells per query, more the finer the mesh: the exact search among
-        # clusters of points (Rust) answers instead, and the k-d tree only the rare queries
-        # whose nearest points are equal up to rounding, as it always did.
+        # Queries lie far from B's points (A's distances are not B's), where a k-d tree
+        # visits many cells per query, more the finer the mesh. An exact search among point
+        # clusters (Rust) answers instead; queries whose two nearest points tie up to rounding
+        # go to the k-d tree, so every answer equals the k-d tree's.
         self.clusters = _core.PointClusters(self.points)
         self._tree = None
 

@@ -2,7 +2,7 @@
 
 ``match(a, b, landmarks=L)`` takes ``L``, an (m, 2) array of (vertex of A, vertex of B) rows.
 Geodesic distances to the landmarks are intrinsic coordinates both shapes share, and unlike
-descriptors they tell a left limb from its mirror image. They act in three places:
+descriptors they tell a left limb from its mirror image. They act in four places:
 
 * the "landmarks" stage (:class:`LandmarkStage`) re-places every match of the initial map
   whose distances to the landmarks fit far worse than they could (a mirrored region), at the
@@ -10,7 +10,8 @@ descriptors they tell a left limb from its mirror image. They act in three place
   own (:func:`landmark_initial_map`);
 * the refinement (:func:`hope_rs.pipeline.refine.refine`) pins the landmarks after every step,
   counts them as witnesses, never trusts such a match (:class:`LandmarkCoordinates`), and its
-  global repair takes the landmarks as anchors;
+  swapped-region step takes the landmarks as anchors (its global repair too with
+  ``LandmarkConfig.repair_anchors``);
 * the spectral pass's ZoomOut matches by landmark coordinates besides its spectral embedding
   (:func:`landmark_embedding`);
 * after every later stage (the spectral pass, the finish), the stage re-pins them.
@@ -160,11 +161,38 @@ def landmark_embedding(
     weight: float,
     repair: RepairConfig = RepairConfig(),
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Landmark coordinates of A's and of B's vertices, (n_a, m) and (n_b, m) float64, that
-    ZoomOut appends to its spectral embeddings: landmark ``k``'s distance field on each shape
-    scaled to the mean of its two means over the shapes' reachable vertices (sqrt(area)
-    units; a non-isometric pair stretches the distances from one landmark more than from
-    another), unreachable vertices at ``repair.unreachable``, all times ``weight``."""
+    """Landmark coordinates that ZoomOut appends to its spectral embeddings.
+
+    Landmark ``k``'s distance field on each shape is scaled to the mean of its two means over
+    the shapes' reachable vertices (sqrt(area) units; a non-isometric pair stretches the
+    distances from one landmark more than from another).
+
+    Parameters
+    ----------
+    a, b : Shape
+        The two shapes.
+    landmarks : (m, 2) int ndarray
+        (vertex of A, vertex of B) rows, internal numbering.
+    weight : float
+        Factor applied to every coordinate (``LandmarkConfig.zoomout_weight``).
+    repair : RepairConfig
+        Its ``unreachable`` is the coordinate of a vertex in another component.
+
+    Returns
+    -------
+    (n_a, m) and (n_b, m) float64 ndarrays
+        The coordinates of A's and of B's vertices.
+
+    Examples
+    --------
+    >>> import numpy as np, hope_rs
+    >>> from hope_rs.evaluation.demo import demo_pair
+    >>> a, b = (hope_rs.Shape(m) for m in demo_pair())
+    >>> lm = np.array([[0, 0], [100, 100]])
+    >>> ea, eb = landmark_embedding(a, b, lm, 3.0)
+    >>> ea.shape, eb.shape
+    ((6890, 2), (6890, 2))
+    """
     da, db = distance_fields(a, landmarks[:, 0]), distance_fields(b, landmarks[:, 1])
     ma = np.array([row[np.isfinite(row)].mean() for row in da])
     mb = np.array([row[np.isfinite(row)].mean() for row in db])
