@@ -248,19 +248,21 @@ def ground_truth_landmarks(sa: hope_rs.Shape, ai: np.ndarray, bi: np.ndarray) ->
     return np.array([[int(v), first[int(v)]] for v in sa.order[chosen[1:]]])
 
 
+def non_isometric_pair(name: str) -> tuple:
+    """Shapes, ground truth (ai, bi) and four ground-truth landmarks of a tosca_nonisometric_r
+    pair."""
+    pair = next(p for p in pairs_of(data_path("tosca_nonisometric_r")) if p.name == name)
+    a, b = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
+    sa, sb = hope_rs.Shape(a), hope_rs.Shape(b)
+    ai, bi = pair.ground_truth(a.n_vertices, b.n_vertices, max_points=None)
+    return sa, sb, ai, bi, ground_truth_landmarks(sa, ai, bi)
+
+
 @pytest.mark.slow
 def test_landmarks_do_not_mislead_a_non_isometric_pair():
     # Gorilla -> woman: distances to the landmarks bend with the shape, so as anchors of the
     # global repair they would re-place right matches (docs/decisions.md#landmarks).
-    pair = next(
-        p
-        for p in pairs_of(data_path("tosca_nonisometric_r"))
-        if p.name == "8_gorilla_01->8_woman_01"
-    )
-    a, b = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
-    sa, sb = hope_rs.Shape(a), hope_rs.Shape(b)
-    ai, bi = pair.ground_truth(a.n_vertices, b.n_vertices, max_points=None)
-    lm = ground_truth_landmarks(sa, ai, bi)
+    sa, sb, ai, bi, lm = non_isometric_pair("8_gorilla_01->8_woman_01")
     without = geodesic_errors(sb, hope_rs.match(sa, sb).map, a_idx=ai, b_idx=bi).mean()
     res = hope_rs.match(sa, sb, landmarks=lm)
     np.testing.assert_array_equal(res.map[lm[:, 0]], lm[:, 1])
@@ -311,15 +313,7 @@ def test_landmark_coordinates_reach_zoomout_on_sampled_shapes(spheres, monkeypat
 def test_landmark_coordinates_in_zoomout_help_a_non_isometric_pair():
     # Gorilla -> woman: ZoomOut's spectral embedding alone assumes an isometry; the landmarks'
     # scaled distance fields pull each vertex towards its place along the stretched limbs.
-    pair = next(
-        p
-        for p in pairs_of(data_path("tosca_nonisometric_r"))
-        if p.name == "8_gorilla_02->8_woman_02"
-    )
-    a, b = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
-    sa, sb = hope_rs.Shape(a), hope_rs.Shape(b)
-    ai, bi = pair.ground_truth(a.n_vertices, b.n_vertices, max_points=None)
-    lm = ground_truth_landmarks(sa, ai, bi)
+    sa, sb, ai, bi, lm = non_isometric_pair("8_gorilla_02->8_woman_02")
     errors = {}
     for weight in (0.0, LandmarkConfig().zoomout_weight):
         cfg = MatchConfig(landmarks=LandmarkConfig(zoomout_weight=weight))
