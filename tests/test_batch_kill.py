@@ -47,6 +47,15 @@ def many_pairs_file(tmp_path_factory):
     return d / "pairs.txt", len(lines)
 
 
+#: ``hope-rs`` with SIGINT back to Python's handler first: a shell without job control starts
+#: background jobs (a test suite run with ``&``) with SIGINT ignored, and Python would keep
+#: ignoring it, so Ctrl-C would do nothing.
+CLI_WITH_SIGINT = (
+    "import runpy, signal; signal.signal(signal.SIGINT, signal.default_int_handler); "
+    "runpy.run_module('hope_rs.cli', run_name='__main__', alter_sys=True)"
+)
+
+
 def tagged(tag: str) -> list[str]:
     """Processes whose environment carries ``tag``: the batch and everything it started."""
     found = []
@@ -150,6 +159,7 @@ def test_ctrl_c_of_a_pool_batch_prints_the_summary_and_ends_its_workers(many_pai
     pairs, total = many_pairs_file
     out, tag = tmp_path / "out", uuid.uuid4().hex
     cmd = batch_command(pairs, out, tmp_path / "cache", 2)
+    cmd[1:3] = ["-c", CLI_WITH_SIGINT]  # instead of "-m hope_rs.cli"
     # A terminal's Ctrl-C sends SIGINT to the whole foreground process group.
     proc = subprocess.Popen(
         cmd, env=environment(tag), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,

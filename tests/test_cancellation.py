@@ -131,8 +131,11 @@ def test_cancellable_eigensolve_is_bit_identical_to_eigsh(pair):
     np.testing.assert_array_equal(evals, np.maximum(e[order], 0.0))
 
 
+# SIGINT first back to Python's handler: a shell without job control starts background jobs
+# (a test suite run with `&`) with SIGINT ignored, and Python would keep ignoring it.
 CLI_REPORTING_THREADS = """
-import atexit, sys, threading
+import atexit, signal, sys, threading
+signal.signal(signal.SIGINT, signal.default_int_handler)
 names = lambda: sorted(t.name for t in threading.enumerate() if t.name.startswith("hope_rs-"))
 atexit.register(lambda: print("threads at exit:", names(), file=sys.stderr))
 from hope_rs.cli import main
