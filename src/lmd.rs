@@ -427,14 +427,26 @@ mod tests {
         }
     }
 
-    #[test]
-    fn table_lookups_give_the_searched_distortion() {
-        let (va, fa) = grid(15, 13, 1.0);
-        let (mut vb, _) = grid(15, 13, 2.3);
+    /// A unit grid A and the same grid scaled by `s` as B, B's heights bumped by
+    /// `((i * mul) % modulo) * step`; the two share one adjacency.
+    fn bumped_pair(
+        w: u32,
+        h: u32,
+        s: f64,
+        (mul, modulo, step): (usize, usize, f64),
+    ) -> (Vec<[f64; 3]>, Vec<[f64; 3]>, crate::csr::Csr<()>) {
+        let (va, fa) = grid(w, h, 1.0);
+        let (mut vb, _) = grid(w, h, s);
         for (i, v) in vb.iter_mut().enumerate() {
-            v[2] += ((i * 37) % 11) as f64 * 0.07;
+            v[2] += ((i * mul) % modulo) as f64 * step;
         }
         let adj = adjacency_from_faces(&fa, va.len()).unwrap();
+        (va, vb, adj)
+    }
+
+    #[test]
+    fn table_lookups_give_the_searched_distortion() {
+        let (va, vb, adj) = bumped_pair(15, 13, 2.3, (37, 11, 0.07));
         let balls = HopBalls::new(&adj.view(), 2).unwrap();
         let (ga, gb) = (graph(&va, &adj), graph(&vb, &adj));
         let rings = RingDistances::new(&ga, &balls).unwrap();
@@ -521,12 +533,7 @@ mod tests {
     fn skipping_far_images_and_short_rows_changes_nothing() {
         // A scrambled map sends most 2-rings far beyond the cutoff (no search for those), and
         // rows of 8 entries answer only for the images they list.
-        let (va, fa) = grid(20, 16, 1.0);
-        let (mut vb, _) = grid(20, 16, 1.9);
-        for (i, v) in vb.iter_mut().enumerate() {
-            v[2] += ((i * 53) % 7) as f64 * 0.11;
-        }
-        let adj = adjacency_from_faces(&fa, va.len()).unwrap();
+        let (va, vb, adj) = bumped_pair(20, 16, 1.9, (53, 7, 0.11));
         let balls = HopBalls::new(&adj.view(), 2).unwrap();
         let (ga, gb) = (graph(&va, &adj), graph(&vb, &adj));
         let rings = RingDistances::new(&ga, &balls).unwrap();
