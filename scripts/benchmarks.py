@@ -137,6 +137,7 @@ def _stats(rows: list[dict], method: str) -> dict | None:
         "pairs": len(rs), "exact": 100 * col("exact").mean(), "mean": col("mean").mean(),
         "worst": col("mean").max(), "auc": col("auc").mean(), "seconds": float(np.median(col("seconds"))),
         "auroc": float(np.mean(aurocs)) if aurocs else None,
+        "flagged": [float(r["mean"]) for r in rs if r.get("likely_failed") == "1"],
     }  # fmt: skip
 
 
@@ -199,9 +200,10 @@ def partial() -> str:
             f"### {cond}\n\n{what}; the first {PARTIAL_PAIRS} pairs of each source set.\n",
             (
                 "| source set | pairs | init mean error | HOPE mean error | HOPE worst pair's mean "
-                "| HOPE confidence AUROC | HOPE median s / pair |"
+                "| HOPE confidence AUROC | HOPE pairs flagged likely failed (their mean errors) "
+                "| HOPE median s / pair |"
             ),
-            "|---|---|---|---|---|---|---|",
+            "|---|---|---|---|---|---|---|---|",
         ]
         for src in PARTIAL_SOURCES:
             rows = _rows(f"{src}_{cond}")
@@ -210,9 +212,12 @@ def partial() -> str:
                 continue
             auroc = f"{h['auroc']:.3f}" if h["auroc"] is not None else "–"
             im = f"{i['mean']:.4f}" if i else "–"
+            flagged = f"{len(h['flagged'])}" + (
+                f" ({', '.join(f'{e:.3f}' for e in sorted(h['flagged']))})" if h["flagged"] else ""
+            )
             lines.append(
                 f"| {src} | {h['pairs']} | {im} | **{h['mean']:.4f}** | {h['worst']:.4f} "
-                f"| {auroc} | {h['seconds']:.1f} |"
+                f"| {auroc} | {flagged} | {h['seconds']:.1f} |"
             )
         if len(lines) > 3:
             out.append("\n".join(lines) + "\n")

@@ -31,7 +31,7 @@ from .show import render_pair
 FIELDS = [
     "dataset", "pair", "method", "n_a", "n_b", "n_scored", "exact", "mean", "mean_x100", "auc",
     "auc_010", "edge_stretch", "coverage", "seconds", "start", "start_exact", "start_mean",
-    "confidence_auroc",
+    "confidence_auroc", "likely_failed",
 ]  # fmt: skip
 
 
@@ -81,6 +81,8 @@ def _score_row(pair: Pair, name: str, res, ctx, ai, bi, starts: dict) -> tuple[d
     if res.confidence is not None:
         # How well MatchResult.confidence tells right (error <= 0.05) from wrong matches.
         row["confidence_auroc"] = confidence_auroc(res.confidence[ai], e)
+    if res.quality is not None:
+        row["likely_failed"] = int(res.quality.likely_failed)
     return row, e
 
 

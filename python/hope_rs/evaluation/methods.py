@@ -33,6 +33,7 @@ import numpy as np
 from ..features.descriptors import descriptors
 from ..geometry.mesh import Mesh
 from ..matching import match
+from ..pipeline.confidence import MatchQuality
 from ..pipeline.initial import initial_map
 from ..pipeline.partial import detect_part
 from ..shape import Shape
@@ -47,6 +48,7 @@ class MethodResult:
     seconds: float  #: wall time from meshes to map
     start: str | None = None  #: key of the initial map it refined (see PairContext.start_map)
     confidence: np.ndarray | None = None  #: (n_a,) MatchResult.confidence, for HOPE's methods
+    quality: MatchQuality | None = None  #: MatchResult.quality, for HOPE's methods
 
 
 class PairContext:
@@ -118,7 +120,7 @@ def _hope(*, kind: str = "shot", k_max: int = 8, degrade: float = 0.0, **kw):
         else:
             res = match(sa, sb, init=f0, k_max=k_max, **kw)
         seconds = t_init + t_shapes + time.perf_counter() - t
-        return MethodResult(res.map, seconds, key, res.confidence)
+        return MethodResult(res.map, seconds, key, res.confidence, res.quality)
 
     return run
 

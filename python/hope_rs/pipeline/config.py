@@ -372,6 +372,19 @@ class MultiscaleConfig:
     lift_ridge: float = 1e-3
 
 
+def _positive_numbers(name: str, value) -> tuple[float, ...]:
+    """``value`` as a tuple of finite positive floats, or a one-line error naming the field."""
+    try:
+        out = tuple(float(x) for x in value)
+    except (TypeError, ValueError):
+        raise TypeError(
+            f"PartialConfig.{name} must be a sequence of positive numbers, got {value!r}"
+        ) from None
+    if not all(math.isfinite(x) and x > 0 for x in out):
+        raise ValueError(f"PartialConfig.{name} must be positive numbers, got {value!r}")
+    return out
+
+
 @dataclass(frozen=True)
 class PartialConfig:
     """Matching a part of a shape (:mod:`hope_rs.pipeline.partial`).
@@ -413,6 +426,17 @@ class PartialConfig:
     merge_rings : int
         With ``scale_trials``, each vertex of the merge takes its image from the map whose
         confidence, averaged over this many rounds of 1-ring averaging, is highest there.
+    wide_trials : tuple of float
+        With ``scale_trials``, when no map so far (the merge included) reaches a mean
+        confidence of ``wide_below``, the part is also matched at these multiples of the
+        guessed scale: a few percent of scale can move the refinement into another basin, and
+        a part that went wrong is worth a wider search. Empty: no wider search.
+    wide_below : float
+        See ``wide_trials`` (a mean confidence in [0, 1]).
+    wide_margin : float
+        A map of ``wide_trials`` is kept only when its mean confidence exceeds the best of the
+        other maps by at least this: the confidence of maps of one part varies by about this
+        much between scales whether or not they are right.
     """
 
     enabled: bool = True
@@ -424,20 +448,19 @@ class PartialConfig:
     counterpart_edges: float = 1.0
     scale_trials: tuple[float, ...] = (0.95, 1.05)
     merge_rings: int = 32
+    wide_trials: tuple[float, ...] = (0.85, 0.9, 1.1)
+    wide_below: float = 0.85
+    wide_margin: float = 0.15
 
     def __post_init__(self):
-        try:
-            trials = tuple(float(x) for x in self.scale_trials)
-        except (TypeError, ValueError):
-            raise TypeError(
-                "PartialConfig.scale_trials must be a sequence of positive numbers, "
-                f"got {self.scale_trials!r}"
-            ) from None
-        if not all(math.isfinite(x) and x > 0 for x in trials):
-            raise ValueError(
-                f"PartialConfig.scale_trials must be positive numbers, got {self.scale_trials!r}"
-            )
-        object.__setattr__(self, "scale_trials", trials)
+        for name in ("scale_trials", "wide_trials"):
+            object.__setattr__(self, name, _positive_numbers(name, getattr(self, name)))
+        for name in ("wide_below", "wide_margin"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(
+                    f"PartialConfig.{name} must be a confidence in [0, 1], "
+                    f"got {getattr(self, name)!r}"
+                )
         if self.whole_to_part not in ("reverse", "direct"):
             raise ValueError(
                 f"PartialConfig.whole_to_part must be 'reverse' or 'direct', got {self.whole_to_part!r}"

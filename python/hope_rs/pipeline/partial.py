@@ -17,8 +17,10 @@ Which region of the whole a part's refinement settles on can change with a few p
 its scale: with nothing on the part competing for the whole's missing side, a region of the
 part can settle there. So a part is matched at the guessed scale and at the multiples
 ``PartialConfig.scale_trials`` of it, once more from the merge of those maps (each vertex
-from the map of highest smoothed confidence there), and the map of highest mean confidence
-is kept.
+from the map of highest smoothed confidence there), when none of these maps reaches a mean
+confidence of ``PartialConfig.wide_below`` also at the wider multiples
+``PartialConfig.wide_trials``, and the map of highest mean confidence is kept (a wider
+scale's only when it beats the others by ``PartialConfig.wide_margin``).
 
 Matching a whole A to its part B asks every vertex of A for a partner, also where B has
 none, and the refinement's overlaps then pull the vertices that do have one off their place.
@@ -196,12 +198,13 @@ class PartialStage(Stage):
     def _rescale_part(state: MatchState, info: PartialInfo) -> PartialInfo:
         """A (the part) matched at the guessed scale and, when the share of B its map covers
         puts A's whole at a scale off by more than ``rescale_tolerance``, again at that scale.
-        With ``scale_trials`` also at those multiples of the guessed scale and once more from
-        the merge of these maps (:func:`_refined_merge`); the map of highest mean confidence
-        wins. Without, of the two maps the one whose vertices' descriptors (at the second
-        scale) lie nearer their images' wins: a left-right mirror keeps every distance, so
-        only the descriptors, which see orientation, tell it from the true map. Sets the map
-        and ``state.done``."""
+        With ``scale_trials`` also at those multiples of the guessed scale, once more from
+        the merge of these maps (:func:`_refined_merge`) and, when none reaches
+        ``wide_below``, at the multiples ``wide_trials``; the map of highest mean confidence
+        wins (a wider scale's by at least ``wide_margin``). Without, of the two maps the one
+        whose vertices' descriptors (at the second scale) lie nearer their images' wins: a
+        left-right mirror keeps every distance, so only the descriptors, which see
+        orientation, tell it from the true map. Sets the map and ``state.done``."""
         cfg = state.config
         a, b = state.a, state.b
         trials = cfg.partial.scale_trials
@@ -226,8 +229,19 @@ class PartialStage(Stage):
             for s in scales:
                 view = a.at_scale(s)
                 runs.append((view, state.run(view, b, init, off, landmarks=landmarks)))
-            runs.append(_refined_merge(state, runs, off, landmarks, cfg.partial.merge_rings))
-            best, chosen = max(runs, key=lambda r: float(np.mean(r[1].confidence)))
+            merge = _refined_merge(state, runs, off, landmarks, cfg.partial.merge_rings)
+            best, chosen = max([*runs, merge], key=_mean_confidence)
+            top = _mean_confidence((best, chosen))
+            if top < cfg.partial.wide_below:
+                # The wider scales' maps are not merged (where they went wrong they would pull
+                # the merge off the nearby scales' map), and one replaces the choice only when
+                # clearly more confident: they lie farther from the guessed scale.
+                wide = [a.at_scale(info.scale * t) for t in cfg.partial.wide_trials]
+                wide = [(v, state.run(v, b, init, off, landmarks=landmarks)) for v in wide]
+                if wide and _mean_confidence(w := max(wide, key=_mean_confidence)) >= (
+                    top + cfg.partial.wide_margin
+                ):
+                    best, chosen = w
             info = dataclasses.replace(info, scale=float(best.scale))
         elif rescale:
             again = a.at_scale(scale)
@@ -264,8 +278,13 @@ def _refined_merge(state: MatchState, runs: list, config, landmarks, rings: int)
     for _ in range(rings):
         conf = p @ conf
     merged = maps[np.argmax(conf, axis=1), np.arange(a.n_vertices)]
-    view = max(runs, key=lambda r: float(np.mean(r[1].confidence)))[0]
+    view = max(runs, key=_mean_confidence)[0]
     return view, state.run(view, b, a.map_out(b, merged), config, landmarks=landmarks)
+
+
+def _mean_confidence(run: tuple) -> float:
+    """Mean confidence of a (view, result) run."""
+    return float(np.mean(run[1].confidence))
 
 
 def _landmarks(state: MatchState, swap: bool = False) -> np.ndarray | None:
