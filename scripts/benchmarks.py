@@ -338,6 +338,10 @@ def main() -> int:
     )
     args = p.parse_args()
     RUN.mkdir(parents=True, exist_ok=True)
+    if (args.partial_only or args.landmarks_only) and not (RUN / "provenance.txt").exists():
+        # The document is rendered from every section's results: without the shared sets'
+        # the rewrite would drop their tables.
+        p.error(f"no earlier full run in {RUN}; run scripts/benchmarks.py without an --*-only flag")
     if not args.render_only:
         if not (args.partial_only or args.landmarks_only):
             run_shared()
