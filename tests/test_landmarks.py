@@ -286,6 +286,29 @@ def test_landmark_embedding_gives_each_landmark_the_same_mean_on_both_shapes(sph
     assert not np.allclose(raw / raw[0], xb1.mean(axis=0) / xb1.mean(axis=0)[0], rtol=1e-3)
 
 
+def test_near_landmark_columns_act_only_near_a_landmark(spheres):
+    sa = hope_rs.Shape(spheres[0])
+    stretched = hope_rs.Shape(hope_rs.Mesh(spheres[1].vertices * [1.5, 1, 1], spheres[1].faces))
+    lm = np.array([[0, 0], [100, 120], [250, 300]])
+    fa, fb = landmark_embedding(sa, stretched, lm, 2.0)
+    xa, xb = landmark_embedding(sa, stretched, lm, 2.0, near_weight=50.0, near_radius=0.3)
+    # The scaled fields first, unchanged; then one near-landmark column per landmark.
+    assert xa.shape == (sa.n_vertices, 6) and xb.shape == (stretched.n_vertices, 6)
+    np.testing.assert_array_equal(xa[:, :3], fa)
+    np.testing.assert_array_equal(xb[:, :3], fb)
+    for x, f in ((xa, fa), (xb, fb)):
+        near, d = x[:, 3:], f / 2.0  # d: the scaled fields
+        # Zero wherever the scaled field reaches the radius: vertices far from every landmark
+        # are compared by their spectral embedding and scaled fields alone.
+        assert (near[d >= 0.3] == 0).all() and (near[d < 0.3] > 0).all()
+        assert ((d >= 0.3).all(axis=1)).any()
+        # Steep near the landmark: 50 units of embedding per unit of scaled distance.
+        np.testing.assert_allclose(near[d < 0.3], 50.0 * (0.3 - d[d < 0.3]))
+    # Each landmark's own vertex has the same, largest, near coordinate on both shapes.
+    np.testing.assert_allclose(xa[lm[:, 0], range(3, 6)], 15.0)
+    np.testing.assert_allclose(xb[lm[:, 1], range(3, 6)], 15.0)
+
+
 def test_landmark_coordinates_reach_zoomout_on_sampled_shapes(spheres, monkeypatch):
     # Shapes above SpectralConfig.max_samples: ZoomOut fits on samples, then searches every
     # vertex; the landmark columns follow both paths.
@@ -303,10 +326,11 @@ def test_landmark_coordinates_reach_zoomout_on_sampled_shapes(spheres, monkeypat
     res = hope_rs.match(a, b, landmarks=rows, config=cfg, max_passes=1)
     assert res.stage("spectral").ran
     np.testing.assert_array_equal(res.map[rows[:, 0]], rows[:, 1])
-    # Each search compares A's and B's embeddings of equal width, the 4 landmark columns
-    # included: k + 4 for the basis sizes 20..40 in steps of 5.
+    # Each search compares A's and B's embeddings of equal width, the landmark columns
+    # included (4 scaled fields, 4 near-landmark columns): k + 8 for the basis sizes 20..40
+    # in steps of 5.
     assert widths and all(wa == wb for wa, wb in widths)
-    assert {wa - 4 for wa, _ in widths} <= set(range(20, 41, 5))
+    assert {wa - 8 for wa, _ in widths} <= set(range(20, 41, 5))
 
 
 @pytest.mark.slow
@@ -321,6 +345,28 @@ def test_landmark_coordinates_in_zoomout_help_a_non_isometric_pair():
         np.testing.assert_array_equal(res.map[lm[:, 0]], lm[:, 1])
         errors[weight] = geodesic_errors(sb, res.map, a_idx=ai, b_idx=bi).mean()
     assert errors[LandmarkConfig().zoomout_weight] < 0.93 * errors[0.0]
+
+
+@pytest.mark.slow
+def test_near_landmark_columns_help_a_non_isometric_pair():
+    # Gorilla -> man: the gorilla's hands are larger (in sqrt(area) units) than the man's, and
+    # without the near-landmark columns ZoomOut slid them up the man's forearms.
+    sa, sb, ai, bi, lm = non_isometric_pair("8_gorilla_01->8_man_01")
+    near = {}
+    errors = {}
+    for weight in (0.0, LandmarkConfig().near_weight):
+        cfg = MatchConfig(landmarks=LandmarkConfig(near_weight=weight))
+        res = hope_rs.match(sa, sb, landmarks=lm, config=cfg)
+        np.testing.assert_array_equal(res.map[lm[:, 0]], lm[:, 1])
+        err = geodesic_errors(sb, res.map, a_idx=ai, b_idx=bi)
+        errors[weight] = err.mean()
+        # The scored vertices within the radius of a landmark on A (its raw fields: they only
+        # pick the region whose error is compared).
+        d = distance_fields(sa, sa.rank[lm[:, 0]])[:, sa.rank[ai]].min(axis=0)
+        near[weight] = err[d < LandmarkConfig().near_radius].mean()
+    default = LandmarkConfig().near_weight
+    assert errors[default] < 0.93 * errors[0.0]
+    assert near[default] < 0.8 * near[0.0]
 
 
 @pytest.mark.slow

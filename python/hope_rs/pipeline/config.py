@@ -91,6 +91,16 @@ class LandmarkConfig:
         its landmark coordinates times this weight, each landmark's field first scaled to
         the same mean over A and over B (a non-isometric pair stretches the distances from
         one landmark more than from another); 0 leaves ZoomOut as without landmarks.
+    near_weight : float
+        ZoomOut's embedding also gets, per landmark, ``max(near_radius - d, 0)`` times this
+        weight, ``d`` the scaled field above: steep coordinates within ``near_radius`` of a
+        landmark that are zero farther away. Near a landmark its own distance stretches
+        little between the shapes, while the distances to the far landmarks stretch with
+        whole limbs and the spectral embedding pulls a limb end that is larger on A than on
+        B up the limb of B; these coordinates keep the vertices around each landmark at
+        their distance from it. 0: none (only with ``zoomout_weight > 0``).
+    near_radius : float
+        The radius above (sqrt(area) units, the scaled fields').
     """
 
     max_gap: float = 0.25
@@ -101,6 +111,8 @@ class LandmarkConfig:
     repair_anchors: bool = False
     # A weight of inf would make every coordinate inf or NaN: check_config refuses it.
     zoomout_weight: float = field(default=3.0, metadata={"finite": True})
+    near_weight: float = field(default=90.0, metadata={"finite": True})
+    near_radius: float = field(default=0.2, metadata={"finite": True})
 
 
 @dataclass(frozen=True)

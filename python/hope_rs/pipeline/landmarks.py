@@ -12,8 +12,8 @@ descriptors they tell a left limb from its mirror image. They act in four places
   counts them as witnesses, never trusts such a match (:class:`LandmarkCoordinates`), and its
   swapped-region step takes the landmarks as anchors (its global repair too with
   ``LandmarkConfig.repair_anchors``);
-* the spectral pass's ZoomOut matches by landmark coordinates besides its spectral embedding
-  (:func:`landmark_embedding`);
+* the spectral pass's ZoomOut matches by landmark coordinates, and steep ones near each
+  landmark, besides its spectral embedding (:func:`landmark_embedding`);
 * after every later stage (the spectral pass, the finish), the stage re-pins them.
 
 Without landmarks none of this runs and the map is the one ``match`` makes without them.
@@ -160,12 +160,21 @@ def landmark_embedding(
     landmarks: np.ndarray,
     weight: float,
     repair: RepairConfig = RepairConfig(),
+    *,
+    near_weight: float = 0.0,
+    near_radius: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Landmark coordinates that ZoomOut appends to its spectral embeddings.
 
     Landmark ``k``'s distance field on each shape is scaled to the mean of its two means over
     the shapes' reachable vertices (sqrt(area) units; a non-isometric pair stretches the
-    distances from one landmark more than from another).
+    distances from one landmark more than from another): ``m`` columns, ``weight`` times
+    the scaled fields ``d``. With ``near_weight > 0``, ``m`` more: ``near_weight * max(
+    near_radius - d, 0)``, steep near each landmark and zero beyond ``near_radius``. Around a
+    landmark its own distance is the one that stretches least between the shapes (the
+    distances to the far landmarks stretch with whole limbs), so these columns hold the
+    vertices near a landmark at their distance from it, where ZoomOut's spectral embedding
+    would slide a limb end that is larger on A than on B up the limb of B.
 
     Parameters
     ----------
@@ -174,14 +183,18 @@ def landmark_embedding(
     landmarks : (m, 2) int ndarray
         (vertex of A, vertex of B) rows, internal numbering.
     weight : float
-        Factor applied to every coordinate (``LandmarkConfig.zoomout_weight``).
+        Factor of the scaled fields (``LandmarkConfig.zoomout_weight``).
     repair : RepairConfig
         Its ``unreachable`` is the coordinate of a vertex in another component.
+    near_weight, near_radius : float
+        Slope and radius (sqrt(area) units) of the near-landmark columns
+        (``LandmarkConfig.near_weight``, ``LandmarkConfig.near_radius``); 0: none.
 
     Returns
     -------
-    (n_a, m) and (n_b, m) float64 ndarrays
-        The coordinates of A's and of B's vertices.
+    (n_a, j) and (n_b, j) float64 ndarrays
+        The coordinates of A's and of B's vertices: ``j = m``, or ``2 m`` with the
+        near-landmark columns.
 
     Examples
     --------
@@ -192,6 +205,8 @@ def landmark_embedding(
     >>> ea, eb = landmark_embedding(a, b, lm, 3.0)
     >>> ea.shape, eb.shape
     ((6890, 2), (6890, 2))
+    >>> landmark_embedding(a, b, lm, 3.0, near_weight=90.0, near_radius=0.2)[0].shape
+    (6890, 4)
     """
     da, db = distance_fields(a, landmarks[:, 0]), distance_fields(b, landmarks[:, 1])
     ma = np.array([row[np.isfinite(row)].mean() for row in da])
@@ -201,7 +216,12 @@ def landmark_embedding(
     for d, m in ((da, ma), (db, mb)):
         # A landmark alone in its component has mean 0: its field is left unscaled.
         scale = np.divide(target, m, out=np.ones_like(m), where=m > 0)
-        out.append(np.ascontiguousarray(weight * reachable(d * scale[:, None], repair).T))
+        scaled = reachable(d * scale[:, None], repair)
+        cols = [weight * scaled]
+        if near_weight > 0 and near_radius > 0:
+            # Vertices of other components sit at repair.unreachable, beyond any radius: 0.
+            cols.append(near_weight * np.maximum(near_radius - scaled, 0.0))
+        out.append(np.ascontiguousarray(np.vstack(cols).T))
     return out[0], out[1]
 
 

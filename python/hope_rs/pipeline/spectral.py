@@ -441,7 +441,13 @@ class SpectralStage(Stage):
         if state.landmarks is not None and lm.zoomout_weight > 0:
             # Before the BLAS setting below, which only _stop restores.
             self.extra = landmark_embedding(
-                state.a, state.b, state.landmarks, lm.zoomout_weight, state.config.refine.repair
+                state.a,
+                state.b,
+                state.landmarks,
+                lm.zoomout_weight,
+                state.config.refine.repair,
+                near_weight=lm.near_weight,
+                near_radius=lm.near_radius,
             )
         # One BLAS thread from before the solves start to after they end (see BasisPrefetch).
         self.blas = ExitStack()
