@@ -138,6 +138,7 @@ def _stats(rows: list[dict], method: str) -> dict | None:
         "worst": col("mean").max(), "auc": col("auc").mean(), "seconds": float(np.median(col("seconds"))),
         "auroc": float(np.mean(aurocs)) if aurocs else None,
         "flagged": [float(r["mean"]) for r in rs if r.get("likely_failed") == "1"],
+        "judged": any(r.get("likely_failed") not in (None, "") for r in rs),
     }  # fmt: skip
 
 
@@ -215,6 +216,8 @@ def partial() -> str:
             flagged = f"{len(h['flagged'])}" + (
                 f" ({', '.join(f'{e:.3f}' for e in sorted(h['flagged']))})" if h["flagged"] else ""
             )
+            if not h["judged"]:  # results from before the bench recorded the flag
+                flagged = "–"
             lines.append(
                 f"| {src} | {h['pairs']} | {im} | **{h['mean']:.4f}** | {h['worst']:.4f} "
                 f"| {auroc} | {flagged} | {h['seconds']:.1f} |"
@@ -338,10 +341,11 @@ def main() -> int:
     )
     args = p.parse_args()
     RUN.mkdir(parents=True, exist_ok=True)
-    if (args.partial_only or args.landmarks_only) and not (RUN / "provenance.txt").exists():
+    only = args.partial_only or args.landmarks_only or args.render_only
+    if only and not (RUN / "provenance.txt").exists():
         # The document is rendered from every section's results: without the shared sets'
         # the rewrite would drop their tables.
-        p.error(f"no earlier full run in {RUN}; run scripts/benchmarks.py without an --*-only flag")
+        p.error(f"no earlier full run in {RUN}; run scripts/benchmarks.py without --*-only")
     if not args.render_only:
         if not (args.partial_only or args.landmarks_only):
             run_shared()

@@ -19,6 +19,7 @@ import dataclasses
 import hashlib
 import json
 import math
+import numbers
 from dataclasses import dataclass, field
 
 from ..kernels.search import SearchConfig
@@ -98,7 +99,7 @@ class LandmarkConfig:
         little between the shapes, while the distances to the far landmarks stretch with
         whole limbs and the spectral embedding pulls a limb end that is larger on A than on
         B up the limb of B; these coordinates keep the vertices around each landmark at
-        their distance from it. 0: none (only with ``zoomout_weight > 0``).
+        their distance from it. 0: none. Used only when ``zoomout_weight > 0``.
     near_radius : float
         The radius above (sqrt(area) units, the scaled fields').
     """
@@ -387,6 +388,8 @@ class MultiscaleConfig:
 def _positive_numbers(name: str, value) -> tuple[float, ...]:
     """``value`` as a tuple of finite positive floats, or a one-line error naming the field."""
     try:
+        if isinstance(value, (str, bytes)):
+            raise TypeError
         out = tuple(float(x) for x in value)
     except (TypeError, ValueError):
         raise TypeError(
@@ -468,11 +471,9 @@ class PartialConfig:
         for name in ("scale_trials", "wide_trials"):
             object.__setattr__(self, name, _positive_numbers(name, getattr(self, name)))
         for name in ("wide_below", "wide_margin"):
-            if not 0.0 <= getattr(self, name) <= 1.0:
-                raise ValueError(
-                    f"PartialConfig.{name} must be a confidence in [0, 1], "
-                    f"got {getattr(self, name)!r}"
-                )
+            x = getattr(self, name)
+            if isinstance(x, bool) or not isinstance(x, numbers.Real) or not 0.0 <= x <= 1.0:
+                raise ValueError(f"PartialConfig.{name} must be a number in [0, 1], got {x!r}")
         if self.whole_to_part not in ("reverse", "direct"):
             raise ValueError(
                 f"PartialConfig.whole_to_part must be 'reverse' or 'direct', got {self.whole_to_part!r}"

@@ -216,10 +216,10 @@ def landmark_embedding(
     for d, m in ((da, ma), (db, mb)):
         # A landmark alone in its component has mean 0: its field is left unscaled.
         scale = np.divide(target, m, out=np.ones_like(m), where=m > 0)
-        scaled = reachable(d * scale[:, None], repair)
-        cols = [weight * scaled]
+        scaled = d * scale[:, None]
+        cols = [weight * reachable(scaled, repair)]
         if near_weight > 0 and near_radius > 0:
-            # Vertices of other components sit at repair.unreachable, beyond any radius: 0.
+            # Before reachable(): a vertex of another component (inf) gets 0.
             cols.append(near_weight * np.maximum(near_radius - scaled, 0.0))
         out.append(np.ascontiguousarray(np.vstack(cols).T))
     return out[0], out[1]

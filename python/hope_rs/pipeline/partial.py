@@ -232,7 +232,8 @@ class PartialStage(Stage):
             merge = _refined_merge(state, runs, off, landmarks, cfg.partial.merge_rings)
             best, chosen = max([*runs, merge], key=_mean_confidence)
             top = _mean_confidence((best, chosen))
-            if top < cfg.partial.wide_below:
+            # A confidence is at most 1: beyond that no wider map could win.
+            if top < cfg.partial.wide_below and top + cfg.partial.wide_margin <= 1.0:
                 # The wider scales' maps are not merged (where they went wrong they would pull
                 # the merge off the nearby scales' map), and one replaces the choice only when
                 # clearly more confident: they lie farther from the guessed scale.
