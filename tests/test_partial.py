@@ -255,13 +255,7 @@ def test_scale_trials_keep_a_cut_cat_off_the_whole_s_missing_side(tmp_path):
     """TOSCA cat0 cut by a plane along its back, matched to cat2 (sitting): at the guessed
     scale alone a hind quarter settles on the side the part lacks; the trials at nearby
     scales and their merge, chosen by confidence, halve the error."""
-    (out,) = write_partial_sets(
-        data_path("tosca_r"), tmp_path, conditions=["cut30"], max_pairs=2, reverse=False
-    )
-    pair = pairs_of(out)[1]
-    assert (pair.a.stem, pair.b.stem) == ("01_cat0_cut30", "01_cat2")
-    a, b = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
-    ai, bi = pair.ground_truth(a.n_vertices, b.n_vertices)
+    a, b, ai, bi = _partial_pair(tmp_path, "tosca_r", "cut30", 1, ("01_cat0_cut30", "01_cat2"))
     res = match(a, b)
     e = geodesic_errors(b, res.map, a_idx=ai, b_idx=bi).mean()
     single = MatchConfig(partial=PartialConfig(scale_trials=()))
@@ -320,18 +314,25 @@ def test_wide_trials_rescue_a_posed_faust_part(tmp_path):
     """FAUST tr_reg_007 (standing on one leg, hands up) cut at 30%, matched to tr_reg_008: at
     the guessed scale and its nearby trials the shoulder stumps settle on the chest and the
     raised knee elsewhere, the mean confidence stays low, and the wider trials find the map."""
-    (out,) = write_partial_sets(
-        data_path("faust_r"), tmp_path, conditions=["cut30"], max_pairs=8, reverse=False
-    )
-    pair = pairs_of(out)[7]
-    assert (pair.a.stem, pair.b.stem) == ("07_tr_reg_007_cut30", "07_tr_reg_008")
-    a, b = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
-    ai, bi = pair.ground_truth(a.n_vertices, b.n_vertices)
+    stems = ("07_tr_reg_007_cut30", "07_tr_reg_008")
+    a, b, ai, bi = _partial_pair(tmp_path, "faust_r", "cut30", 7, stems)
     res = match(a, b)
     narrow = match(a, b, config=MatchConfig(partial=PartialConfig(wide_trials=())))
     e, e_narrow = (geodesic_errors(b, r.map, a_idx=ai, b_idx=bi).mean() for r in (res, narrow))
     assert e < 0.1 and e_narrow > 0.12
     assert res.confidence.mean() > narrow.confidence.mean() + 0.15
+
+
+def _partial_pair(tmp_path, source: str, condition: str, index: int, stems: tuple):
+    """Pair ``index`` of the ``condition`` set written from ``source``: its meshes and scored
+    ground truth, after checking that it is the pair of ``stems``."""
+    (out,) = write_partial_sets(
+        data_path(source), tmp_path, conditions=[condition], max_pairs=index + 1, reverse=False
+    )
+    pair = pairs_of(out)[index]
+    assert (pair.a.stem, pair.b.stem) == stems
+    a, b = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
+    return (a, b, *pair.ground_truth(a.n_vertices, b.n_vertices))
 
 
 def _tiny_pair():
