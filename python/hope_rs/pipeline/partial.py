@@ -218,35 +218,37 @@ class PartialStage(Stage):
         init = state.init if isinstance(state.init, str) else a.map_out(b, state.init)
         guess = a.at_scale(info.scale) if info.scale != a.scale else a
         landmarks = _landmarks(state)
-        best, first = guess, state.run(guess, b, init, off, landmarks=landmarks)
+
+        def at(view: Shape) -> tuple:
+            """(view, the part's match at that view's scale)."""
+            return view, state.run(view, b, init, off, landmarks=landmarks)
+
+        best, first = at(guess)
         share = covered_share(b, guess.map_in(b, first.map))
         scale = a.internal.scale / np.sqrt(max(share, cfg.partial.min_covered))
         chosen = first
         rescale = abs(scale / info.scale - 1.0) > cfg.partial.rescale_tolerance
         if trials:
             scales = [info.scale * t for t in trials] + ([scale] if rescale else [])
-            runs = [(guess, first)]
-            for s in scales:
-                view = a.at_scale(s)
-                runs.append((view, state.run(view, b, init, off, landmarks=landmarks)))
+            runs = [(guess, first)] + [at(a.at_scale(s)) for s in scales]
             merge = _refined_merge(state, runs, off, landmarks, cfg.partial.merge_rings)
-            best, chosen = max([*runs, merge], key=_mean_confidence)
-            top = _mean_confidence((best, chosen))
+            kept = max([*runs, merge], key=_mean_confidence)
+            top, margin = _mean_confidence(kept), cfg.partial.wide_margin
             # A confidence is at most 1: beyond that no wider map could win.
-            if top < cfg.partial.wide_below and top + cfg.partial.wide_margin <= 1.0:
+            if cfg.partial.wide_trials and top < cfg.partial.wide_below and top + margin <= 1.0:
                 # The wider scales' maps are not merged (where they went wrong they would pull
                 # the merge off the nearby scales' map), and one replaces the choice only when
                 # clearly more confident: they lie farther from the guessed scale.
-                wide = [a.at_scale(info.scale * t) for t in cfg.partial.wide_trials]
-                wide = [(v, state.run(v, b, init, off, landmarks=landmarks)) for v in wide]
-                if wide and _mean_confidence(w := max(wide, key=_mean_confidence)) >= (
-                    top + cfg.partial.wide_margin
-                ):
-                    best, chosen = w
+                wide = max(
+                    (at(a.at_scale(info.scale * t)) for t in cfg.partial.wide_trials),
+                    key=_mean_confidence,
+                )
+                if _mean_confidence(wide) >= top + margin:
+                    kept = wide
+            best, chosen = kept
             info = dataclasses.replace(info, scale=float(best.scale))
         elif rescale:
-            again = a.at_scale(scale)
-            second = state.run(again, b, init, off, landmarks=landmarks)
+            again, second = at(a.at_scale(scale))
             kind = state.init if isinstance(state.init, str) else "shot"
             da, db = again.internal_descriptors(kind), b.internal_descriptors(kind)
             cost = [
