@@ -98,6 +98,9 @@ pub struct Dijkstra {
     heap: BinaryHeap<Reverse<(u64, u32)>>,
 }
 
+/// How many times the size a caller needs a kept thread workspace may be (16 bytes a vertex).
+const LOCAL_SLACK: usize = 4;
+
 thread_local! {
     /// Each thread's workspace for [`Dijkstra::with_local`].
     static WORKSPACE: std::cell::Cell<Option<Dijkstra>> = const { std::cell::Cell::new(None) };
@@ -108,9 +111,11 @@ impl Dijkstra {
     /// the thread's next call. Many short searches spread over rayon's tasks would otherwise
     /// allocate (and the kernel zero, page by page as the searches touch them) a workspace
     /// of the graph's size per task, again on every call. A nested call gets a fresh one.
+    /// A kept workspace more than [`LOCAL_SLACK`] times the size asked for is replaced, so a
+    /// large mesh's workspace does not stay with every thread through later small ones.
     pub fn with_local<R>(n: usize, work: impl FnOnce(&mut Dijkstra) -> R) -> R {
         let mut dj = match WORKSPACE.take() {
-            Some(dj) if dj.dist.len() >= n => dj,
+            Some(dj) if dj.dist.len() >= n && dj.dist.len() <= n.saturating_mul(LOCAL_SLACK) => dj,
             _ => Dijkstra::new(n),
         };
         let out = work(&mut dj);
@@ -308,8 +313,16 @@ pub fn distance_fields(g: &EdgeGraph, sources: &[u32]) -> Result<Vec<f64>> {
     }
     let size = sources.len().saturating_mul(n);
     let mut out = try_filled_vec(size, f64::INFINITY, "the distance fields")?;
+    fill_fields(g, sources, &mut out);
+    Ok(out)
+}
+
+/// Writes the distance field of `sources[i]` into row i of `out` (`sources.len() x n`
+/// row-major, every entry infinite on entry; sources in range), searching in parallel.
+fn fill_fields(g: &EdgeGraph, sources: &[u32], out: &mut [f64]) {
+    let n = g.adj.n_rows;
     if n == 0 {
-        return Ok(out);
+        return;
     }
     // A full search is a ball without limits; its distances are the ones `run` settles.
     out.par_chunks_mut(n).zip(sources.par_iter()).for_each_init(
@@ -321,7 +334,6 @@ pub fn distance_fields(g: &EdgeGraph, sources: &[u32]) -> Result<Vec<f64>> {
             }
         },
     );
-    Ok(out)
 }
 
 /// Farthest-point samples of `candidates` and their distance fields: `start` first, then
@@ -351,8 +363,7 @@ pub fn farthest_point_fields(
     if !(scale > 0.0 && scale.is_finite()) {
         return invalid("the scale must be positive and finite");
     }
-    let first = distance_fields(g, &[start])?;
-    let mut nearest = first.clone();
+    let mut nearest = distance_fields(g, &[start])?;
     let mut chosen = vec![start];
     let mut dj = Dijkstra::new(n_v);
     for _ in 1..n.min(candidates.len()) {
@@ -372,12 +383,12 @@ pub fn farthest_point_fields(
         dj.lower(g, next as usize, &mut nearest);
         chosen.push(next);
     }
-    let mut fields = try_filled_vec(chosen.len().saturating_mul(n_v), 0.0, "the distance fields")?;
-    fields[..n_v].copy_from_slice(&first);
-    if chosen.len() > 1 {
-        let rest = distance_fields(g, &chosen[1..])?;
-        fields[n_v..].copy_from_slice(&rest);
-    }
+    // The start's field is searched again rather than kept: the fields are then the only
+    // array of their size (`nearest` is one row).
+    drop(nearest);
+    let size = chosen.len().saturating_mul(n_v);
+    let mut fields = try_filled_vec(size, f64::INFINITY, "the distance fields")?;
+    fill_fields(g, &chosen, &mut fields);
     Ok((chosen, fields))
 }
 
@@ -385,6 +396,19 @@ pub fn farthest_point_fields(
 mod tests {
     use super::*;
     use crate::graph::adjacency_from_faces;
+
+    #[test]
+    fn thread_workspace_follows_the_size_asked_for() {
+        let len = |n| Dijkstra::with_local(n, |dj| dj.dist.len());
+        assert_eq!(len(1000), 1000);
+        assert_eq!(
+            len(500),
+            1000,
+            "within the slack the kept workspace is reused"
+        );
+        assert_eq!(len(10), 10, "a workspace far too large is replaced");
+        assert_eq!(len(2000), 2000);
+    }
 
     #[test]
     fn distances_along_a_strip() {

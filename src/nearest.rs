@@ -201,9 +201,12 @@ fn ball(rows: &[f64], dim: usize, idx: &[u32]) -> (Vec<f64>, f64) {
 impl PointClusters {
     /// The clusters of `points` (`dim` values per row).
     pub fn new(points: &[f64], dim: usize) -> Result<Self> {
-        if dim == 0 || !points.len().is_multiple_of(dim) {
+        if dim == 0 {
+            return invalid("points must have at least one column, got 0");
+        }
+        if !points.len().is_multiple_of(dim) {
             return invalid(format!(
-                "points must hold whole rows of {dim} > 0 values, got {} values",
+                "points must hold whole rows of {dim} values, got {} values",
                 points.len()
             ));
         }
@@ -487,7 +490,8 @@ mod tests {
         let (_, tie) = index.nearest(&[f64::INFINITY, 0.0]).unwrap();
         assert_eq!(tie, [true]);
         assert!(PointClusters::new(&points, 3).is_err());
-        assert!(PointClusters::new(&points, 0).is_err());
+        let zero = PointClusters::new(&points, 0).err().unwrap().to_string();
+        assert_eq!(zero, "points must have at least one column, got 0");
         assert!(index.nearest(&[1.0, 2.0, 3.0]).is_err());
         let (ids, tie) = PointClusters::new(&[], 2)
             .unwrap()
