@@ -68,7 +68,7 @@ def main(argv=None) -> int:
     for vname, cfg, init in variants:
         for pair in pairs if vname == "default" else pairs[::2]:
             m = matched(pair, cfg, init, cache)
-            x = features_of(pair, m, base)[m["a_idx"]]
+            x = features_of(pair, m, base)[0][m["a_idx"]]
             y = m["errors"] <= WRONG_ABOVE
             xs.append(x)
             ys.append(y)

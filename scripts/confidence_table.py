@@ -35,7 +35,13 @@ import hope_rs
 from hope_rs import MatchConfig, Shape
 from hope_rs.evaluation.datasets import Pair, pairs_of
 from hope_rs.evaluation.evaluate import confidence_auroc
-from hope_rs.pipeline.confidence import confidence_features, predict_confidence
+from hope_rs.pipeline.confidence import (
+    MatchQuality,
+    confidence_features,
+    flipped_share,
+    match_quality,
+    predict_confidence,
+)
 from hope_rs.pipeline.config import ConfidenceConfig
 from hope_rs.pipeline.runner import run_match
 
@@ -88,22 +94,24 @@ def matched(pair: Pair, config: MatchConfig, init: str, cache: Path) -> dict:
     return {**out, "cached": False}
 
 
-def features_of(pair: Pair, m: dict, config: MatchConfig) -> np.ndarray:
-    """:func:`confidence_features` of the cached maps, rows in A's input numbering."""
+def features_of(pair: Pair, m: dict, config: MatchConfig) -> tuple[np.ndarray, float]:
+    """:func:`confidence_features` of the cached maps, rows in A's input numbering, and the
+    final map's :func:`flipped_share`."""
     a = Shape(hope_rs.load_mesh(pair.a), k_max=config.k_max, config=config.shape)
     b = Shape(hope_rs.load_mesh(pair.b), k_max=config.k_max, config=config.shape)
     z = None if (m["zoomout"] < 0).any() else a.map_in(b, m["zoomout"])
+    f = a.map_in(b, m["map"])
     x = confidence_features(
         a,
         b,
-        a.map_in(b, m["map"]),
+        f,
         a.map_in(b, m["hope"]),
         z,
         config.confidence,
         min_consistent=config.refine.min_consistent,
         repair=config.refine.repair,
     )
-    return x[a.rank]
+    return x[a.rank], flipped_share(a, b, f)
 
 
 def auroc(score: np.ndarray, right: np.ndarray) -> float:
@@ -111,10 +119,12 @@ def auroc(score: np.ndarray, right: np.ndarray) -> float:
     return confidence_auroc(score, np.where(right, 0.0, 1.0), wrong_above=0.5)
 
 
-def scored(pair: Pair, m: dict, config: MatchConfig) -> tuple[np.ndarray, np.ndarray, float]:
-    """(confidence at the scored vertices, right or not, the pair's mean confidence)."""
-    c = predict_confidence(features_of(pair, m, config), config.confidence)
-    return c[m["a_idx"]], m["errors"] <= WRONG_ABOVE, float(c.mean())
+def scored(pair: Pair, m: dict, config: MatchConfig) -> tuple[np.ndarray, np.ndarray, MatchQuality]:
+    """(confidence at the scored vertices, right or not, the pair's :class:`MatchQuality`)."""
+    x, flipped = features_of(pair, m, config)
+    c = predict_confidence(x, config.confidence)
+    quality = match_quality(c, config.confidence, flipped=flipped)
+    return c[m["a_idx"]], m["errors"] <= WRONG_ABOVE, quality
 
 
 def pairs(names: list[str], max_pairs: int | None) -> dict[str, list[Pair]]:
@@ -208,22 +218,26 @@ def render(
         "## Per pair",
         "",
         (
-            f"`quality.likely_failed`: mean confidence < {config.confidence.failed_mean} or "
+            f"`quality.likely_failed`: mean confidence < {config.confidence.failed_mean}, "
             f"fewer than {config.confidence.failed_share:.0%} of the vertices at confidence >= "
-            f"{config.confidence.threshold}."
+            f"{config.confidence.threshold}, or more than {config.confidence.failed_flipped:.0%} "
+            "of A's area turned over by the map (`quality.flipped_share`)."
         ),
         "",
-        "| set | pair | mean error | wrong | mean confidence | likely failed | AUROC |",
-        "|---|---|---|---|---|---|---|",
+        (
+            "| set | pair | mean error | wrong | mean confidence | area turned over "
+            "| likely failed | AUROC |"
+        ),
+        "|---|---|---|---|---|---|---|---|",
     ]
-    for name, pair, err, conf, right, mean_c in per_pair:
-        q_failed = mean_c < config.confidence.failed_mean or (
-            (conf >= config.confidence.threshold).mean() < config.confidence.failed_share
-        )
+    for name, pair, err, conf, right, q in per_pair:
         a = auroc(conf, right)
         lines.append(
-            f"| {name} | {pair} | {err.mean():.3f} | {1 - right.mean():.3f} | {mean_c:.3f} | "
-            f"{'yes' if q_failed else 'no'} | " + ("n/a" if np.isnan(a) else f"{a:.3f}") + " |"
+            f"| {name} | {pair} | {err.mean():.3f} | {1 - right.mean():.3f} | "
+            f"{q.mean_confidence:.3f} | {q.flipped_share:.3f} | "
+            f"{'yes' if q.likely_failed else 'no'} | "
+            + ("n/a" if np.isnan(a) else f"{a:.3f}")
+            + " |"
         )
     return "\n".join(lines) + "\n"
 
@@ -246,10 +260,10 @@ def main(argv=None) -> int:
             m = matched(pair, config, config.initial.descriptor, args.cache)
             matched_now += not m["cached"]
             match_s += float(m["seconds"])
-            conf, right, mean_c = scored(pair, m, config)
+            conf, right, quality = scored(pair, m, config)
             confs.append(conf)
             rights.append(right)
-            per_pair.append((name, pair.name, m["errors"], conf, right, mean_c))
+            per_pair.append((name, pair.name, m["errors"], conf, right, quality))
             print(f"{name} {pair.name}: mean error {m['errors'].mean():.3f}", file=sys.stderr)
         rows[name] = (np.concatenate(confs), np.concatenate(rights), len(ps))
     seconds = time.perf_counter() - t0

@@ -12,7 +12,12 @@ import hope_rs
 from hope_rs.cli.commands import main
 from hope_rs.evaluation.datasets import pairs_of
 from hope_rs.evaluation.evaluate import confidence_auroc
-from hope_rs.pipeline.confidence import MatchQuality, match_quality, predict_confidence
+from hope_rs.pipeline.confidence import (
+    MatchQuality,
+    flipped_share,
+    match_quality,
+    predict_confidence,
+)
 from hope_rs.pipeline.config import CONFIDENCE_FEATURES, ConfidenceConfig, MatchConfig
 from hope_rs.pipeline.progress import STAGES
 
@@ -38,7 +43,7 @@ def test_confidence_is_a_probability_per_vertex_of_a(broken_and_good):
 
 
 def test_quality_flags_a_broken_match_and_not_a_good_one(broken_and_good):
-    a, _, broken, good = broken_and_good
+    a, b, broken, good = broken_and_good
     truth = np.arange(a.n_vertices)
     assert np.mean(broken.map == truth) < 0.5  # the broken match is broken
     assert np.mean(good.map == truth) > 0.95
@@ -46,7 +51,14 @@ def test_quality_flags_a_broken_match_and_not_a_good_one(broken_and_good):
     assert broken.quality.likely_failed
     assert not good.quality.likely_failed
     assert good.quality.mean_confidence > broken.quality.mean_confidence + 0.3
-    assert good.quality == match_quality(good.confidence, good.config.confidence)
+    assert good.quality == match_quality(
+        good.confidence, good.config.confidence, flipped=good.quality.flipped_share
+    )
+    sa, sb = hope_rs.Shape(a), hope_rs.Shape(b)
+    turned = flipped_share(sa, sb, sa.map_in(sb, good.map))
+    assert good.quality.flipped_share == pytest.approx(turned, abs=1e-12)
+    assert good.quality.flipped_share < 0.01  # one triangulation: the right map keeps windings
+    assert broken.quality.flipped_share > 0.1
 
 
 def test_map_or_unmatched(broken_and_good):
@@ -96,6 +108,11 @@ def test_quality_rule():
     assert match_quality(np.array([0.9, 0.1, 0.2]), cfg).likely_failed
     q = match_quality(np.array([0.6, 0.4]), cfg)
     assert q.share_confident == 0.5 and q.mean_confidence == pytest.approx(0.5)
+    assert q.flipped_share == 0.0 and not q.likely_failed
+    assert match_quality(np.array([0.9, 0.8]), cfg, flipped=0.2).flipped_share == 0.2
+    cfg = ConfidenceConfig(failed_flipped=0.25)
+    assert not match_quality(np.array([0.9, 0.8]), cfg, flipped=0.25).likely_failed
+    assert match_quality(np.array([0.9, 0.8]), cfg, flipped=0.26).likely_failed
 
 
 @settings(max_examples=4, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -114,6 +131,25 @@ def test_relabelling_both_meshes_relabels_the_confidence(data):
     res2 = hope_rs.match(a2, b2, init=inverse(pb)[init[pa]], **opts)
     np.testing.assert_array_equal(res2.map, inverse(pb)[res.map[pa]])
     np.testing.assert_allclose(res2.confidence, res.confidence[pa], rtol=1e-9, atol=1e-12)
+    assert res2.quality.flipped_share == pytest.approx(res.quality.flipped_share, abs=1e-12)
+
+
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data())
+def test_flipped_share_is_the_area_a_map_turns_over(data):
+    v, f = data.draw(bumpy_surfaces(200, 400), label="surface")
+    a = hope_rs.Shape(hope_rs.Mesh(v, f))
+    mirror = hope_rs.Shape(hope_rs.Mesh(v * np.array([-1.0, 1.0, 1.0]), f))
+    same = np.arange(a.n_vertices)
+    # Each vertex onto itself keeps every triangle's winding; onto its mirror image (both
+    # shapes oriented outward) it turns every triangle over.
+    assert flipped_share(a, a, a.map_in(a, same)) < 0.01
+    assert flipped_share(a, mirror, a.map_in(mirror, same)) > 0.99
+    # Only the triangles with all corners in ``among`` count; images on one vertex never do.
+    upper = a.internal.vertices[:, 2] > 0
+    assert flipped_share(a, mirror, a.map_in(mirror, same), among=upper) > 0.99
+    assert flipped_share(a, a, np.zeros(a.n_vertices, dtype=np.int64)) == 0.0
+    assert flipped_share(a, a, a.map_in(a, same), among=np.zeros(a.n_vertices, bool)) == 0.0
 
 
 @pytest.mark.slow

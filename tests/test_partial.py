@@ -21,7 +21,7 @@ from hope_rs.evaluation.partial import (
     write_partial_sets,
 )
 from hope_rs.pipeline import runner
-from hope_rs.pipeline.config import MatchConfig, PartialConfig, SpectralConfig
+from hope_rs.pipeline.config import ConfidenceConfig, MatchConfig, PartialConfig, SpectralConfig
 from hope_rs.pipeline.partial import boundary_length, covered_share, detect_part
 from hope_rs.pipeline.runner import run_match
 from hope_rs.pipeline.spectral import basis_slope
@@ -321,6 +321,21 @@ def test_wide_trials_rescue_a_posed_faust_part(tmp_path):
     e, e_narrow = (geodesic_errors(b, r.map, a_idx=ai, b_idx=bi).mean() for r in (res, narrow))
     assert e < 0.1 and e_narrow > 0.12
     assert res.confidence.mean() > narrow.confidence.mean() + 0.15
+
+
+@pytest.mark.slow
+def test_quality_flags_a_half_faust_part_carried_onto_the_wrong_branch(tmp_path):
+    """FAUST 007 (on one leg, the other raised) cut in half and matched to 008: at no scale
+    does the part settle in the right basin. The map carries the torso onto B's other leg and
+    the raised leg onto the torso, which keeps distances well enough for a middling
+    confidence but turns that area over; the pair is flagged."""
+    stems = ("07_tr_reg_007_cut50", "07_tr_reg_008")
+    a, b, ai, bi = _partial_pair(tmp_path, "faust_r", "cut50", 7, stems)
+    res = match(a, b)
+    assert geodesic_errors(b, res.map, a_idx=ai, b_idx=bi).mean() > 0.2  # the failure
+    assert res.quality.mean_confidence > ConfidenceConfig().failed_mean
+    assert res.quality.flipped_share > ConfidenceConfig().failed_flipped
+    assert res.quality.likely_failed
 
 
 def _partial_pair(tmp_path, source: str, condition: str, index: int, stems: tuple):

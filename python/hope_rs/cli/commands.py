@@ -99,7 +99,8 @@ def cmd_match(args) -> int:
         print(
             f"hope-rs: warning: this match likely failed (mean confidence "
             f"{res.quality.mean_confidence:.2f}, {res.quality.share_confident:.0%} of A's "
-            "vertices confident); look at it with hope-rs show --color-by confidence",
+            f"vertices confident, {res.quality.flipped_share:.0%} of its area turned over); "
+            "look at it with hope-rs show --color-by confidence",
             file=sys.stderr,
         )
     if args.output:

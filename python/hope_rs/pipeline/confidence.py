@@ -16,6 +16,11 @@ about the final map ``f``, each in the shapes' internal numbering (see
 averaged over a few rings so that regions, not single vertices, lose confidence, and combined
 by a logistic model (:class:`~hope_rs.pipeline.config.ConfidenceConfig`). The stage reads the
 maps only: ``MatchResult.map`` is the same with or without it.
+
+The pair-level summary (:class:`MatchQuality`) also measures the share of A's area whose
+triangles the map turns over (:func:`flipped_share`). A region carried onto a swapped branch
+(a part's torso onto a leg, the leg onto the torso) can keep its distances and its 2-rings,
+so its confidence stays middling, but its triangles land on B wound the other way.
 """
 
 from __future__ import annotations
@@ -42,6 +47,7 @@ __all__ = [
     "ConfidenceStage",
     "MatchQuality",
     "confidence_features",
+    "flipped_share",
     "match_quality",
     "predict_confidence",
 ]
@@ -57,24 +63,82 @@ class MatchQuality:
         The mean confidence over A's vertices.
     share_confident : float
         The share of A's vertices with confidence at least ``ConfidenceConfig.threshold``.
+    flipped_share : float
+        The share of A's area whose triangles the map turns over (:func:`flipped_share`).
     likely_failed : bool
-        ``mean_confidence < ConfidenceConfig.failed_mean`` or ``share_confident <
-        ConfidenceConfig.failed_share``: much of the map is probably wrong; look at the pair
-        (``hope-rs show --color-by confidence``) before using it.
+        ``mean_confidence < ConfidenceConfig.failed_mean``, ``share_confident <
+        ConfidenceConfig.failed_share`` or ``flipped_share > ConfidenceConfig.failed_flipped``:
+        much of the map is probably wrong; look at the pair (``hope-rs show --color-by
+        confidence``) before using it.
     """
 
     mean_confidence: float
     share_confident: float
+    flipped_share: float
     likely_failed: bool
 
 
-def match_quality(confidence: np.ndarray, config: ConfidenceConfig = ConfidenceConfig()):
-    """The :class:`MatchQuality` of a per-vertex ``confidence`` under ``config``'s rule."""
+def match_quality(
+    confidence: np.ndarray, config: ConfidenceConfig = ConfidenceConfig(), *, flipped: float = 0.0
+) -> MatchQuality:
+    """The :class:`MatchQuality` of a per-vertex ``confidence`` and a map's
+    :func:`flipped_share` under ``config``'s rule.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> match_quality(np.array([0.9, 0.8, 0.7]), flipped=0.05).likely_failed
+    False
+    >>> match_quality(np.array([0.9, 0.8, 0.7]), flipped=0.45).likely_failed
+    True
+    """
     c = np.asarray(confidence, dtype=np.float64)
     mean = float(c.mean()) if c.size else 0.0
     share = float((c >= config.threshold).mean()) if c.size else 0.0
-    failed = mean < config.failed_mean or share < config.failed_share
-    return MatchQuality(mean, share, bool(failed))
+    failed = (
+        mean < config.failed_mean or share < config.failed_share or flipped > config.failed_flipped
+    )
+    return MatchQuality(mean, share, float(flipped), bool(failed))
+
+
+def flipped_share(a: Shape, b: Shape, f: np.ndarray, among: np.ndarray | None = None) -> float:
+    """The share of A's area whose triangles ``f`` turns over.
+
+    A triangle of A (internal numbering, outward-oriented) is turned over when the triangle of
+    its corners' images winds against B's outward vertex normals there (their sum). Triangles
+    whose image is degenerate (two corners on one vertex, or a zero area) count on neither
+    side; with ``among`` ((n_a,) bool), only the triangles with all three corners in it count.
+    On remeshed pairs a right map turns a few percent of the area over, where the two
+    triangulations disagree; a region carried onto a mirror image or a swapped branch turns
+    over as a whole. 0 when no triangle counts.
+    """
+    fa = a.internal.faces
+    if among is not None:
+        fa = fa[np.asarray(among, dtype=bool)[fa].all(axis=1)]
+    pa, pb = a.internal.vertices, b.internal.vertices
+    area_a = np.linalg.norm(_face_normals(pa, fa), axis=1)
+    image = np.asarray(f)[fa]
+    turned = np.einsum("ij,ij->i", _face_normals(pb, image), _vertex_normals(b)[image].sum(axis=1))
+    counted = (turned != 0.0) & (image[:, 0] != image[:, 1]) & (image[:, 1] != image[:, 2])
+    counted &= image[:, 2] != image[:, 0]
+    total = float(area_a[counted].sum())
+    return float(area_a[counted & (turned < 0.0)].sum() / total) if total > 0.0 else 0.0
+
+
+def _face_normals(p: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(m, 3) cross products of the faces' edges: normal times twice the area."""
+    return np.cross(p[faces[:, 1]] - p[faces[:, 0]], p[faces[:, 2]] - p[faces[:, 0]])
+
+
+def _vertex_normals(s: Shape) -> np.ndarray:
+    """(n, 3) area-weighted sums of the normals of each vertex's faces (internal numbering)."""
+    faces = s.internal.faces
+    n = _face_normals(s.internal.vertices, faces)
+    out = np.zeros((s.n_vertices, 3))
+    for corner in range(3):
+        for axis in range(3):
+            out[:, axis] += np.bincount(faces[:, corner], n[:, axis], minlength=s.n_vertices)
+    return out
 
 
 def confidence_features(
@@ -190,6 +254,7 @@ class ConfidenceStage(Stage):
         if counterpart is not None:
             # A vertex of the whole without a counterpart on the part has no right match.
             state.confidence = np.where(counterpart, state.confidence, 0.0)
+        state.flipped = flipped_share(state.a, state.b, state.f, among=counterpart)
         state.timings["confidence"] = time.perf_counter() - t
         share = float((state.confidence >= cfg.threshold).mean())
         state.log.ran(

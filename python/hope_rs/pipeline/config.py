@@ -523,7 +523,10 @@ class ConfidenceConfig:
     failed_mean : float
         ``MatchQuality.likely_failed`` when the mean confidence is below this ...
     failed_share : float
-        ... or when fewer than this share of A's vertices are confident.
+        ... or when fewer than this share of A's vertices are confident ...
+    failed_flipped : float
+        ... or when the map turns more than this share of A's area over
+        (``MatchQuality.flipped_share``).
     """
 
     enabled: bool = True
@@ -545,6 +548,7 @@ class ConfidenceConfig:
     threshold: float = 0.5
     failed_mean: float = 0.5
     failed_share: float = 0.5
+    failed_flipped: float = 0.3
 
 
 #: ``match``'s keyword options → (stage field of :class:`MatchConfig`, field of that stage).

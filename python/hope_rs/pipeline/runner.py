@@ -85,7 +85,7 @@ def run_match(
         # the pair is judged on the others.
         counterpart = getattr(state.partial, "counterpart", None)
         judged = confidence if counterpart is None else confidence[counterpart[a.rank]]
-        quality = match_quality(judged, config.confidence)
+        quality = match_quality(judged, config.confidence, flipped=state.flipped or 0.0)
     return MatchResult(
         a.map_out(b, state.f).astype(np.int64),
         a.map_out(b, state.f0).astype(np.int64),
