@@ -138,18 +138,43 @@ def test_relabelling_both_meshes_relabels_the_confidence(data):
 @given(data=st.data())
 def test_flipped_share_is_the_area_a_map_turns_over(data):
     v, f = data.draw(bumpy_surfaces(200, 400), label="surface")
-    a = hope_rs.Shape(hope_rs.Mesh(v, f))
-    mirror = hope_rs.Shape(hope_rs.Mesh(v * np.array([-1.0, 1.0, 1.0]), f))
-    same = np.arange(a.n_vertices)
-    # Each vertex onto itself keeps every triangle's winding; onto its mirror image (both
-    # shapes oriented outward) it turns every triangle over.
-    assert flipped_share(a, a, a.map_in(a, same)) < 0.01
-    assert flipped_share(a, mirror, a.map_in(mirror, same)) > 0.99
-    # Only the triangles with all corners in ``among`` count; images on one vertex never do.
-    upper = a.internal.vertices[:, 2] > 0
-    assert flipped_share(a, mirror, a.map_in(mirror, same), among=upper) > 0.99
-    assert flipped_share(a, a, np.zeros(a.n_vertices, dtype=np.int64)) == 0.0
-    assert flipped_share(a, a, a.map_in(a, same), among=np.zeros(a.n_vertices, bool)) == 0.0
+    n = len(v)
+    # Two closed components, the second twice as large (four times the area); on B the
+    # second is mirrored. Each vertex onto itself keeps the first one's windings and turns
+    # every triangle of the second over (both shapes are oriented outward).
+    big = v * 2.0 + np.array([10.0, 0.0, 0.0])
+    flip = np.array([-1.0, 1.0, 1.0])
+    faces = np.concatenate([f, f + n])
+    a = hope_rs.Shape(hope_rs.Mesh(np.concatenate([v, big]), faces))
+    b = hope_rs.Shape(hope_rs.Mesh(np.concatenate([v, big * flip]), faces))
+    same = a.map_in(b, np.arange(2 * n))
+    second = (np.arange(2 * n) >= n)[a.order]  # internal numbering
+    assert flipped_share(a, b, same) == pytest.approx(0.8, abs=0.02)  # by area, not count
+    assert flipped_share(a, b, same, among=~second) < 0.01
+    assert flipped_share(a, b, same, among=second) > 0.99
+    assert flipped_share(a, a, a.map_in(a, np.arange(2 * n))) < 0.01
+    # Images on one vertex count on neither side; no counted triangle gives 0.
+    assert flipped_share(a, b, np.zeros(2 * n, dtype=np.int64)) == 0.0
+    assert flipped_share(a, b, same, among=np.zeros(2 * n, dtype=bool)) == 0.0
+
+
+def test_flipped_share_of_open_surfaces_counts_the_smaller_side():
+    # A cap of a sphere: which side of an open surface is outward is a guess, so a map onto
+    # its mirror image turns nothing over as far as the share can tell; the whole sphere
+    # onto its mirror image turns everything over.
+    v, f = bumpy_sphere(600, 3)
+    cap = f[(v[f][:, :, 2] > -0.2).all(axis=1)]
+    used = np.unique(cap)
+    renum = np.full(len(v), -1)
+    renum[used] = np.arange(used.size)
+    pv, pf = v[used], renum[cap]
+    a = hope_rs.Shape(hope_rs.Mesh(pv, pf))
+    mirror = hope_rs.Shape(hope_rs.Mesh(pv * np.array([-1.0, 1.0, 1.0]), pf))
+    same = a.map_in(mirror, np.arange(used.size))
+    assert flipped_share(a, mirror, same) < 0.01
+    whole = hope_rs.Shape(hope_rs.Mesh(v, f))
+    closed = hope_rs.Shape(hope_rs.Mesh(v * np.array([-1.0, 1.0, 1.0]), f))
+    assert flipped_share(whole, closed, whole.map_in(closed, np.arange(len(v)))) > 0.99
 
 
 @pytest.mark.slow

@@ -29,6 +29,8 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 
 from ..shape import Shape
 from .anchors import (
@@ -63,19 +65,19 @@ class MatchQuality:
         The mean confidence over A's vertices.
     share_confident : float
         The share of A's vertices with confidence at least ``ConfidenceConfig.threshold``.
-    flipped_share : float
-        The share of A's area whose triangles the map turns over (:func:`flipped_share`).
     likely_failed : bool
         ``mean_confidence < ConfidenceConfig.failed_mean``, ``share_confident <
         ConfidenceConfig.failed_share`` or ``flipped_share > ConfidenceConfig.failed_flipped``:
         much of the map is probably wrong; look at the pair (``hope-rs show --color-by
         confidence``) before using it.
+    flipped_share : float
+        The share of A's area whose triangles the map turns over (:func:`flipped_share`).
     """
 
     mean_confidence: float
     share_confident: float
-    flipped_share: float
     likely_failed: bool
+    flipped_share: float = 0.0
 
 
 def match_quality(
@@ -98,31 +100,77 @@ def match_quality(
     failed = (
         mean < config.failed_mean or share < config.failed_share or flipped > config.failed_flipped
     )
-    return MatchQuality(mean, share, float(flipped), bool(failed))
+    return MatchQuality(mean, share, bool(failed), float(flipped))
 
 
 def flipped_share(a: Shape, b: Shape, f: np.ndarray, among: np.ndarray | None = None) -> float:
     """The share of A's area whose triangles ``f`` turns over.
 
-    A triangle of A (internal numbering, outward-oriented) is turned over when the triangle of
+    A triangle of A (internal numbering, oriented outward) is turned over when the triangle of
     its corners' images winds against B's outward vertex normals there (their sum). Triangles
     whose image is degenerate (two corners on one vertex, or a zero area) count on neither
-    side; with ``among`` ((n_a,) bool), only the triangles with all three corners in it count.
+    side; with ``among``, only the triangles with all three corners in it count.
+
+    Which side of an open surface is outward is a guess (:mod:`hope_rs.geometry.orientation`):
+    a concave part can come out inward, and a right map onto it would then turn everything
+    over. So the triangles are grouped by their component of A and the component of B their
+    first corner lands in, and a group with either component open counts the smaller of its
+    turned and kept areas as turned (at most half of it).
+
     On remeshed pairs a right map turns a few percent of the area over, where the two
     triangulations disagree; a region carried onto a mirror image or a swapped branch turns
-    over as a whole. 0 when no triangle counts.
+    over as a whole.
+
+    Parameters
+    ----------
+    a, b : Shape
+        The shapes (a view at another scale reads the same mesh).
+    f : (n_a,) ndarray of int
+        The map, internal numbering.
+    among : (n_a,) bool ndarray, optional
+        The vertices of A (internal numbering) whose triangles count.
+
+    Returns
+    -------
+    float
+        In [0, 1]; 0 when no triangle counts.
     """
     fa = a.internal.faces
     if among is not None:
         fa = fa[np.asarray(among, dtype=bool)[fa].all(axis=1)]
-    pa, pb = a.internal.vertices, b.internal.vertices
-    area_a = np.linalg.norm(_face_normals(pa, fa), axis=1)
     image = np.asarray(f)[fa]
-    turned = np.einsum("ij,ij->i", _face_normals(pb, image), _vertex_normals(b)[image].sum(axis=1))
+    normals_b = _vertex_normals(b)[image].sum(axis=1)
+    turned = np.einsum("ij,ij->i", _face_normals(b.internal.vertices, image), normals_b)
     counted = (turned != 0.0) & (image[:, 0] != image[:, 1]) & (image[:, 1] != image[:, 2])
     counted &= image[:, 2] != image[:, 0]
-    total = float(area_a[counted].sum())
-    return float(area_a[counted & (turned < 0.0)].sum() / total) if total > 0.0 else 0.0
+    area = np.linalg.norm(_face_normals(a.internal.vertices, fa), axis=1) * counted
+    total = float(area.sum())
+    if total <= 0.0:
+        return 0.0
+    comp_a, open_a = _components(a)
+    comp_b, open_b = _components(b)
+    width = comp_b.max() + 1
+    group, index = np.unique(comp_a[fa[:, 0]] * width + comp_b[image[:, 0]], return_inverse=True)
+    over = np.bincount(index, area * (turned < 0.0), minlength=group.size)
+    kept = np.bincount(index, area, minlength=group.size) - over
+    either_open = open_a[group // width] | open_b[group % width]
+    over = np.where(either_open, np.minimum(over, kept), over)
+    return float(over.sum() / total)
+
+
+def _components(s: Shape) -> tuple[np.ndarray, np.ndarray]:
+    """(component of each vertex, int64; whether each component has an edge of one face only)
+    of the internal mesh, components linked through its edges."""
+    n = s.n_vertices
+    e = s.edges
+    graph = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    _, comp = connected_components(graph, directed=False)
+    faces = s.internal.faces
+    ends = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    edge, count = np.unique(ends, axis=0, return_counts=True)
+    is_open = np.zeros(int(comp.max()) + 1, dtype=bool)
+    is_open[comp[edge[count == 1, 0]]] = True
+    return comp.astype(np.int64), is_open
 
 
 def _face_normals(p: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -254,7 +302,6 @@ class ConfidenceStage(Stage):
         if counterpart is not None:
             # A vertex of the whole without a counterpart on the part has no right match.
             state.confidence = np.where(counterpart, state.confidence, 0.0)
-        state.flipped = flipped_share(state.a, state.b, state.f, among=counterpart)
         state.timings["confidence"] = time.perf_counter() - t
         share = float((state.confidence >= cfg.threshold).mean())
         state.log.ran(

@@ -15,7 +15,7 @@ from typing import Callable
 import numpy as np
 
 from ..shape import Shape
-from .confidence import match_quality
+from .confidence import flipped_share, match_quality
 from .config import MatchConfig
 from .progress import StageLog
 from .result import MatchResult
@@ -85,7 +85,11 @@ def run_match(
         # the pair is judged on the others.
         counterpart = getattr(state.partial, "counterpart", None)
         judged = confidence if counterpart is None else confidence[counterpart[a.rank]]
-        quality = match_quality(judged, config.confidence, flipped=state.flipped or 0.0)
+        quality = match_quality(
+            judged,
+            config.confidence,
+            flipped=flipped_share(state.a, state.b, state.f, among=counterpart),
+        )
     return MatchResult(
         a.map_out(b, state.f).astype(np.int64),
         a.map_out(b, state.f0).astype(np.int64),

@@ -137,9 +137,6 @@ class MatchState:
         The spectral pass's ZoomOut map, when it computed one.
     confidence : ndarray or None
         Per vertex of A, the confidence in the final map (the confidence stage).
-    flipped : float or None
-        The share of A's area the final map turns over (:func:`~hope_rs.pipeline.confidence.
-        flipped_share`; the confidence stage).
     landmarks : (m, 2) ndarray of int or None
         The caller's landmarks (vertex of A, vertex of B), rows sorted by A's vertex; ``None``
         when there are none.
@@ -165,7 +162,6 @@ class MatchState:
     coarse: Any = None
     zoomout: np.ndarray | None = None
     confidence: np.ndarray | None = None
-    flipped: float | None = None
     landmarks: np.ndarray | None = None
     partial: Any = None
 
