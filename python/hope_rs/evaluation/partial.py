@@ -34,7 +34,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 
-from ..geometry.mesh import Mesh, load_mesh
+from ..geometry.mesh import Mesh, boundary_edges, load_mesh
 from .datasets import pairs_of
 
 __all__ = [
@@ -79,10 +79,9 @@ def submesh(mesh: Mesh, keep: np.ndarray) -> Part:
     keep = np.array(keep, dtype=bool)
     while True:
         part = _largest_component(mesh, keep)
-        f = part.mesh.faces
-        e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
-        u, count = np.unique(e, axis=0, return_counts=True)
-        ends = np.bincount(u[count == 1].reshape(-1), minlength=part.mesh.n_vertices)
+        ends = np.bincount(
+            boundary_edges(part.mesh.faces).reshape(-1), minlength=part.mesh.n_vertices
+        )
         pinched = ends > 2
         if not pinched.any():
             return part

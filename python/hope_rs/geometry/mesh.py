@@ -28,6 +28,7 @@ __all__ = [
     "SUPPORTED_FORMATS",
     "Mesh",
     "as_mesh",
+    "boundary_edges",
     "load_mesh",
     "merge_coincident_vertices",
     "scale_exponent",
@@ -142,6 +143,14 @@ def unique_edges(faces: np.ndarray) -> np.ndarray:
     """The undirected edges of ``faces``, each once as ``(low, high)``, sorted."""
     f = np.asarray(faces)
     return np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), 1), axis=0)
+
+
+def boundary_edges(faces: np.ndarray) -> np.ndarray:
+    """The edges of one face only (a surface's boundary), each once as ``(low, high)``, sorted."""
+    f = np.asarray(faces)
+    e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), 1)
+    u, count = np.unique(e, axis=0, return_counts=True)
+    return u[count == 1]
 
 
 def scale_exponent(vertices: np.ndarray, *, safe: tuple[float, float] = SAFE_COORDINATES) -> int:

@@ -32,6 +32,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
+from ..geometry.mesh import boundary_edges
 from ..shape import Shape
 from .anchors import (
     agree,
@@ -165,11 +166,8 @@ def _components(s: Shape) -> tuple[np.ndarray, np.ndarray]:
     e = s.edges
     graph = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
     _, comp = connected_components(graph, directed=False)
-    faces = s.internal.faces
-    ends = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    edge, count = np.unique(ends, axis=0, return_counts=True)
     is_open = np.zeros(int(comp.max()) + 1, dtype=bool)
-    is_open[comp[edge[count == 1, 0]]] = True
+    is_open[comp[boundary_edges(s.internal.faces)[:, 0]]] = True
     return comp.astype(np.int64), is_open
 
 

@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..geometry.mesh import boundary_edges
 from ..shape import Shape
 from .config import PartialConfig
 from .state import QUIET, MatchState, Stage
@@ -56,10 +57,7 @@ __all__ = [
 
 def boundary_length(shape: Shape) -> float:
     """Total length of the edges of one face only, in units of the shape's own sqrt(area)."""
-    f = shape.internal.faces
-    e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
-    u, count = np.unique(e, axis=0, return_counts=True)
-    b = u[count == 1]
+    b = boundary_edges(shape.internal.faces)
     p = shape.internal.vertices
     return float(np.linalg.norm(p[b[:, 0]] - p[b[:, 1]], axis=1).sum() / shape.internal.scale)
 
