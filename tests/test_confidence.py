@@ -99,7 +99,33 @@ def test_the_model_reads_one_weight_per_feature():
         predict_confidence(x, ConfidenceConfig(intercept=0.0)), np.full(3, 0.5)
     )
     with pytest.raises(ValueError, match="one entry per feature"):
-        predict_confidence(x, ConfidenceConfig(weights=(1.0, 2.0)))
+        predict_confidence(x[:, :2])
+
+
+@pytest.mark.parametrize(
+    "field, value, message",
+    [
+        ("weights", (1.0, 2.0), "one finite number per feature"),
+        ("weights", "abc", "sequence of numbers"),
+        ("n_anchors", 0, "integer >= 1"),
+        ("rings", 2.5, "integer >= 0"),
+        ("floor", 0.0, "positive number"),
+        ("intercept", float("nan"), "finite number"),
+        ("threshold", 1.5, r"in \[0, 1\]"),
+        ("failed_flipped", True, r"in \[0, 1\]"),
+    ],
+)
+def test_confidence_config_refuses_bad_settings_before_matching(field, value, message):
+    with pytest.raises(
+        (TypeError, ValueError), match=f"ConfidenceConfig.{field} must .*{message}"
+    ):
+        ConfidenceConfig(**{field: value})
+
+
+def test_confidence_config_weights_become_floats():
+    cfg = ConfidenceConfig(weights=list(range(len(CONFIDENCE_FEATURES))))
+    assert cfg.weights == tuple(float(i) for i in range(len(CONFIDENCE_FEATURES)))
+    assert ConfidenceConfig() == ConfidenceConfig(weights=list(ConfidenceConfig().weights))
 
 
 def test_quality_rule():

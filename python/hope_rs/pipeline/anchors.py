@@ -188,6 +188,31 @@ class AnchorPlacement:
         return q
 
 
+def firm_regions(a: Shape, firm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(label, sizes)``: the connected components of A's ``firm`` vertices (joined by edges
+    between firm vertices), ``label`` -1 elsewhere, and each component's vertex count."""
+    n = a.n_vertices
+    e = a.edges
+    keep = firm[e[:, 0]] & firm[e[:, 1]]
+    graph = sp.csr_matrix((np.ones(int(keep.sum())), (e[keep, 0], e[keep, 1])), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    label[~firm] = -1
+    return label, np.bincount(label[firm])
+
+
+def core_fields(
+    a: Shape, b: Shape, f: np.ndarray, core: np.ndarray, config: RepairConfig = RepairConfig()
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(da, db)``: distance fields on A of ``config.n_anchors`` farthest-point anchors among
+    the ``core`` vertices, and on B of their images under ``f``, without the anchors that
+    disagree with the others (:func:`drop_disagreeing_anchors`); ``db`` not yet
+    :func:`reachable`."""
+    anchors, da = farthest_witnesses(a, np.flatnonzero(core), config.n_anchors)
+    db = distance_fields(b, f[anchors])
+    _, da, db = drop_disagreeing_anchors(f, anchors, da, db, config)
+    return da, db
+
+
 def swapped_regions(
     a: Shape,
     b: Shape,
@@ -214,20 +239,12 @@ def swapped_regions(
     firm = consistent >= config.region_consistent
     if firm.sum() < 4:
         return f
-    n = a.n_vertices
-    e = a.edges
-    keep = firm[e[:, 0]] & firm[e[:, 1]]
-    graph = sp.csr_matrix((np.ones(int(keep.sum())), (e[keep, 0], e[keep, 1])), shape=(n, n))
-    _, label = connected_components(graph, directed=False)
-    label[~firm] = -1
-    sizes = np.bincount(label[firm])
+    label, sizes = firm_regions(a, firm)
     core = int(np.argmax(sizes))
     others = [c for c in np.flatnonzero(sizes >= config.region_min_size) if c != core]
     if sizes[core] < 4 or not others:
         return f
-    anchors, da = farthest_witnesses(a, np.flatnonzero(label == core), config.n_anchors)
-    db = distance_fields(b, f[anchors])
-    anchors, da, db = drop_disagreeing_anchors(f, anchors, da, db, config)
+    da, db = core_fields(a, b, f, label == core, config)
     # Regions of other mesh components than the anchors' have no distances to compare.
     others = [c for c in others if np.isfinite(da[:, label == c]).all()]
     if not others:

@@ -53,6 +53,7 @@ __all__ = [
     "flipped_share",
     "match_quality",
     "predict_confidence",
+    "state_quality",
 ]
 
 
@@ -102,6 +103,18 @@ def match_quality(
         mean < config.failed_mean or share < config.failed_share or flipped > config.failed_flipped
     )
     return MatchQuality(mean, share, bool(failed), float(flipped))
+
+
+def state_quality(state: MatchState) -> MatchQuality | None:
+    """The :class:`MatchQuality` of the state's map and confidence (``None`` without a
+    confidence); a whole's vertices without a counterpart on the part (the partial stage's
+    ``counterpart``) have no right match to find, and the pair is judged on the others."""
+    if state.confidence is None:
+        return None
+    counterpart = getattr(state.partial, "counterpart", None)
+    judged = state.confidence if counterpart is None else state.confidence[counterpart]
+    flipped = flipped_share(state.a, state.b, state.f, among=counterpart)
+    return match_quality(judged, state.config.confidence, flipped=flipped)
 
 
 def flipped_share(a: Shape, b: Shape, f: np.ndarray, among: np.ndarray | None = None) -> float:

@@ -550,6 +550,49 @@ class ConfidenceConfig:
     failed_share: float = 0.5
     failed_flipped: float = 0.3
 
+    def __post_init__(self):
+        # Checked here, not when the confidence stage runs after the whole match.
+        for name, low in (("n_anchors", 1), ("rings", 0)):
+            x = getattr(self, name)
+            if isinstance(x, bool) or not isinstance(x, numbers.Integral) or x < low:
+                raise ValueError(f"ConfidenceConfig.{name} must be an integer >= {low}, got {x!r}")
+        try:
+            if isinstance(self.weights, (str, bytes)):
+                raise TypeError
+            weights = tuple(float(w) for w in self.weights)
+        except (TypeError, ValueError):
+            raise TypeError(
+                f"ConfidenceConfig.weights must be a sequence of numbers, got {self.weights!r}"
+            ) from None
+        if len(weights) != len(CONFIDENCE_FEATURES) or not all(map(math.isfinite, weights)):
+            raise ValueError(
+                f"ConfidenceConfig.weights must hold one finite number per feature "
+                f"({', '.join(CONFIDENCE_FEATURES)}), got {len(weights)} values"
+            )
+        object.__setattr__(self, "weights", weights)
+        for name, low, high in (
+            ("floor", 0.0, math.inf),
+            ("intercept", -math.inf, math.inf),
+            ("threshold", 0.0, 1.0),
+            ("failed_mean", 0.0, 1.0),
+            ("failed_share", 0.0, 1.0),
+            ("failed_flipped", 0.0, 1.0),
+        ):
+            x = getattr(self, name)
+            if (
+                isinstance(x, bool)
+                or not isinstance(x, numbers.Real)
+                or not math.isfinite(x)
+                or not low <= x <= high
+                or (name == "floor" and x <= 0.0)
+            ):
+                span = (
+                    "a positive number"
+                    if name == "floor"
+                    else ("a finite number" if name == "intercept" else "a number in [0, 1]")
+                )
+                raise ValueError(f"ConfidenceConfig.{name} must be {span}, got {x!r}")
+
 
 #: ``match``'s keyword options → (stage field of :class:`MatchConfig`, field of that stage).
 KEYWORDS: dict[str, tuple[str | None, str]] = {

@@ -36,6 +36,7 @@ __all__ = [
     "LandmarkStage",
     "check_landmarks",
     "coarse_landmarks",
+    "input_landmarks",
     "landmark_embedding",
     "landmark_initial_map",
     "pin",
@@ -116,6 +117,15 @@ def coarse_landmarks(
         v, count = np.unique(rows[:, col], return_counts=True)
         keep &= ~np.isin(rows[:, col], v[count > 1])
     return rows[keep] if keep.any() else None
+
+
+def input_landmarks(state: MatchState, swap: bool = False) -> np.ndarray | None:
+    """The caller's landmarks in the shapes' input numbering, for a nested match (of B to A
+    with ``swap``)."""
+    if state.landmarks is None:
+        return None
+    la, lb = state.a.order[state.landmarks[:, 0]], state.b.order[state.landmarks[:, 1]]
+    return np.column_stack([lb, la] if swap else [la, lb])
 
 
 def pin(f: np.ndarray, landmarks: np.ndarray | None) -> np.ndarray:

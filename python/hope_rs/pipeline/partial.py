@@ -42,6 +42,7 @@ from scipy.spatial import cKDTree
 from ..geometry.mesh import boundary_edges
 from ..shape import Shape
 from .config import PartialConfig
+from .landmarks import input_landmarks
 from .state import QUIET, MatchState, Stage
 
 __all__ = [
@@ -169,7 +170,7 @@ class PartialStage(Stage):
                 state.a,
                 state.init,
                 state.config,
-                landmarks=_landmarks(state, swap=True),
+                landmarks=input_landmarks(state, swap=True),
                 on_stage=lambda st, name: nested.update(partial=st.partial),
             )
             g = state.b.map_in(state.a, back.map)
@@ -215,7 +216,7 @@ class PartialStage(Stage):
         # The nested runs take a given initial map in the input numbering.
         init = state.init if isinstance(state.init, str) else a.map_out(b, state.init)
         guess = a.at_scale(info.scale) if info.scale != a.scale else a
-        landmarks = _landmarks(state)
+        landmarks = input_landmarks(state)
 
         def at(view: Shape) -> tuple:
             """(view, the part's match at that view's scale)."""
@@ -286,12 +287,3 @@ def _refined_merge(state: MatchState, runs: list, config, landmarks, rings: int)
 def _mean_confidence(run: tuple) -> float:
     """Mean confidence of a (view, result) run."""
     return float(np.mean(run[1].confidence))
-
-
-def _landmarks(state: MatchState, swap: bool = False) -> np.ndarray | None:
-    """The caller's landmarks in the shapes' input numbering, for a nested match (of B to A
-    with ``swap``)."""
-    if state.landmarks is None:
-        return None
-    la, lb = state.a.order[state.landmarks[:, 0]], state.b.order[state.landmarks[:, 1]]
-    return np.column_stack([lb, la] if swap else [la, lb])

@@ -15,7 +15,7 @@ from typing import Callable
 import numpy as np
 
 from ..shape import Shape
-from .confidence import flipped_share, match_quality
+from .confidence import state_quality
 from .config import MatchConfig
 from .progress import StageLog
 from .result import MatchResult
@@ -78,18 +78,8 @@ def run_match(
         state.hooks.on("stage_end", on_stage)
     run_stages(state, default_stages() if stages is None else stages)
     state.timings["total"] = time.perf_counter() - t0
-    confidence = quality = None
-    if state.confidence is not None:
-        confidence = state.confidence[a.rank]
-        # A whole's vertices without a counterpart on the part have no right match to find:
-        # the pair is judged on the others.
-        counterpart = getattr(state.partial, "counterpart", None)
-        judged = confidence if counterpart is None else confidence[counterpart[a.rank]]
-        quality = match_quality(
-            judged,
-            config.confidence,
-            flipped=flipped_share(state.a, state.b, state.f, among=counterpart),
-        )
+    confidence = None if state.confidence is None else state.confidence[a.rank]
+    quality = state_quality(state)
     return MatchResult(
         a.map_out(b, state.f).astype(np.int64),
         a.map_out(b, state.f0).astype(np.int64),
