@@ -20,6 +20,7 @@ from hope_rs.pipeline.confidence import (
 )
 from hope_rs.pipeline.config import CONFIDENCE_FEATURES, ConfidenceConfig, MatchConfig
 from hope_rs.pipeline.progress import STAGES
+from hope_rs.pipeline.turned import TurnedFaces
 
 
 @pytest.fixture(scope="module")
@@ -116,9 +117,7 @@ def test_the_model_reads_one_weight_per_feature():
     ],
 )
 def test_confidence_config_refuses_bad_settings_before_matching(field, value, message):
-    with pytest.raises(
-        (TypeError, ValueError), match=f"ConfidenceConfig.{field} must .*{message}"
-    ):
+    with pytest.raises((TypeError, ValueError), match=f"ConfidenceConfig.{field} must .*{message}"):
         ConfidenceConfig(**{field: value})
 
 
@@ -179,6 +178,8 @@ def test_flipped_share_is_the_area_a_map_turns_over(data):
     assert flipped_share(a, b, same, among=~second) < 0.01
     assert flipped_share(a, b, same, among=second) > 0.99
     assert flipped_share(a, a, a.map_in(a, np.arange(2 * n))) < 0.01
+    # Per vertex (the refinement's orientation check): the second component's vertices.
+    np.testing.assert_array_equal(TurnedFaces(a, b).vertices(same, 0.5), second)
     # Images on one vertex count on neither side; no counted triangle gives 0.
     assert flipped_share(a, b, np.zeros(2 * n, dtype=np.int64)) == 0.0
     assert flipped_share(a, b, same, among=np.zeros(2 * n, dtype=bool)) == 0.0

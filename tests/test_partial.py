@@ -1,5 +1,7 @@
 """Partial shapes: the benchmark-set generator, the detection of a part, and matching a part."""
 
+import inspect
+
 import numpy as np
 import pytest
 from conftest import data_path
@@ -20,8 +22,15 @@ from hope_rs.evaluation.partial import (
     submesh,
     write_partial_sets,
 )
+from hope_rs.pipeline import refine as refine_module
 from hope_rs.pipeline import runner
-from hope_rs.pipeline.config import ConfidenceConfig, MatchConfig, PartialConfig, SpectralConfig
+from hope_rs.pipeline.config import (
+    ConfidenceConfig,
+    MatchConfig,
+    PartialConfig,
+    RefineConfig,
+    SpectralConfig,
+)
 from hope_rs.pipeline.partial import boundary_length, covered_share, detect_part
 from hope_rs.pipeline.runner import run_match
 from hope_rs.pipeline.spectral import basis_slope
@@ -324,19 +333,54 @@ def test_wide_trials_rescue_a_posed_faust_part(tmp_path):
 
 
 @pytest.mark.slow
-def test_quality_flags_a_half_faust_part_carried_onto_the_wrong_branch(tmp_path):
-    """FAUST 007 (on one leg, the other raised) cut in half and matched to 008: at no scale
-    does the part settle in the right basin. The map carries the torso onto B's other leg and
-    the raised leg onto the torso, which keeps distances well enough for a middling
-    confidence but turns that area over; the pair is flagged."""
+def test_a_half_faust_part_keeps_its_orientation(tmp_path):
+    """FAUST 007 (on one leg, the other raised) cut in half and matched to 008. Without the
+    orientation check of the part's refinement, at no scale does the part settle in the right
+    basin: the map carries the torso onto B's other leg and the raised leg onto the torso,
+    which keeps distances well enough for a middling confidence but turns that area over, and
+    the pair is flagged. With it (the default) the turned vertices do not vote and the map
+    is right."""
     stems = ("07_tr_reg_007_cut50", "07_tr_reg_008")
     a, b, ai, bi = _partial_pair(tmp_path, "faust_r", "cut50", 7, stems)
     res = match(a, b)
-    failed = geodesic_errors(b, res.map, a_idx=ai, b_idx=bi).mean() > 0.2
-    assert res.quality.likely_failed == failed
-    if failed:  # the confidence alone passes it; the turned-over area does not
-        assert res.quality.mean_confidence > ConfidenceConfig().failed_mean
-        assert res.quality.flipped_share > ConfidenceConfig().failed_flipped
+    unchecked = match(a, b, config=MatchConfig(partial=PartialConfig(max_turned=None)))
+    e, e_unchecked = (
+        geodesic_errors(b, r.map, a_idx=ai, b_idx=bi).mean() for r in (res, unchecked)
+    )
+    assert e < 0.15 and e_unchecked > 0.3
+    assert not res.quality.likely_failed and res.quality.flipped_share < 0.15
+    # The confidence alone passes the wrong map; the turned-over area does not.
+    assert unchecked.quality.likely_failed
+    assert unchecked.quality.mean_confidence > ConfidenceConfig().failed_mean
+    assert unchecked.quality.flipped_share > ConfidenceConfig().failed_flipped
+
+
+def test_the_part_s_matches_check_orientation(sphere, monkeypatch):
+    """``PartialConfig.max_turned`` reaches the refinement of the part's matches only; a whole
+    pair's refinement keeps ``RefineConfig.max_turned`` (unset by default)."""
+    seen = []
+    real = refine_module.refine
+
+    def spy(*args, **kwargs):
+        config = inspect.signature(real).bind(*args, **kwargs).arguments["config"]
+        seen.append(config.max_turned)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(refine_module, "refine", spy)
+    part = cut_by_plane(sphere, plane_normal(2), 0.3).mesh
+    match(part, sphere)
+    assert seen and set(seen) == {PartialConfig().max_turned}
+    seen.clear()
+    match(part, sphere, config=MatchConfig(partial=PartialConfig(max_turned=0.25)))
+    assert seen and set(seen) == {0.25}
+    seen.clear()
+    match(sphere, sphere)
+    assert seen == [None]
+    for bad in (0.0, 1.5, "0.5", True):
+        with pytest.raises(ValueError, match=r"PartialConfig.max_turned must be None or a number"):
+            PartialConfig(max_turned=bad)
+    with pytest.raises(ValueError, match=r"RefineConfig.max_turned must be None or a number"):
+        RefineConfig(max_turned=-1)
 
 
 def _partial_pair(tmp_path, source: str, condition: str, index: int, stems: tuple):

@@ -29,10 +29,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
-from ..geometry.mesh import boundary_edges
 from ..shape import Shape
 from .anchors import (
     agree,
@@ -45,6 +42,7 @@ from .anchors import (
 from .config import CONFIDENCE_FEATURES, ConfidenceConfig, RefineConfig, RepairConfig
 from .lmd import local_map_distortion
 from .state import MatchState, Stage
+from .turned import TurnedFaces
 
 __all__ = [
     "ConfidenceStage",
@@ -118,18 +116,10 @@ def state_quality(state: MatchState) -> MatchQuality | None:
 
 
 def flipped_share(a: Shape, b: Shape, f: np.ndarray, among: np.ndarray | None = None) -> float:
-    """The share of A's area whose triangles ``f`` turns over.
-
-    A triangle of A (internal numbering, oriented outward) is turned over when the triangle of
-    its corners' images winds against B's outward vertex normals there (their sum). Triangles
-    whose image is degenerate (two corners on one vertex, or a zero area) count on neither
-    side; with ``among``, only the triangles with all three corners in it count.
-
-    Which side of an open surface is outward is a guess (:mod:`hope_rs.geometry.orientation`):
-    a concave part can come out inward, and a right map onto it would then turn everything
-    over. So the triangles are grouped by their component of A and the component of B their
-    first corner lands in, and a group with either component open counts the smaller of its
-    turned and kept areas as turned (at most half of it).
+    """The share of A's area whose triangles ``f`` turns over
+    (:class:`~hope_rs.pipeline.turned.TurnedFaces`: triangles whose image is degenerate count
+    on neither side, and in a group with an open component the smaller side counts as turned,
+    at most half of it).
 
     On remeshed pairs a right map turns a few percent of the area over, where the two
     triangulations disagree; a region carried onto a mirror image or a swapped branch turns
@@ -149,55 +139,7 @@ def flipped_share(a: Shape, b: Shape, f: np.ndarray, among: np.ndarray | None = 
     float
         In [0, 1]; 0 when no triangle counts.
     """
-    fa = a.internal.faces
-    if among is not None:
-        fa = fa[np.asarray(among, dtype=bool)[fa].all(axis=1)]
-    image = np.asarray(f)[fa]
-    normals_b = _vertex_normals(b)[image].sum(axis=1)
-    turned = np.einsum("ij,ij->i", _face_normals(b.internal.vertices, image), normals_b)
-    counted = (turned != 0.0) & (image[:, 0] != image[:, 1]) & (image[:, 1] != image[:, 2])
-    counted &= image[:, 2] != image[:, 0]
-    area = np.linalg.norm(_face_normals(a.internal.vertices, fa), axis=1) * counted
-    total = float(area.sum())
-    if total <= 0.0:
-        return 0.0
-    comp_a, open_a = _components(a)
-    comp_b, open_b = _components(b)
-    width = comp_b.max() + 1
-    group, index = np.unique(comp_a[fa[:, 0]] * width + comp_b[image[:, 0]], return_inverse=True)
-    over = np.bincount(index, area * (turned < 0.0), minlength=group.size)
-    kept = np.bincount(index, area, minlength=group.size) - over
-    either_open = open_a[group // width] | open_b[group % width]
-    over = np.where(either_open, np.minimum(over, kept), over)
-    return float(over.sum() / total)
-
-
-def _components(s: Shape) -> tuple[np.ndarray, np.ndarray]:
-    """(component of each vertex, int64; whether each component has an edge of one face only)
-    of the internal mesh, components linked through its edges."""
-    n = s.n_vertices
-    e = s.edges
-    graph = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
-    _, comp = connected_components(graph, directed=False)
-    is_open = np.zeros(int(comp.max()) + 1, dtype=bool)
-    is_open[comp[boundary_edges(s.internal.faces)[:, 0]]] = True
-    return comp.astype(np.int64), is_open
-
-
-def _face_normals(p: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(m, 3) cross products of the faces' edges: normal times twice the area."""
-    return np.cross(p[faces[:, 1]] - p[faces[:, 0]], p[faces[:, 2]] - p[faces[:, 0]])
-
-
-def _vertex_normals(s: Shape) -> np.ndarray:
-    """(n, 3) area-weighted sums of the normals of each vertex's faces (internal numbering)."""
-    faces = s.internal.faces
-    n = _face_normals(s.internal.vertices, faces)
-    out = np.zeros((s.n_vertices, 3))
-    for corner in range(3):
-        for axis in range(3):
-            out[:, axis] += np.bincount(faces[:, corner], n[:, axis], minlength=s.n_vertices)
-    return out
+    return TurnedFaces(a, b, among).share(f)
 
 
 def confidence_features(

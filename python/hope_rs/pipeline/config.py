@@ -202,6 +202,11 @@ class RefineConfig:
     nearest_unused_k : int
         Unused vertices ranked per group of duplicates beyond twice its size when the
         refinement completes a map to a one-to-one one.
+    max_turned : float or None
+        A vertex more than this share of whose triangles' area the map turns over
+        (:mod:`hope_rs.pipeline.turned`) does not vote in the k-hop steps; ``None``: the
+        orientation is not checked. The partial stage sets it for a part's matches
+        (``PartialConfig.max_turned``).
     repair : RepairConfig
     """
 
@@ -221,9 +226,11 @@ class RefineConfig:
     stay_counts: int = 1
     auction_floor_div: int = 16
     nearest_unused_k: int = 16
+    max_turned: float | None = None
     repair: RepairConfig = field(default_factory=RepairConfig)
 
     def __post_init__(self):
+        _check_share("RefineConfig.max_turned", self.max_turned)
         # A tuple, so that the config stays hashable whatever sequence was given.
         if self.schedule is not None and not isinstance(self.schedule, tuple):
             try:
@@ -385,6 +392,14 @@ class MultiscaleConfig:
     lift_ridge: float = 1e-3
 
 
+def _check_share(name: str, value) -> None:
+    """A one-line error unless ``value`` is ``None`` or a number in (0, 1]."""
+    if value is None:
+        return
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not 0.0 < value <= 1.0:
+        raise ValueError(f"{name} must be None or a number in (0, 1], got {value!r}")
+
+
 def _positive_numbers(name: str, value) -> tuple[float, ...]:
     """``value`` as a tuple of finite positive floats, or a one-line error naming the field."""
     try:
@@ -452,6 +467,12 @@ class PartialConfig:
         A map of ``wide_trials`` is kept only when its mean confidence exceeds the best of the
         other maps by at least this: the confidence of maps of one part varies by about this
         much between scales whether or not they are right.
+    max_turned : float or None
+        The part's matches run with ``RefineConfig.max_turned`` at this value: a vertex whose
+        triangles the map mostly turns over does not vote. With nothing on the part to fill
+        the whole's missing side, a branch of the part can settle on another branch of the
+        whole wound the other way (a leg laid over the other leg's place and the torso),
+        keeping its distances; ``None``: the refinement's own setting.
     """
 
     enabled: bool = True
@@ -466,8 +487,10 @@ class PartialConfig:
     wide_trials: tuple[float, ...] = (0.85, 0.9, 1.1)
     wide_below: float = 0.85
     wide_margin: float = 0.15
+    max_turned: float | None = 0.5
 
     def __post_init__(self):
+        _check_share("PartialConfig.max_turned", self.max_turned)
         for name in ("scale_trials", "wide_trials"):
             object.__setattr__(self, name, _positive_numbers(name, getattr(self, name)))
         for name in ("wide_below", "wide_margin"):

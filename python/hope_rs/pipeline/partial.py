@@ -208,6 +208,10 @@ class PartialStage(Stage):
         a, b = state.a, state.b
         trials = cfg.partial.scale_trials
         off = dataclasses.replace(cfg, partial=dataclasses.replace(cfg.partial, enabled=False))
+        if cfg.partial.max_turned is not None:
+            off = dataclasses.replace(
+                off, refine=dataclasses.replace(cfg.refine, max_turned=cfg.partial.max_turned)
+            )
         if trials:
             # The trials are compared by their confidence (the map does not depend on it).
             off = dataclasses.replace(

@@ -7,8 +7,10 @@ a match and publishes the refinement's events to the other stages (see
 
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
@@ -22,6 +24,7 @@ from .landmarks import LandmarkCoordinates, pin
 from .lmd import LmdTracker
 from .progress import StageLog, step_detail
 from .state import Iteration, MatchState, Stage, StepClock
+from .turned import TurnedFaces
 
 __all__ = [
     "Iteration",
@@ -118,6 +121,9 @@ def refine(
         raise ValueError(f"every k of the schedule must be in [1, {k_max}], got {schedule}")
     f = np.ascontiguousarray(f0, dtype=np.int64)
     lmd = LmdTracker(a, b)
+    turned = None
+    if cfg.max_turned is not None:
+        turned = functools.partial(TurnedFaces(a, b).vertices, max_share=cfg.max_turned)
     coords = fixed = None
     if landmarks is not None:
         coords = LandmarkCoordinates(a, b, landmarks, cfg.repair)
@@ -181,7 +187,7 @@ def refine(
                 callback(history[-1])
         for step, k in enumerate(schedule):
             t0 = time.perf_counter()
-            w = trusted(voters(lmd, f, min_consistent, cfg.min_witness_fraction), f)
+            w = trusted(voters(lmd, f, min_consistent, cfg.min_witness_fraction, turned), f)
             stay = cfg.stay_counts if n_pass >= cfg.stay_pass and not w.all() else 0
             ran = clock.cost, clock.assign
             f_new = assign_by_overlap(a, b, k, f, w, config=cfg, stay=stay, clock=clock)
@@ -211,7 +217,7 @@ def refine(
     if cfg.polish_k is not None:
         t0 = time.perf_counter()
         k = min(cfg.polish_k, k_max)
-        w = trusted(voters(lmd, f, min_consistent, cfg.min_witness_fraction), f)
+        w = trusted(voters(lmd, f, min_consistent, cfg.min_witness_fraction, turned), f)
         f_new = pin(best_overlap(a, b, k, f, w, top_k=cfg.top_k), landmarks)
         history.append(
             Iteration(
@@ -255,10 +261,19 @@ def global_repair(
     return np.where(ok | (g == f), g, f)
 
 
-def voters(lmd: LmdTracker, f, min_consistent: float, min_fraction: float) -> np.ndarray:
-    """The LMD witnesses of ``f``, or every vertex when fewer than ``min_fraction`` qualify."""
+def voters(
+    lmd: LmdTracker,
+    f,
+    min_consistent: float,
+    min_fraction: float,
+    turned: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> np.ndarray:
+    """The LMD witnesses of ``f``, or every vertex when fewer than ``min_fraction`` qualify;
+    without the vertices ``turned(f)`` marks (the orientation check of
+    ``RefineConfig.max_turned``)."""
     w = lmd.witnesses(f, min_consistent=min_consistent)
-    return w if w.mean() >= min_fraction else np.ones_like(w)
+    w = w if w.mean() >= min_fraction else np.ones_like(w)
+    return w if turned is None else w & ~turned(f)
 
 
 def assign_by_overlap(
