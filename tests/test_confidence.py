@@ -99,7 +99,7 @@ def test_the_model_reads_one_weight_per_feature():
     np.testing.assert_allclose(
         predict_confidence(x, ConfidenceConfig(intercept=0.0)), np.full(3, 0.5)
     )
-    with pytest.raises(ValueError, match="one entry per feature"):
+    with pytest.raises(ValueError, match="features must have one column per feature"):
         predict_confidence(x[:, :2])
 
 
@@ -107,10 +107,11 @@ def test_the_model_reads_one_weight_per_feature():
     "field, value, message",
     [
         ("weights", (1.0, 2.0), "one finite number per feature"),
+        ("weights", (float("inf"),) * len(CONFIDENCE_FEATURES), "got inf"),
         ("weights", "abc", "sequence of numbers"),
         ("n_anchors", 0, "integer >= 1"),
         ("rings", 2.5, "integer >= 0"),
-        ("floor", 0.0, "positive number"),
+        ("floor", 0.0, "finite positive number"),
         ("intercept", float("nan"), "finite number"),
         ("threshold", 1.5, r"in \[0, 1\]"),
         ("failed_flipped", True, r"in \[0, 1\]"),

@@ -263,11 +263,12 @@ def test_a_cut_tosca_shape_gains_from_the_slanted_spectral_pass(tmp_path):
 def test_scale_trials_keep_a_cut_cat_off_the_whole_s_missing_side(tmp_path):
     """TOSCA cat0 cut by a plane along its back, matched to cat2 (sitting): at the guessed
     scale alone a hind quarter settles on the side the part lacks; the trials at nearby
-    scales and their merge, chosen by confidence, halve the error."""
+    scales and their merge, chosen by confidence, halve the error. (The trials alone: the
+    orientation check of the part's votes is off in both runs.)"""
     a, b, ai, bi = _partial_pair(tmp_path, "tosca_r", "cut30", 1, ("01_cat0_cut30", "01_cat2"))
-    res = match(a, b)
+    res = match(a, b, config=MatchConfig(partial=PartialConfig(max_turned=None)))
     e = geodesic_errors(b, res.map, a_idx=ai, b_idx=bi).mean()
-    single = MatchConfig(partial=PartialConfig(scale_trials=()))
+    single = MatchConfig(partial=PartialConfig(scale_trials=(), max_turned=None))
     e_single = geodesic_errors(b, match(a, b, config=single).map, a_idx=ai, b_idx=bi).mean()
     assert e < 0.1 and e_single > 1.5 * e
     assert res.confidence is not None and res.stage("partial").ran
@@ -322,11 +323,13 @@ def test_wide_trials_run_only_when_no_nearby_map_is_confident(sphere, monkeypatc
 def test_wide_trials_rescue_a_posed_faust_part(tmp_path):
     """FAUST tr_reg_007 (standing on one leg, hands up) cut at 30%, matched to tr_reg_008: at
     the guessed scale and its nearby trials the shoulder stumps settle on the chest and the
-    raised knee elsewhere, the mean confidence stays low, and the wider trials find the map."""
+    raised knee elsewhere, the mean confidence stays low, and the wider trials find the map.
+    (The trials alone: the orientation check of the part's votes is off in both runs.)"""
     stems = ("07_tr_reg_007_cut30", "07_tr_reg_008")
     a, b, ai, bi = _partial_pair(tmp_path, "faust_r", "cut30", 7, stems)
-    res = match(a, b)
-    narrow = match(a, b, config=MatchConfig(partial=PartialConfig(wide_trials=())))
+    res = match(a, b, config=MatchConfig(partial=PartialConfig(max_turned=None)))
+    narrow_cfg = PartialConfig(wide_trials=(), max_turned=None)
+    narrow = match(a, b, config=MatchConfig(partial=narrow_cfg))
     e, e_narrow = (geodesic_errors(b, r.map, a_idx=ai, b_idx=bi).mean() for r in (res, narrow))
     assert e < 0.1 and e_narrow > 0.12
     assert res.confidence.mean() > narrow.confidence.mean() + 0.15
@@ -373,6 +376,14 @@ def test_the_part_s_matches_check_orientation(sphere, monkeypatch):
     seen.clear()
     match(part, sphere, config=MatchConfig(partial=PartialConfig(max_turned=0.25)))
     assert seen and set(seen) == {0.25}
+    seen.clear()
+    match(sphere, part)  # whole -> part: the part's match to the whole, inverted
+    assert seen and set(seen) == {PartialConfig().max_turned}
+    seen.clear()
+    # Without the partial setting a part's matches keep the refinement's own.
+    own = MatchConfig(partial=PartialConfig(max_turned=None), refine=RefineConfig(max_turned=0.75))
+    match(part, sphere, config=own)
+    assert seen and set(seen) == {0.75}
     seen.clear()
     match(sphere, sphere)
     assert seen == [None]

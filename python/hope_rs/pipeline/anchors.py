@@ -21,6 +21,20 @@ from .._blas import single_threaded_blas
 from ..shape import Shape
 from .config import RepairConfig
 
+__all__ = [
+    "AnchorPlacement",
+    "agree",
+    "anchor_step",
+    "core_fields",
+    "distance_fields",
+    "drop_disagreeing_anchors",
+    "farthest_witnesses",
+    "firm_regions",
+    "reachable",
+    "shift_lower_bound",
+    "swapped_regions",
+]
+
 
 def distance_fields(shape: Shape, sources) -> np.ndarray:
     """Edge-graph distances / sqrt(area) from each source to every vertex, (len(sources), n)."""

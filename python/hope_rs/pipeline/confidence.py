@@ -216,8 +216,8 @@ def predict_confidence(features: np.ndarray, config: ConfidenceConfig = Confiden
     w = np.asarray(config.weights, dtype=np.float64)
     if w.size != features.shape[1]:
         raise ValueError(
-            f"ConfidenceConfig.weights must have one entry per feature "
-            f"({', '.join(CONFIDENCE_FEATURES)}), got {w.size}"
+            f"features must have one column per feature of ConfidenceConfig.weights "
+            f"({', '.join(CONFIDENCE_FEATURES)}): {w.size}, got {features.shape[1]}"
         )
     z = features @ w + config.intercept
     return 1.0 / (1.0 + np.exp(-np.clip(z, -60.0, 60.0)))

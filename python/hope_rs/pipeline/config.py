@@ -204,8 +204,9 @@ class RefineConfig:
         refinement completes a map to a one-to-one one.
     max_turned : float or None
         A vertex more than this share of whose triangles' area the map turns over
-        (:mod:`hope_rs.pipeline.turned`) does not vote in the k-hop steps; ``None``: the
-        orientation is not checked. The partial stage sets it for a part's matches
+        (:mod:`hope_rs.pipeline.turned`) does not vote in the k-hop steps and the polish (the
+        ``min_witness_fraction`` rule is judged before); ``None``: the orientation is not
+        checked. The partial stage sets it for a part's matches
         (``PartialConfig.max_turned``).
     repair : RepairConfig
     """
@@ -472,7 +473,9 @@ class PartialConfig:
         triangles the map mostly turns over does not vote. With nothing on the part to fill
         the whole's missing side, a branch of the part can settle on another branch of the
         whole wound the other way (a leg laid over the other leg's place and the torso),
-        keeping its distances; ``None``: the refinement's own setting.
+        keeping its distances; ``None``: the refinement's own setting. A whole matched
+        directly to its part (``whole_to_part="direct"``, or a given initial map) keeps the
+        refinement's own setting too.
     """
 
     enabled: bool = True
@@ -587,10 +590,15 @@ class ConfidenceConfig:
             raise TypeError(
                 f"ConfidenceConfig.weights must be a sequence of numbers, got {self.weights!r}"
             ) from None
-        if len(weights) != len(CONFIDENCE_FEATURES) or not all(map(math.isfinite, weights)):
+        if len(weights) != len(CONFIDENCE_FEATURES):
             raise ValueError(
                 f"ConfidenceConfig.weights must hold one finite number per feature "
                 f"({', '.join(CONFIDENCE_FEATURES)}), got {len(weights)} values"
+            )
+        bad = [w for w in weights if not math.isfinite(w)]
+        if bad:
+            raise ValueError(
+                f"ConfidenceConfig.weights must hold one finite number per feature, got {bad[0]}"
             )
         object.__setattr__(self, "weights", weights)
         for name, low, high in (
@@ -610,7 +618,7 @@ class ConfidenceConfig:
                 or (name == "floor" and x <= 0.0)
             ):
                 span = (
-                    "a positive number"
+                    "a finite positive number"
                     if name == "floor"
                     else ("a finite number" if name == "intercept" else "a number in [0, 1]")
                 )

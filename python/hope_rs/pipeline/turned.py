@@ -117,7 +117,8 @@ class TurnedFaces:
 
     def vertices(self, f: np.ndarray, max_share: float) -> np.ndarray:
         """Bool per vertex of A: more than ``max_share`` of the area of its triangles is turned
-        over by ``f``."""
+        over by ``f``. In a group with an open component that is the smaller side: a map that
+        turns most of such a group over marks the side it keeps."""
         over, _ = self(f)
         corners = self.faces.ravel()
         total = np.bincount(corners, np.repeat(self.area, 3), minlength=self.n_a)
