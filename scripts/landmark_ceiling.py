@@ -46,7 +46,10 @@ def main() -> None:
     ap.add_argument("--set", default="tosca_nonisometric_r")
     ap.add_argument("--max-pairs", type=int, default=None)
     args = ap.parse_args()
-    pairs = pairs_of(args.data / args.set)[: args.max_pairs]
+    try:
+        pairs = pairs_of(args.data / args.set)[: args.max_pairs]
+    except ValueError as e:
+        ap.error(str(e))  # one line, before any matching
     print("| pair | " + " | ".join(f"1/{s} of the candidates pinned" for s in STRIDES) + " |")
     print("|---|" + "---|" * len(STRIDES))
     means = []

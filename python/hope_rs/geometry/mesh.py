@@ -139,17 +139,20 @@ def as_mesh(x, name: str = "mesh") -> Mesh:
     )
 
 
+def _face_edges(faces: np.ndarray) -> np.ndarray:
+    """The three edges of every face as ``(low, high)`` rows, an edge once per face."""
+    f = np.asarray(faces)
+    return np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), 1)
+
+
 def unique_edges(faces: np.ndarray) -> np.ndarray:
     """The undirected edges of ``faces``, each once as ``(low, high)``, sorted."""
-    f = np.asarray(faces)
-    return np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), 1), axis=0)
+    return np.unique(_face_edges(faces), axis=0)
 
 
 def boundary_edges(faces: np.ndarray) -> np.ndarray:
     """The edges of one face only (a surface's boundary), each once as ``(low, high)``, sorted."""
-    f = np.asarray(faces)
-    e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), 1)
-    u, count = np.unique(e, axis=0, return_counts=True)
+    u, count = np.unique(_face_edges(faces), axis=0, return_counts=True)
     return u[count == 1]
 
 

@@ -393,11 +393,14 @@ class MultiscaleConfig:
     lift_ridge: float = 1e-3
 
 
+def _is_number(x) -> bool:
+    """Whether ``x`` is a finite real number (``bool`` is not one)."""
+    return not isinstance(x, bool) and isinstance(x, numbers.Real) and math.isfinite(x)
+
+
 def _check_share(name: str, value) -> None:
     """A one-line error unless ``value`` is ``None`` or a number in (0, 1]."""
-    if value is None:
-        return
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not 0.0 < value <= 1.0:
+    if value is not None and not (_is_number(value) and 0.0 < value <= 1.0):
         raise ValueError(f"{name} must be None or a number in (0, 1], got {value!r}")
 
 
@@ -498,7 +501,7 @@ class PartialConfig:
             object.__setattr__(self, name, _positive_numbers(name, getattr(self, name)))
         for name in ("wide_below", "wide_margin"):
             x = getattr(self, name)
-            if isinstance(x, bool) or not isinstance(x, numbers.Real) or not 0.0 <= x <= 1.0:
+            if not (_is_number(x) and 0.0 <= x <= 1.0):
                 raise ValueError(f"PartialConfig.{name} must be a number in [0, 1], got {x!r}")
         if self.whole_to_part not in ("reverse", "direct"):
             raise ValueError(
@@ -601,27 +604,14 @@ class ConfidenceConfig:
                 f"ConfidenceConfig.weights must hold one finite number per feature, got {bad[0]}"
             )
         object.__setattr__(self, "weights", weights)
-        for name, low, high in (
-            ("floor", 0.0, math.inf),
-            ("intercept", -math.inf, math.inf),
-            ("threshold", 0.0, 1.0),
-            ("failed_mean", 0.0, 1.0),
-            ("failed_share", 0.0, 1.0),
-            ("failed_flipped", 0.0, 1.0),
+        shares = ("threshold", "failed_mean", "failed_share", "failed_flipped")
+        for name, fits, span in (
+            ("floor", lambda x: x > 0.0, "a finite positive number"),
+            ("intercept", lambda x: True, "a finite number"),
+            *((n, lambda x: 0.0 <= x <= 1.0, "a number in [0, 1]") for n in shares),
         ):
             x = getattr(self, name)
-            if (
-                isinstance(x, bool)
-                or not isinstance(x, numbers.Real)
-                or not math.isfinite(x)
-                or not low <= x <= high
-                or (name == "floor" and x <= 0.0)
-            ):
-                span = (
-                    "a finite positive number"
-                    if name == "floor"
-                    else ("a finite number" if name == "intercept" else "a number in [0, 1]")
-                )
+            if not (_is_number(x) and fits(x)):
                 raise ValueError(f"ConfidenceConfig.{name} must be {span}, got {x!r}")
 
 

@@ -11,11 +11,10 @@ connected patches.
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 from ..geometry.orientation import face_keys
 from ..shape import Shape
+from .anchors import firm_regions
 
 __all__ = ["face_handles", "face_keys", "large_patches", "seed_handles"]
 
@@ -47,9 +46,8 @@ def large_patches(a: Shape, mask: np.ndarray, min_share: float) -> np.ndarray:
     """``mask`` restricted to its connected patches (over A's edges) of at least
     ``min_share`` of A's vertices: wrong handles lie in small patches (see
     :mod:`hope_rs.pipeline.growth` and docs/decisions.md#growth)."""
-    e = a.edges[mask[a.edges[:, 0]] & mask[a.edges[:, 1]]]
-    n = a.n_vertices
-    graph = sp.csr_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
-    label = connected_components(graph, directed=False)[1]
-    size = np.bincount(label, weights=mask)
-    return mask & (size[label] >= min_share * n)
+    if not mask.any():
+        return mask
+    label, sizes = firm_regions(a, mask)
+    # Vertices outside ``mask`` (label -1) are dropped by the ``&`` whatever size they read.
+    return mask & (sizes[label] >= min_share * a.n_vertices)

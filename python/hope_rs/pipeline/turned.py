@@ -70,13 +70,14 @@ class TurnedFaces:
     """
 
     def __init__(self, a: Shape, b: Shape, among: np.ndarray | None = None):
-        faces = a.internal.faces
+        faces, area = a.internal.faces, a.internal.face_areas
         if among is not None:
-            faces = faces[np.asarray(among, dtype=bool)[faces].all(axis=1)]
+            keep = np.asarray(among, dtype=bool)[faces].all(axis=1)
+            faces, area = faces[keep], area[keep]
         self.faces = faces
         self.n_a = a.n_vertices
-        #: Twice each triangle's area on A.
-        self.area = np.linalg.norm(face_normals(a.internal.vertices, faces), axis=1)
+        #: Each triangle's area on A.
+        self.area = area
         self._points_b = b.internal.vertices
         self._normals_b = vertex_normals(b)
         self._comp_a, self._open_a = _components(a)
