@@ -41,6 +41,7 @@ __all__ = [
     "CONDITIONS",
     "Part",
     "cut_by_plane",
+    "edge_graph",
     "hole_centres",
     "plane_normal",
     "punch_holes",
@@ -128,7 +129,8 @@ def cut_by_plane(mesh: Mesh, normal, fraction: float) -> Part:
     return submesh(mesh, keep)
 
 
-def _edge_graph(mesh: Mesh):
+def edge_graph(mesh: Mesh):
+    """The edge graph of ``mesh`` (symmetric CSR, edge lengths in the mesh's units)."""
     f = mesh.faces
     rows = f[:, [0, 1, 2]].reshape(-1)
     cols = f[:, [1, 2, 0]].reshape(-1)
@@ -141,7 +143,7 @@ def _edge_graph(mesh: Mesh):
 def hole_centres(mesh: Mesh, n_holes: int, *, skip: int = 5) -> np.ndarray:
     """``n_holes`` farthest-point samples (edge-graph geodesics) seeded at the vertex nearest
     the centroid, after the first ``skip`` samples."""
-    g = _edge_graph(mesh)
+    g = edge_graph(mesh)
     start = int(np.argmin(np.linalg.norm(mesh.vertices - mesh.vertices.mean(0), axis=1)))
     dist = dijkstra(g, indices=start)
     picked = []
@@ -158,7 +160,7 @@ def punch_holes(mesh: Mesh, n_holes: int, hole_area: float = 0.03) -> Part:
     ``sqrt(hole_area * area / pi)`` (a flat disc of ``hole_area`` of the surface)."""
     centres = hole_centres(mesh, n_holes)
     radius = np.sqrt(hole_area * mesh.area / np.pi)
-    d = dijkstra(_edge_graph(mesh), indices=centres, limit=radius).min(axis=0)
+    d = dijkstra(edge_graph(mesh), indices=centres, limit=radius).min(axis=0)
     return submesh(mesh, ~(d <= radius))
 
 
