@@ -133,10 +133,10 @@ def _stats(rows: list[dict], method: str) -> dict | None:
 
     aurocs = [float(r.get("confidence_auroc") or "nan") for r in rs]
     aurocs = [x for x in aurocs if np.isfinite(x)]
-    whole = col("mean_whole") if all(r.get("mean_whole") for r in rs) else None
+    per_a = col("mean_a") if all(r.get("mean_a") for r in rs) else None
     return {
-        "whole_mean": None if whole is None else whole.mean(),
-        "whole_worst": None if whole is None else whole.max(),
+        "a_mean": None if per_a is None else per_a.mean(),
+        "a_worst": None if per_a is None else per_a.max(),
         "pairs": len(rs), "exact": 100 * col("exact").mean(), "mean": col("mean").mean(),
         "worst": col("mean").max(), "auc": col("auc").mean(), "seconds": float(np.median(col("seconds"))),
         "auroc": float(np.mean(aurocs)) if aurocs else None,
@@ -200,14 +200,14 @@ def partial() -> str:
     """The partial-shape section: one table per condition, a row per source set (HOPE)."""
     out = []
     for cond, what in PARTIAL.items():
-        # A whole -> part set is also given in the whole's units (÷ sqrt(area) of A), the units
-        # its part -> whole counterpart is measured in.
+        # A whole -> part set is also given ÷ sqrt(area) of A, the whole: its part -> whole
+        # counterpart's B, so both are measured in the same units.
         rev = cond.endswith("_rev")
         lines = [
             f"### {cond}\n\n{what}; the first {PARTIAL_PAIRS} pairs of each source set.\n",
             (
                 "| source set | pairs | init mean error | HOPE mean error | HOPE worst pair's mean "
-                + ("| HOPE mean / worst in the whole's units " if rev else "")
+                + ("| HOPE mean / worst ÷ sqrt(area) of A " if rev else "")
                 + "| HOPE confidence AUROC | HOPE pairs flagged likely failed (their mean errors) "
                 "| HOPE median s / pair |"
             ),
@@ -229,8 +229,8 @@ def partial() -> str:
             if rev:
                 whole = (
                     "| – "
-                    if h["whole_mean"] is None
-                    else (f"| {h['whole_mean']:.4f} / {h['whole_worst']:.4f} ")
+                    if h["a_mean"] is None
+                    else (f"| {h['a_mean']:.4f} / {h['a_worst']:.4f} ")
                 )
             lines.append(
                 f"| {src} | {h['pairs']} | {im} | **{h['mean']:.4f}** | {h['worst']:.4f} "
@@ -305,9 +305,10 @@ def render() -> None:
         "source sets (ground truth carried over); `init` is the SHOT map at each shape's own "
         "scale, `hope` is `hope_rs.match` (which measures a part at the whole's scale). Errors "
         "are divided by sqrt(area) of the target; for the whole → part set only the vertices "
-        "of the whole with a counterpart on the part are scored, and its table also gives the "
-        "errors divided by sqrt(area) of the whole A, the units of the part → whole sets (a "
-        "part's own sqrt(area) is smaller, so the same distances read larger in its units).\n\n"
+        "of the whole with a counterpart on the part are scored, and its table also gives them "
+        "divided by sqrt(area) of the whole A, the units its part → whole counterpart is "
+        "scored in (a part's sqrt(area) is usually smaller than a whole's, so the same "
+        "distances read larger in its units).\n\n"
         + partial()
         + "\nThe confidence AUROC ranks the vertices with error above 0.05 below the others "
         "(`MatchResult.confidence`; 1 is perfect, 0.5 is chance), per pair, averaged over "

@@ -3,17 +3,18 @@ ground-truth pairs that are not landmarks.
 
 For each pair, the ground-truth correspondences (one per vertex of A, each vertex of B once)
 are split alternately: every other one is a candidate landmark, the rest are scored. The pair
-is matched with all candidates, then with every 4th and every 16th of them, as landmarks, and
-the mean geodesic error on the held-out half is printed (edge-graph geodesics / sqrt(area)).
+is matched with every Nth candidate as landmarks for each N of ``--strides`` (all of them,
+every 4th and every 16th by default), and the mean geodesic error on the held-out half is
+printed (edge-graph geodesics / sqrt(area)).
 It bounds what four landmarks can do on the set: a map that does not reach a given error
 from hundreds of exact landmarks will not reach it from four.
 
 The last column does without the matcher: each held-out vertex of A is placed on B from the
-candidate landmarks (at most ``TRILATERATION_LANDMARKS`` of them) by trilateration (its ``NEIGHBOURS`` nearest landmarks on A, their
-distances to it scaled by the ratio of B's to A's distances among them, and the vertex of B
-whose distances to their partners fit those best). It says how far the ground truth itself
-follows from its neighbours at that density; on the isometric sets it is a third of the
-non-isometric one.
+candidate landmarks (at most ``TRILATERATION_LANDMARKS`` of them, evenly spread) by
+trilateration: its ``NEIGHBOURS`` nearest landmarks on A, their distances to it scaled by the
+ratio of B's to A's distances among them, and the vertex of B whose distances to their
+partners fit those best. It says how well the ground truth itself follows from its
+neighbours at that density (``--strides ''`` prints this column alone).
 
     python scripts/landmark_ceiling.py                                  # tosca_nonisometric_r
     python scripts/landmark_ceiling.py --set faust_r --max-pairs 2
@@ -41,8 +42,8 @@ DEFAULT_DATA = Path(
 STRIDES = (1, 4, 16)
 #: Landmarks each held-out vertex is trilaterated from; the offset (sqrt(area) units) keeps
 #: the nearest landmarks' relative misfit from dominating the fit; at most this many
-#: candidates (evenly thinned), about the non-isometric set's count, so that sets of denser
-#: ground truth are compared at the same density.
+#: candidates (evenly spread), about the non-isometric set's count, so that sets of denser
+#: ground truth are compared at about the same density.
 NEIGHBOURS, FIT_OFFSET, TRILATERATION_LANDMARKS = 10, 0.02, 450
 
 
@@ -88,7 +89,9 @@ def main() -> None:
     try:
         strides = [int(x) for x in args.strides.split(",") if x.strip()]
     except ValueError:
-        ap.error(f"--strides takes comma-separated integers, got {args.strides!r}")
+        strides = [0]
+    if any(s < 1 for s in strides):
+        ap.error(f"--strides takes comma-separated integers >= 1, got {args.strides!r}")
     try:
         pairs = pairs_of(args.data / args.set)[: args.max_pairs]
     except ValueError as e:
@@ -112,7 +115,8 @@ def main() -> None:
             err = geodesic_errors(sb, res.map, a_idx=ai[~pinned], b_idx=bi[~pinned]).mean()
             row.append((lm.size, float(err)))
         held, cand = ~pinned, np.flatnonzero(pinned)
-        cand = cand[:: -(-cand.size // TRILATERATION_LANDMARKS)]
+        spread = np.linspace(0, cand.size - 1, TRILATERATION_LANDMARKS).round().astype(np.int64)
+        cand = cand[np.unique(spread)]
         f = np.zeros(ma.n_vertices, dtype=np.int64)
         f[ai[held]] = trilaterate(ma, mb, ai[cand], bi[cand], ai[held])
         err = geodesic_errors(sb, f, a_idx=ai[held], b_idx=bi[held]).mean()

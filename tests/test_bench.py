@@ -134,16 +134,17 @@ def test_bench_command_writes_tables_plots_and_renders(identity_set, tmp_path, c
     scale = {
         f"s{i}": hope_rs.load_mesh(identity_set / "spheres" / f"s{i}.off").scale for i in range(3)
     }
+    assert scale["s2"] < scale["s0"] < scale["s1"]
     for r in rows:
         assert 0 <= float(r["exact"]) <= 1 and float(r["seconds"]) > 0
         assert float(r["mean_x100"]) == pytest.approx(100 * float(r["mean"]), rel=1e-4)
-        # mean_whole is the mean in units of the larger shape's sqrt(area): s2 is the
-        # smallest sphere, so s0 -> s2 is rescaled to s0's units, s0 -> s1 is not.
+        # mean_a is the same distances ÷ sqrt(area) of A: they read smaller against the
+        # larger s0 when B is s2, the smallest sphere, and larger against s0 when B is s1.
         a, b = r["pair"].split("->")
-        whole = float(r["mean"]) * scale[b] / max(scale[a], scale[b])
-        assert float(r["mean_whole"]) == pytest.approx(whole, rel=1e-4, abs=1e-9)
-        if b == "s2" and float(r["mean"]) > 0:
-            assert float(r["mean_whole"]) < float(r["mean"])
+        mean, mean_a = float(r["mean"]), float(r["mean_a"])
+        assert mean_a == pytest.approx(mean * scale[b] / scale[a], rel=1e-4, abs=1e-9)
+        if mean > 0:
+            assert (mean_a < mean) if b == "s2" else (mean_a > mean)
         # HOPE's methods report how well their confidence ranks right above wrong matches
         # (NaN when a pair has no wrong match); the initial map has no confidence.
         auroc = r["confidence_auroc"]

@@ -31,7 +31,7 @@ from .show import render_pair
 FIELDS = [
     "dataset", "pair", "method", "n_a", "n_b", "n_scored", "exact", "mean", "mean_x100", "auc",
     "auc_010", "edge_stretch", "coverage", "seconds", "start", "start_exact", "start_mean",
-    "confidence_auroc", "likely_failed", "mean_whole",
+    "confidence_auroc", "likely_failed", "mean_a",
 ]  # fmt: skip
 
 
@@ -70,9 +70,9 @@ def _score_row(pair: Pair, name: str, res, ctx, ai, bi, starts: dict) -> tuple[d
         "mean_x100": s.mean_x100, "auc": s.auc, "auc_010": s.auc_010,
         "edge_stretch": sm.edge_stretch, "coverage": sm.coverage, "seconds": res.seconds,
         "start": res.start or "",
-        # The mean error in units of the larger shape's sqrt(area): a whole → part pair is
-        # then measured in the whole's units, as its part → whole counterpart is.
-        "mean_whole": s.mean * ctx.b.scale / max(ctx.a.scale, ctx.b.scale),
+        # The mean error ÷ sqrt(area) of A instead of B: a whole → part pair is then measured
+        # in the whole's units, as its part → whole counterpart is.
+        "mean_a": s.mean * ctx.b.scale / ctx.a.scale,
     }  # fmt: skip
     if res.start and name.startswith("hope"):
         if res.start not in starts:
