@@ -225,16 +225,14 @@ def partial() -> str:
             )
             if not h["judged"]:  # results from before the bench recorded the flag
                 flagged = "–"
-            whole = ""
+            by_a = ""
             if rev:
-                whole = (
-                    "| – "
-                    if h["a_mean"] is None
-                    else (f"| {h['a_mean']:.4f} / {h['a_worst']:.4f} ")
+                by_a = (
+                    "| – " if h["a_mean"] is None else f"| {h['a_mean']:.4f} / {h['a_worst']:.4f} "
                 )
             lines.append(
                 f"| {src} | {h['pairs']} | {im} | **{h['mean']:.4f}** | {h['worst']:.4f} "
-                f"{whole}| {auroc} | {flagged} | {h['seconds']:.1f} |"
+                f"{by_a}| {auroc} | {flagged} | {h['seconds']:.1f} |"
             )
         if len(lines) > 3:
             out.append("\n".join(lines) + "\n")
