@@ -8,7 +8,7 @@ import numpy as np
 
 from .. import _core
 from ..kernels.maps import injective_completion
-from ..kernels.search import SearchConfig, nearest_candidates
+from ..kernels.search import SearchConfig, nearest_candidates, nearest_descriptor
 from ..shape import Shape
 from .state import MatchState, Stage
 
@@ -29,7 +29,7 @@ def initial_map(
     and cost seconds more (docs/decisions.md#initial-map).
     """
     if not one_to_one:
-        return nearest_candidates(da, db, 1, search)[0][:, 0].copy()
+        return nearest_descriptor(da, db, search)
     idx, dist = nearest_candidates(da, db, n_candidates, search)
     n_a, n_b = da.shape[0], db.shape[0]
     cost = np.sqrt(dist.astype(np.float64))
