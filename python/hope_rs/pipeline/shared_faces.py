@@ -33,7 +33,7 @@ from ..shape import Shape
 from .config import FinishConfig, RefineConfig
 from .growth import grow
 from .handles import face_handles, large_patches
-from .refine import assign_by_overlap
+from .overlap import assign_by_overlap
 from .state import MatchState, Stage, StepClock
 
 
@@ -112,7 +112,7 @@ def finish(
     """The map after the finishing rounds and, if any ran, the growth from their trusted
     patches (:func:`hope_rs.pipeline.growth.grow`), in the internal numbering; and how many
     rounds ran. ``refine``: the settings of the HOPE steps after each round (``top_k``...);
-    ``clock``: adds up those steps' seconds (see :func:`~hope_rs.pipeline.refine.assign_by_overlap`)."""
+    ``clock``: adds up those steps' seconds (see :func:`~hope_rs.pipeline.overlap.assign_by_overlap`)."""
     cfg = config
     f = np.asarray(f, dtype=np.int64)
     n_a = a.n_vertices
