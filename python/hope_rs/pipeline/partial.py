@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -43,7 +42,8 @@ from ..geometry.mesh import boundary_edges
 from ..shape import Shape
 from .config import PartialConfig
 from .landmarks import input_landmarks
-from .state import QUIET, MatchState, Stage
+from .part_info import PartialInfo
+from .state import QUIET, Halt, MatchState, Stage
 
 __all__ = [
     "PartialInfo",
@@ -61,30 +61,6 @@ def boundary_length(shape: Shape) -> float:
     b = boundary_edges(shape.internal.faces)
     p = shape.internal.vertices
     return float(np.linalg.norm(p[b[:, 0]] - p[b[:, 1]], axis=1).sum() / shape.internal.scale)
-
-
-@dataclass(frozen=True)
-class PartialInfo:
-    """Which shape of a pair is a part of the other.
-
-    Attributes
-    ----------
-    part : {"a", "b"}
-        The shape that is a part.
-    boundary : tuple of float
-        Boundary lengths of A and B, each in units of its own sqrt(area).
-    scale : float
-        The scale the part is measured at: the larger sqrt(area) of the two.
-    counterpart : (n_a,) bool ndarray or None
-        Per vertex of A (internal numbering), whether it has a counterpart on B: all True when
-        A is the part; when B is, those whose image the reverse match places near them (see
-        the module notes); ``None`` until known.
-    """
-
-    part: str
-    boundary: tuple[float, float]
-    scale: float
-    counterpart: np.ndarray | None = None
 
 
 def mean_edge(shape: Shape) -> float:
@@ -148,7 +124,7 @@ class PartialStage(Stage):
         self.info = detect_part(state.a, state.b, cfg)
         return QUIET if self.info is None else None
 
-    def run(self, state: MatchState) -> None:
+    def run(self, state: MatchState) -> Halt | None:
         info = self.info
         assert info is not None
         cfg = state.config.partial
@@ -159,9 +135,11 @@ class PartialStage(Stage):
         )
         detail += ": matched B -> A and inverted" if reverse else ": matched at the whole's scale"
         t = state.log.start("partial", detail=detail)
+        halt = None
         if info.part == "a":
             info = dataclasses.replace(info, counterpart=np.ones(state.a.n_vertices, dtype=bool))
             info = self._rescale_part(state, info)
+            halt = Halt("the map is the part's match at the whole's scale")
         elif reverse:
             # The nested match detects B as the part of its pair and scales it itself.
             nested = {}
@@ -184,7 +162,7 @@ class PartialStage(Stage):
             if scale != state.b.scale:
                 state.b = state.b.at_scale(scale)
             state.timings.update({k: v for k, v in back.timings.items() if k != "total"})
-            state.done = "the map is the inverse of the match of the part B to the whole A"
+            halt = Halt("the map is the inverse of the match of the part B to the whole A")
         elif info.scale != state.b.scale:
             state.b = state.b.at_scale(info.scale)
         state.partial = info
@@ -192,6 +170,7 @@ class PartialStage(Stage):
         if info.part == "a":
             detail += f" ({info.scale / state.a.internal.scale:.3f} x its own sqrt(area))"
         state.log.ran("partial", state.timings["partial"], detail)
+        return halt
 
     @staticmethod
     def _rescale_part(state: MatchState, info: PartialInfo) -> PartialInfo:
@@ -203,7 +182,7 @@ class PartialStage(Stage):
         wins (a wider scale's by at least ``wide_margin``). Without, of the two maps the one
         whose vertices' descriptors (at the second scale) lie nearer their images' wins: a
         left-right mirror keeps every distance, so only the descriptors, which see
-        orientation, tell it from the true map. Sets the map and ``state.done``."""
+        orientation, tell it from the true map. Sets the map."""
         cfg = state.config
         a, b = state.a, state.b
         trials = cfg.partial.scale_trials
@@ -268,7 +247,6 @@ class PartialStage(Stage):
         state.history = chosen.history
         # The stages of the kept nested match, as seconds within "partial".
         state.timings.update({k: v for k, v in chosen.timings.items() if k != "total"})
-        state.done = "the map is the part's match at the whole's scale"
         return info
 
 

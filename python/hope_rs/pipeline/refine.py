@@ -27,7 +27,7 @@ from .refine_steps import (
     run_steps,
     start_state,
 )
-from .state import Iteration, MatchState, Stage, StepClock
+from .state import Halt, Iteration, MatchState, Stage, StepClock
 
 __all__ = [
     "Iteration",
@@ -142,37 +142,28 @@ def refine(
 class RefineStage(Stage):
     """The "refine" stage (and its "polish" step): :func:`refine` from ``state.f0``.
 
-    Publishes "refine_start", "last_pass" and "refine_end" and asks "stop_refining" (see
+    Publishes "last_pass" and asks "stop_refining" (see
     :data:`hope_rs.pipeline.state.EVENTS`); sets ``state.f``, ``state.hope_map``,
-    ``state.history`` and ``state.settled`` (and ``state.done`` when settled).
+    ``state.history`` and ``state.settled``, and halts the stages after it when settled.
     """
 
     name = "refine"
 
-    def skip_reason(self, state: MatchState):
-        # A stage before it may have the final map already (the partial stage's inverse).
-        return state.done if state.f is not None else None
-
-    def run(self, state: MatchState) -> None:
+    def run(self, state: MatchState) -> Halt | None:
         a, b, cfg, hooks = state.a, state.b, state.config.refine, state.hooks
         steps = _RefineSteps(a, b, state.log, cfg, state.callback, hooks)
         clock = StepClock()
         t = state.log.start("refine", steps.total, f"pass 1/{steps.n_passes}")
-        hooks.emit("refine_start", state)
-        res = None
-        try:
-            res = refine(
-                a,
-                b,
-                state.f0,
-                cfg,
-                events=steps,
-                landmarks=state.landmarks,
-                landmark_config=state.config.landmarks,
-                clock=clock,
-            )
-        finally:
-            hooks.emit("refine_end", state, res)
+        res = refine(
+            a,
+            b,
+            state.f0,
+            cfg,
+            events=steps,
+            landmarks=state.landmarks,
+            landmark_config=state.config.landmarks,
+            clock=clock,
+        )
         state.timings["refine"] = time.perf_counter() - t
         clock.record(state.timings, "refine")
         steps.finished(state.timings["refine"])
@@ -180,10 +171,11 @@ class RefineStage(Stage):
         state.history = res.history
         state.settled = res.settled
         if res.settled:
-            state.done = (
+            return Halt(
                 "HOPE's map settled: its last pass and the polish moved no vertex and LMD "
                 "trusts every vertex"
             )
+        return None
 
 
 class _RefineSteps(RefineEvents):
