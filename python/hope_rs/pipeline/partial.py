@@ -20,7 +20,8 @@ part can settle there. So a part is matched at the guessed scale and at the mult
 from the map of highest smoothed confidence there), when none of these maps reaches a mean
 confidence of ``PartialConfig.wide_below`` also at the wider multiples
 ``PartialConfig.wide_trials``, and the map of highest mean confidence is kept (a wider
-scale's only when it beats the others by ``PartialConfig.wide_margin``).
+scale's only when it beats the others by ``PartialConfig.wide_margin``). These are rounds of
+:func:`~hope_rs.pipeline.trials.run_trials`, recorded in ``res.stage("partial").trials``.
 
 Matching a whole A to its part B asks every vertex of A for a partner, also where B has
 none, and the refinement's overlaps then pull the vertices that do have one off their place.
@@ -44,6 +45,7 @@ from .config import PartialConfig
 from .landmarks import input_landmarks
 from .part_info import PartialInfo
 from .state import QUIET, Halt, MatchState, Stage
+from .trials import Candidate, Trial, adopt, mean_confidence, run_trial, run_trials
 
 __all__ = [
     "PartialInfo",
@@ -177,7 +179,7 @@ class PartialStage(Stage):
         """A (the part) matched at the guessed scale and, when the share of B its map covers
         puts A's whole at a scale off by more than ``rescale_tolerance``, again at that scale.
         With ``scale_trials`` also at those multiples of the guessed scale, once more from
-        the merge of these maps (:func:`_refined_merge`) and, when none reaches
+        the merge of these maps (:func:`_merge_candidate`) and, when none reaches
         ``wide_below``, at the multiples ``wide_trials``; the map of highest mean confidence
         wins (a wider scale's by at least ``wide_margin``). Without, of the two maps the one
         whose vertices' descriptors (at the second scale) lie nearer their images' wins: a
@@ -201,71 +203,66 @@ class PartialStage(Stage):
         guess = a.at_scale(info.scale) if info.scale != a.scale else a
         landmarks = input_landmarks(state)
 
-        def at(view: Shape) -> tuple:
-            """(view, the part's match at that view's scale)."""
-            return view, state.run(view, b, init, off, landmarks=landmarks)
+        def at(view: Shape, label: str) -> Candidate:
+            """The part's match at ``view``'s scale."""
+            return Candidate(label, view, b, init, off, landmarks)
 
-        best, first = at(guess)
-        share = covered_share(b, guess.map_in(b, first.map))
+        def times(t: float) -> str:
+            return f"x{t:.3g}"
+
+        first = run_trial(state, "partial", at(guess, times(1.0)))
+        share = covered_share(b, guess.map_in(b, first.result.map))
         scale = a.internal.scale / np.sqrt(max(share, cfg.partial.min_covered))
-        chosen = first
+        kept = first
         rescale = abs(scale / info.scale - 1.0) > cfg.partial.rescale_tolerance
         if trials:
-            scales = [info.scale * t for t in trials] + ([scale] if rescale else [])
-            runs = [(guess, first)] + [at(a.at_scale(s)) for s in scales]
-            merge = _refined_merge(state, runs, off, landmarks, cfg.partial.merge_rings)
-            kept = max([*runs, merge], key=_mean_confidence)
-            top, margin = _mean_confidence(kept), cfg.partial.wide_margin
+            near = [at(a.at_scale(info.scale * t), times(t)) for t in trials]
+            if rescale:
+                near.append(at(a.at_scale(scale), f"covered {times(scale / info.scale)}"))
+            nearby = run_trials(state, "partial", near, mean_confidence, against=first)
+            merge = _merge_candidate(state, [first, *nearby.tried], nearby.kept, cfg.partial)
+            kept = run_trials(state, "partial", [merge], mean_confidence, against=nearby.kept).kept
+            top, margin = kept.score, cfg.partial.wide_margin
             # A confidence is at most 1: beyond that no wider map could win.
             if cfg.partial.wide_trials and top < cfg.partial.wide_below and top + margin <= 1.0:
                 # The wider scales' maps are not merged (where they went wrong they would pull
                 # the merge off the nearby scales' map), and one replaces the choice only when
                 # clearly more confident: they lie farther from the guessed scale.
-                wide = max(
-                    (at(a.at_scale(info.scale * t)) for t in cfg.partial.wide_trials),
-                    key=_mean_confidence,
-                )
-                if _mean_confidence(wide) >= top + margin:
-                    kept = wide
-            best, chosen = kept
-            info = dataclasses.replace(info, scale=float(best.scale))
+                wide = [at(a.at_scale(info.scale * t), times(t)) for t in cfg.partial.wide_trials]
+                kept = run_trials(
+                    state, "partial", wide, mean_confidence, against=kept, margin=margin
+                ).kept
+            info = dataclasses.replace(info, scale=float(kept.candidate.a.scale))
         elif rescale:
-            again, second = at(a.at_scale(scale))
+            again = a.at_scale(scale)
             kind = state.init if isinstance(state.init, str) else "shot"
             da, db = again.internal_descriptors(kind), b.internal_descriptors(kind)
-            cost = [
-                float(np.linalg.norm(da - db[again.map_in(b, r.map)], axis=1).mean())
-                for r in (first, second)
-            ]
-            if cost[1] <= cost[0]:
-                best, chosen = again, second
+
+            def nearer(t: Trial) -> float:
+                """Minus the mean distance of the descriptors (at the second scale) of A's
+                vertices to their images'."""
+                g = again.map_in(b, t.result.map)
+                return -float(np.linalg.norm(da - db[g], axis=1).mean())
+
+            second = at(again, f"covered {times(scale / info.scale)}")
+            kept = run_trials(state, "partial", [second], nearer, against=first, margin=0.0).kept
+            if kept is not first:
                 info = dataclasses.replace(info, scale=float(scale))
-        state.a = best
-        state.f0 = best.map_in(b, chosen.init_map)
-        state.f = best.map_in(b, chosen.map)
-        state.hope_map = best.map_in(b, chosen.hope_map)
-        state.history = chosen.history
-        # The stages of the kept nested match, as seconds within "partial".
-        state.timings.update({k: v for k, v in chosen.timings.items() if k != "total"})
+        # The stages of the kept nested match count as seconds within "partial".
+        adopt(state, kept)
         return info
 
 
-def _refined_merge(state: MatchState, runs: list, config, landmarks, rings: int) -> tuple:
-    """(view, result) of the part's match from the merge of the maps of ``runs`` ((view,
-    result) pairs of one part at several scales): each vertex takes its image from the map
-    whose confidence, averaged over ``rings`` rounds of 1-ring averaging, is highest there;
-    matched at the scale of the run of highest mean confidence."""
+def _merge_candidate(state: MatchState, runs: list[Trial], best: Trial, cfg) -> Candidate:
+    """The part's match from the merge of the maps of ``runs`` (trials of one part at
+    several scales): each vertex takes its image from the map whose confidence, averaged
+    over ``cfg.merge_rings`` rounds of 1-ring averaging, is highest there; matched at the
+    scale of ``best``, the run of highest mean confidence."""
     a, b = state.a, state.b
-    maps = np.stack([view.map_in(b, r.map) for view, r in runs])  # internal numbering
-    conf = np.stack([r.confidence[a.order] for _, r in runs], axis=1)
+    maps = np.stack([t.candidate.a.map_in(b, t.result.map) for t in runs])  # internal numbering
+    conf = np.stack([t.result.confidence[a.order] for t in runs], axis=1)
     p = a.ring_average()
-    for _ in range(rings):
+    for _ in range(cfg.merge_rings):
         conf = p @ conf
     merged = maps[np.argmax(conf, axis=1), np.arange(a.n_vertices)]
-    view = max(runs, key=_mean_confidence)[0]
-    return view, state.run(view, b, a.map_out(b, merged), config, landmarks=landmarks)
-
-
-def _mean_confidence(run: tuple) -> float:
-    """Mean confidence of a (view, result) run."""
-    return float(np.mean(run[1].confidence))
+    return dataclasses.replace(best.candidate, label="merge", init=a.map_out(b, merged))
