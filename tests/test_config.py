@@ -13,7 +13,7 @@ from hope_rs import MatchConfig
 from hope_rs.batch.cache import basis_params, descriptor_params
 from hope_rs.evaluation.demo import demo_pair
 from hope_rs.features.descriptors import DescriptorConfig
-from hope_rs.pipeline import refine as refine_module
+from hope_rs.pipeline import overlap as overlap_module
 from hope_rs.pipeline import shared_faces as finish_module
 from hope_rs.pipeline.config import (
     KEYWORDS,
@@ -85,7 +85,7 @@ def test_bad_config_and_unknown_options_are_rejected_before_any_work(bundled):
 def test_the_polish_and_the_finish_use_the_configured_top_k(monkeypatch):
     """``top_k`` reaches every overlap cost: the polish's and the finish's HOPE steps too."""
     seen = {"polish": [], "finish": []}
-    polish, step = refine_module.best_overlap, finish_module.assign_by_overlap
+    polish, step = overlap_module.best_overlap, finish_module.assign_by_overlap
 
     def spy_polish(*args, top_k, **kw):
         seen["polish"].append(top_k)
@@ -95,7 +95,7 @@ def test_the_polish_and_the_finish_use_the_configured_top_k(monkeypatch):
         seen["finish"].append(config.top_k)
         return step(*args, config=config, **kw)
 
-    monkeypatch.setattr(refine_module, "best_overlap", spy_polish)
+    monkeypatch.setattr(overlap_module, "best_overlap", spy_polish)
     monkeypatch.setattr(finish_module, "assign_by_overlap", spy_step)
     # A = FAUST 012 without its legs, B = the whole 018: the finish runs on this pair.
     a, b = demo_pair()

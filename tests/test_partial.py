@@ -446,3 +446,21 @@ def test_a_legless_faust_registration_is_matched_exactly(faust_pair):
     res = match(part.mesh, b)
     assert "A is a part" in str(res.stage("partial")) and "faces" in res.timings
     assert (res.map == part.origin).mean() > 0.999
+
+
+def test_the_part_s_scale_trials_are_recorded_with_the_kept_one(sphere):
+    part = cut_by_plane(sphere, plane_normal(2), 0.3).mesh
+    wide_every_time = PartialConfig(wide_below=1.0, wide_margin=0.0)
+    res = match(part, sphere, config=MatchConfig(partial=wide_every_time))
+    trials = res.stage("partial").trials
+    labels = [t.label for t in trials]
+    assert labels[:3] == ["x1", "x0.95", "x1.05"] and "merge" in labels
+    assert labels[-3:] == ["x0.85", "x0.9", "x1.1"]  # the wider scales every time
+    assert all(t.score is not None and 0.0 <= t.score <= 1.0 for t in trials)
+    (kept,) = [t for t in trials if t.kept]
+    # The kept trial is the map of highest mean confidence among the nearby ones and the
+    # merge, unless a wider one reaches it (wide_margin=0).
+    best = max(trials[:-3], key=lambda t: t.score)
+    wide = max(trials[-3:], key=lambda t: t.score)
+    assert kept is (wide if wide.score >= best.score else best)
+    assert str(res.stage("partial")).startswith("partial: ")

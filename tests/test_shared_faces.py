@@ -10,7 +10,7 @@ from hope_rs import _core
 from hope_rs.pipeline import handles
 from hope_rs.pipeline import shared_faces as SF
 from hope_rs.pipeline.config import FinishConfig, PartialConfig
-from hope_rs.pipeline.refine import refine
+from hope_rs.pipeline.refine import RefineEvents, refine
 
 
 def test_face_keys_ignore_rotation_but_not_orientation():
@@ -143,24 +143,25 @@ def test_cli_and_batch_no_shared_faces_flags(faust_pair, tmp_path, capsys):
     capsys.readouterr()
 
 
-def test_last_pass_if_makes_that_pass_the_last(faust_pair):
+def test_last_pass_now_makes_that_pass_the_last(faust_pair):
     a, b = faust_pair
     sa, sb = hope_rs.Shape(a), hope_rs.Shape(b)
     f0 = sa.map_in(sb, hope_rs.match(sa, sb, spectral=False, max_passes=1).init_map)
     seen, calls = [], []
 
-    def on_last(f, n_pass):
-        calls.append(n_pass)
+    class AfterFirst(RefineEvents):
+        def last_pass(self, f, n_pass):
+            calls.append(n_pass)
 
-    def after_first(f):
-        seen.append(f.copy())
-        return True
+        def last_pass_now(self, f):
+            seen.append(f.copy())
+            return True
 
-    res = refine(sa, sb, f0, last_pass_if=after_first, on_last_pass=on_last)
+    res = refine(sa, sb, f0, events=AfterFirst())
     passes = sum(it.k == 0 for it in res.history)
     assert passes == 2 and len(seen) == 1 and calls == [1]
     # Never True: the same as without it.
     plain = refine(sa, sb, f0)
-    never = refine(sa, sb, f0, last_pass_if=lambda f: False)
+    never = refine(sa, sb, f0, events=RefineEvents())
     np.testing.assert_array_equal(never.map, plain.map)
     assert len(never.history) == len(plain.history)

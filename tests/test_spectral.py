@@ -17,6 +17,7 @@ from hope_rs._blas import single_threaded_blas
 from hope_rs.evaluation.datasets import Pair
 from hope_rs.pipeline import spectral as S
 from hope_rs.pipeline.config import PartialConfig, RefineConfig, SpectralConfig
+from hope_rs.pipeline.refine import RefineEvents
 
 
 def spectral_config(**fields) -> MatchConfig:
@@ -370,9 +371,12 @@ def test_zoomout_started_during_the_last_pass_is_zoomout_from_that_map(monkeypat
     # The same refinement again, keeping the map the hook saw, and ZoomOut from it afterwards.
     seen = []
     f0 = sa.map_in(sb, res.init_map)
-    again = hope_rs.pipeline.refine.refine(
-        sa, sb, f0, RefineConfig(max_passes=1), on_last_pass=lambda f, n: seen.append((f.copy(), n))
-    )
+
+    class Seen(RefineEvents):
+        def last_pass(self, f, n_pass):
+            seen.append((f.copy(), n_pass))
+
+    again = hope_rs.pipeline.refine.refine(sa, sb, f0, RefineConfig(max_passes=1), events=Seen())
     assert len(seen) == 1 and seen[0][1] == 0
     # It saw the map after the first step, not the one the pass ended with.
     assert not np.array_equal(seen[0][0], again.map)

@@ -5,6 +5,7 @@ methods on data sets (:mod:`hope_rs.evaluation.bench`), ``show`` a map (:mod:`ho
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import logging
 import os
@@ -48,7 +49,7 @@ def _summary(res) -> dict:
             for h in res.history
         ],
         "timings": res.timings,
-        "stages": [vars(s) for s in res.stages],
+        "stages": [dataclasses.asdict(s) for s in res.stages],
         "quality": None if res.quality is None else vars(res.quality),
     }
 

@@ -12,6 +12,7 @@ stored as float32, faces and landmarks as int32, in compressed ``.npz`` files of
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from importlib import resources
 
@@ -99,7 +100,7 @@ def score_pair(name: str) -> dict:
         "final": vars(final),
         "seconds": seconds,
         "timings": res.timings,
-        "stages": [vars(s) for s in res.stages],
+        "stages": [dataclasses.asdict(s) for s in res.stages],
     }
 
 

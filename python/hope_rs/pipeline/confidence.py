@@ -26,7 +26,6 @@ so its confidence stays middling, but its triangles land on B wound the other wa
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -41,6 +40,7 @@ from .anchors import (
 )
 from .config import CONFIDENCE_FEATURES, ConfidenceConfig, RefineConfig, RepairConfig
 from .lmd import local_map_distortion
+from .result import MatchQuality
 from .state import MatchState, Stage
 from .turned import TurnedFaces
 
@@ -53,31 +53,6 @@ __all__ = [
     "predict_confidence",
     "state_quality",
 ]
-
-
-@dataclass(frozen=True)
-class MatchQuality:
-    """A pair-level summary of :attr:`MatchResult.confidence`.
-
-    Attributes
-    ----------
-    mean_confidence : float
-        The mean confidence over A's vertices.
-    share_confident : float
-        The share of A's vertices with confidence at least ``ConfidenceConfig.threshold``.
-    likely_failed : bool
-        ``mean_confidence < ConfidenceConfig.failed_mean``, ``share_confident <
-        ConfidenceConfig.failed_share`` or ``flipped_share > ConfidenceConfig.failed_flipped``:
-        much of the map is probably wrong; look at the pair (``hope-rs show --color-by
-        confidence``) before using it.
-    flipped_share : float
-        The share of A's area whose triangles the map turns over (:func:`flipped_share`).
-    """
-
-    mean_confidence: float
-    share_confident: float
-    likely_failed: bool
-    flipped_share: float = 0.0
 
 
 def match_quality(
@@ -109,7 +84,7 @@ def state_quality(state: MatchState) -> MatchQuality | None:
     ``counterpart``) have no right match to find, and the pair is judged on the others."""
     if state.confidence is None:
         return None
-    counterpart = getattr(state.partial, "counterpart", None)
+    counterpart = None if state.partial is None else state.partial.counterpart
     judged = state.confidence if counterpart is None else state.confidence[counterpart]
     flipped = flipped_share(state.a, state.b, state.f, among=counterpart)
     return match_quality(judged, state.config.confidence, flipped=flipped)
@@ -230,6 +205,7 @@ class ConfidenceStage(Stage):
     (``state.partial.counterpart``)."""
 
     name = "confidence"
+    runs_on_final_map = True
 
     def skip_reason(self, state: MatchState):
         if not state.config.confidence.enabled:
@@ -239,7 +215,7 @@ class ConfidenceStage(Stage):
     def run(self, state: MatchState) -> None:
         cfg = state.config.confidence
         t = state.log.start("confidence", detail="per-vertex confidence of the final map")
-        counterpart = getattr(state.partial, "counterpart", None)
+        counterpart = None if state.partial is None else state.partial.counterpart
         x = confidence_features(
             state.a,
             state.b,

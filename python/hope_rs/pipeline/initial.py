@@ -109,8 +109,6 @@ class InitialStage(Stage):
 
 def _given_start(state: MatchState) -> str | None:
     """Why the descriptor stages do not run: the map to refine is there already."""
-    if state.done is not None:
-        return state.done
     if state.coarse is not None:
         return "multiscale: the lifted coarse map is the start"
     if not isinstance(state.init, str):

@@ -272,6 +272,7 @@ class LandmarkStage(Stage):
     ``state.f``. Silent without landmarks."""
 
     name = "landmarks"
+    runs_on_final_map = True
 
     def attach(self, state: MatchState) -> None:
         if state.landmarks is not None:

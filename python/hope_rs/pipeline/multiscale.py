@@ -136,8 +136,6 @@ class MultiscaleStage(Stage):
     def skip_reason(self, state: MatchState):
         if not state.config.multiscale.enabled:
             return QUIET
-        if state.done is not None:
-            return state.done
         sparse = too_sparse(state.a, state.b)
         return None if sparse is None else f"multiscale not applied: {sparse}"
 

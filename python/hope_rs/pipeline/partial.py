@@ -20,7 +20,8 @@ part can settle there. So a part is matched at the guessed scale and at the mult
 from the map of highest smoothed confidence there), when none of these maps reaches a mean
 confidence of ``PartialConfig.wide_below`` also at the wider multiples
 ``PartialConfig.wide_trials``, and the map of highest mean confidence is kept (a wider
-scale's only when it beats the others by ``PartialConfig.wide_margin``).
+scale's only when it beats the others by ``PartialConfig.wide_margin``). These are rounds of
+:func:`~hope_rs.pipeline.trials.run_trials`, recorded in ``res.stage("partial").trials``.
 
 Matching a whole A to its part B asks every vertex of A for a partner, also where B has
 none, and the refinement's overlaps then pull the vertices that do have one off their place.
@@ -34,7 +35,6 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -43,7 +43,9 @@ from ..geometry.mesh import boundary_edges
 from ..shape import Shape
 from .config import PartialConfig
 from .landmarks import input_landmarks
-from .state import QUIET, MatchState, Stage
+from .part_info import PartialInfo
+from .state import QUIET, Halt, MatchState, Stage
+from .trials import Candidate, Trial, adopt, mean_confidence, run_trial, run_trials
 
 __all__ = [
     "PartialInfo",
@@ -61,30 +63,6 @@ def boundary_length(shape: Shape) -> float:
     b = boundary_edges(shape.internal.faces)
     p = shape.internal.vertices
     return float(np.linalg.norm(p[b[:, 0]] - p[b[:, 1]], axis=1).sum() / shape.internal.scale)
-
-
-@dataclass(frozen=True)
-class PartialInfo:
-    """Which shape of a pair is a part of the other.
-
-    Attributes
-    ----------
-    part : {"a", "b"}
-        The shape that is a part.
-    boundary : tuple of float
-        Boundary lengths of A and B, each in units of its own sqrt(area).
-    scale : float
-        The scale the part is measured at: the larger sqrt(area) of the two.
-    counterpart : (n_a,) bool ndarray or None
-        Per vertex of A (internal numbering), whether it has a counterpart on B: all True when
-        A is the part; when B is, those whose image the reverse match places near them (see
-        the module notes); ``None`` until known.
-    """
-
-    part: str
-    boundary: tuple[float, float]
-    scale: float
-    counterpart: np.ndarray | None = None
 
 
 def mean_edge(shape: Shape) -> float:
@@ -148,7 +126,7 @@ class PartialStage(Stage):
         self.info = detect_part(state.a, state.b, cfg)
         return QUIET if self.info is None else None
 
-    def run(self, state: MatchState) -> None:
+    def run(self, state: MatchState) -> Halt | None:
         info = self.info
         assert info is not None
         cfg = state.config.partial
@@ -159,9 +137,11 @@ class PartialStage(Stage):
         )
         detail += ": matched B -> A and inverted" if reverse else ": matched at the whole's scale"
         t = state.log.start("partial", detail=detail)
+        halt = None
         if info.part == "a":
             info = dataclasses.replace(info, counterpart=np.ones(state.a.n_vertices, dtype=bool))
             info = self._rescale_part(state, info)
+            halt = Halt("the map is the part's match at the whole's scale")
         elif reverse:
             # The nested match detects B as the part of its pair and scales it itself.
             nested = {}
@@ -184,7 +164,7 @@ class PartialStage(Stage):
             if scale != state.b.scale:
                 state.b = state.b.at_scale(scale)
             state.timings.update({k: v for k, v in back.timings.items() if k != "total"})
-            state.done = "the map is the inverse of the match of the part B to the whole A"
+            halt = Halt("the map is the inverse of the match of the part B to the whole A")
         elif info.scale != state.b.scale:
             state.b = state.b.at_scale(info.scale)
         state.partial = info
@@ -192,18 +172,19 @@ class PartialStage(Stage):
         if info.part == "a":
             detail += f" ({info.scale / state.a.internal.scale:.3f} x its own sqrt(area))"
         state.log.ran("partial", state.timings["partial"], detail)
+        return halt
 
     @staticmethod
     def _rescale_part(state: MatchState, info: PartialInfo) -> PartialInfo:
         """A (the part) matched at the guessed scale and, when the share of B its map covers
         puts A's whole at a scale off by more than ``rescale_tolerance``, again at that scale.
         With ``scale_trials`` also at those multiples of the guessed scale, once more from
-        the merge of these maps (:func:`_refined_merge`) and, when none reaches
+        the merge of these maps (:func:`_merge_candidate`) and, when none reaches
         ``wide_below``, at the multiples ``wide_trials``; the map of highest mean confidence
         wins (a wider scale's by at least ``wide_margin``). Without, of the two maps the one
         whose vertices' descriptors (at the second scale) lie nearer their images' wins: a
         left-right mirror keeps every distance, so only the descriptors, which see
-        orientation, tell it from the true map. Sets the map and ``state.done``."""
+        orientation, tell it from the true map. Sets the map."""
         cfg = state.config
         a, b = state.a, state.b
         trials = cfg.partial.scale_trials
@@ -222,72 +203,66 @@ class PartialStage(Stage):
         guess = a.at_scale(info.scale) if info.scale != a.scale else a
         landmarks = input_landmarks(state)
 
-        def at(view: Shape) -> tuple:
-            """(view, the part's match at that view's scale)."""
-            return view, state.run(view, b, init, off, landmarks=landmarks)
+        def at(view: Shape, label: str) -> Candidate:
+            """The part's match at ``view``'s scale."""
+            return Candidate(label, view, b, init, off, landmarks)
 
-        best, first = at(guess)
-        share = covered_share(b, guess.map_in(b, first.map))
+        def times(t: float) -> str:
+            return f"x{t:.3g}"
+
+        first = run_trial(state, "partial", at(guess, times(1.0)))
+        share = covered_share(b, guess.map_in(b, first.result.map))
         scale = a.internal.scale / np.sqrt(max(share, cfg.partial.min_covered))
-        chosen = first
+        kept = first
         rescale = abs(scale / info.scale - 1.0) > cfg.partial.rescale_tolerance
         if trials:
-            scales = [info.scale * t for t in trials] + ([scale] if rescale else [])
-            runs = [(guess, first)] + [at(a.at_scale(s)) for s in scales]
-            merge = _refined_merge(state, runs, off, landmarks, cfg.partial.merge_rings)
-            kept = max([*runs, merge], key=_mean_confidence)
-            top, margin = _mean_confidence(kept), cfg.partial.wide_margin
+            near = [at(a.at_scale(info.scale * t), times(t)) for t in trials]
+            if rescale:
+                near.append(at(a.at_scale(scale), f"covered {times(scale / info.scale)}"))
+            nearby = run_trials(state, "partial", near, mean_confidence, against=first)
+            merge = _merge_candidate(state, [first, *nearby.tried], nearby.kept, cfg.partial)
+            kept = run_trials(state, "partial", [merge], mean_confidence, against=nearby.kept).kept
+            top, margin = kept.score, cfg.partial.wide_margin
             # A confidence is at most 1: beyond that no wider map could win.
             if cfg.partial.wide_trials and top < cfg.partial.wide_below and top + margin <= 1.0:
                 # The wider scales' maps are not merged (where they went wrong they would pull
                 # the merge off the nearby scales' map), and one replaces the choice only when
                 # clearly more confident: they lie farther from the guessed scale.
-                wide = max(
-                    (at(a.at_scale(info.scale * t)) for t in cfg.partial.wide_trials),
-                    key=_mean_confidence,
-                )
-                if _mean_confidence(wide) >= top + margin:
-                    kept = wide
-            best, chosen = kept
-            info = dataclasses.replace(info, scale=float(best.scale))
+                wide = [at(a.at_scale(info.scale * t), times(t)) for t in cfg.partial.wide_trials]
+                kept = run_trials(
+                    state, "partial", wide, mean_confidence, against=kept, margin=margin
+                ).kept
+            info = dataclasses.replace(info, scale=float(kept.candidate.a.scale))
         elif rescale:
-            again, second = at(a.at_scale(scale))
+            again = a.at_scale(scale)
             kind = state.init if isinstance(state.init, str) else "shot"
             da, db = again.internal_descriptors(kind), b.internal_descriptors(kind)
-            cost = [
-                float(np.linalg.norm(da - db[again.map_in(b, r.map)], axis=1).mean())
-                for r in (first, second)
-            ]
-            if cost[1] <= cost[0]:
-                best, chosen = again, second
+
+            def nearer(t: Trial) -> float:
+                """Minus the mean distance of the descriptors (at the second scale) of A's
+                vertices to their images'."""
+                g = again.map_in(b, t.result.map)
+                return -float(np.linalg.norm(da - db[g], axis=1).mean())
+
+            second = at(again, f"covered {times(scale / info.scale)}")
+            kept = run_trials(state, "partial", [second], nearer, against=first, margin=0.0).kept
+            if kept is not first:
                 info = dataclasses.replace(info, scale=float(scale))
-        state.a = best
-        state.f0 = best.map_in(b, chosen.init_map)
-        state.f = best.map_in(b, chosen.map)
-        state.hope_map = best.map_in(b, chosen.hope_map)
-        state.history = chosen.history
-        # The stages of the kept nested match, as seconds within "partial".
-        state.timings.update({k: v for k, v in chosen.timings.items() if k != "total"})
-        state.done = "the map is the part's match at the whole's scale"
+        # The stages of the kept nested match count as seconds within "partial".
+        adopt(state, kept)
         return info
 
 
-def _refined_merge(state: MatchState, runs: list, config, landmarks, rings: int) -> tuple:
-    """(view, result) of the part's match from the merge of the maps of ``runs`` ((view,
-    result) pairs of one part at several scales): each vertex takes its image from the map
-    whose confidence, averaged over ``rings`` rounds of 1-ring averaging, is highest there;
-    matched at the scale of the run of highest mean confidence."""
+def _merge_candidate(state: MatchState, runs: list[Trial], best: Trial, cfg) -> Candidate:
+    """The part's match from the merge of the maps of ``runs`` (trials of one part at
+    several scales): each vertex takes its image from the map whose confidence, averaged
+    over ``cfg.merge_rings`` rounds of 1-ring averaging, is highest there; matched at the
+    scale of ``best``, the run of highest mean confidence."""
     a, b = state.a, state.b
-    maps = np.stack([view.map_in(b, r.map) for view, r in runs])  # internal numbering
-    conf = np.stack([r.confidence[a.order] for _, r in runs], axis=1)
+    maps = np.stack([t.candidate.a.map_in(b, t.result.map) for t in runs])  # internal numbering
+    conf = np.stack([t.result.confidence[a.order] for t in runs], axis=1)
     p = a.ring_average()
-    for _ in range(rings):
+    for _ in range(cfg.merge_rings):
         conf = p @ conf
     merged = maps[np.argmax(conf, axis=1), np.arange(a.n_vertices)]
-    view = max(runs, key=_mean_confidence)[0]
-    return view, state.run(view, b, a.map_out(b, merged), config, landmarks=landmarks)
-
-
-def _mean_confidence(run: tuple) -> float:
-    """Mean confidence of a (view, result) run."""
-    return float(np.mean(run[1].confidence))
+    return dataclasses.replace(best.candidate, label="merge", init=a.map_out(b, merged))

@@ -16,10 +16,10 @@ from __future__ import annotations
 import logging
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Callable
 
-__all__ = ["STAGES", "ProgressBar", "ProgressEvent", "StageInfo", "logger"]
+__all__ = ["STAGES", "ProgressBar", "ProgressEvent", "StageInfo", "Tried", "logger"]
 
 #: The package logger; silent until the application configures logging.
 logger = logging.getLogger("hope_rs")
@@ -45,6 +45,17 @@ STAGES = (
 
 
 @dataclass
+class Tried:
+    """One trial of a stage's choice among candidate matches
+    (:mod:`hope_rs.pipeline.trials`): its label, its score (``None``: not scored) and
+    whether it is the one kept."""
+
+    label: str
+    score: float | None = None
+    kept: bool = False
+
+
+@dataclass
 class StageInfo:
     """One stage of a match: whether it ran, why or why not, and its wall time.
 
@@ -59,12 +70,16 @@ class StageInfo:
     seconds : float
         Wall time of the stage (0 when skipped). "refine" excludes the polish step here,
         while ``MatchResult.timings["refine"]`` counts it.
+    trials : list of Tried
+        The candidate matches the stage tried, in order, the kept one marked (the partial
+        stage's scales; empty for most stages).
     """
 
     name: str
     ran: bool
     reason: str = ""
     seconds: float = 0.0
+    trials: list[Tried] = field(default_factory=list)
 
     def __str__(self) -> str:
         if self.ran:
@@ -127,6 +142,8 @@ class StageLog:
 
     def __init__(self, progress: Callable[[ProgressEvent], Any] | None = None, t0=None):
         self.stages: list[StageInfo] = []
+        #: Per stage, the trials recorded while it runs (:meth:`tried`).
+        self.trials: dict[str, list[Tried]] = {}
         self.progress = progress
         self.t0 = time.perf_counter() if t0 is None else t0
         # A nested match (the coarse one of a multiscale match) logs as "coarse refine: ...".
@@ -151,8 +168,12 @@ class StageLog:
         logger.debug("%s%s: %s (%.2f s)", self.prefix, stage, detail, seconds)
         self._emit(stage, step, total, detail=detail, iteration=iteration)
 
+    def tried(self, stage: str, record: Tried) -> None:
+        """Records a trial of ``stage``, listed in its :class:`StageInfo` when it ran."""
+        self.trials.setdefault(stage, []).append(record)
+
     def ran(self, stage: str, seconds: float, reason: str = "", step: int = 0, total=None):
-        info = StageInfo(stage, True, reason, seconds)
+        info = StageInfo(stage, True, reason, seconds, self.trials.pop(stage, []))
         self.stages.append(info)
         logger.info("%s%s", self.prefix, info)
         self._emit(stage, step, total, done=True, detail=reason, seconds=seconds)

@@ -6,12 +6,36 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .confidence import MatchQuality
 from .config import MatchConfig
+from .iteration import Iteration
 from .progress import StageInfo
-from .state import Iteration
 
 __all__ = ["MatchQuality", "MatchResult"]
+
+
+@dataclass(frozen=True)
+class MatchQuality:
+    """A pair-level summary of :attr:`MatchResult.confidence`.
+
+    Attributes
+    ----------
+    mean_confidence : float
+        The mean confidence over A's vertices.
+    share_confident : float
+        The share of A's vertices with confidence at least ``ConfidenceConfig.threshold``.
+    likely_failed : bool
+        ``mean_confidence < ConfidenceConfig.failed_mean``, ``share_confident <
+        ConfidenceConfig.failed_share`` or ``flipped_share > ConfidenceConfig.failed_flipped``:
+        much of the map is probably wrong; look at the pair (``hope-rs show --color-by
+        confidence``) before using it.
+    flipped_share : float
+        The share of A's area whose triangles the map turns over (:func:`~hope_rs.pipeline.confidence.flipped_share`).
+    """
+
+    mean_confidence: float
+    share_confident: float
+    likely_failed: bool
+    flipped_share: float = 0.0
 
 
 @dataclass
@@ -33,9 +57,10 @@ class MatchResult:
         :mod:`hope_rs.pipeline.shared_faces`, when they ran), "confidence", "total"), and
         within "refine" and "faces" the seconds their HOPE steps spent building overlap costs
         ("refine.cost", "faces.cost") and solving the assignments ("refine.assign",
-        "faces.assign"). The spectral pass's eigenbases are solved
-        in a background thread during "refine" and count there, as does its ZoomOut when the
-        refinement reaches its last pass (:class:`~hope_rs.pipeline.spectral.EarlyZoomOut`).
+        "faces.assign"). The spectral pass's eigenbases are solved in a background thread
+        during "refine", as is its ZoomOut when the refinement reaches its last pass
+        (:class:`~hope_rs.pipeline.spectral.SpectralBackground`); the wait for what is left
+        of them after the refinement counts in "spectral".
     coarse : MatchResult or None
         With ``multiscale``, the match of the coarse copies.
     hope_map : (n_a,) int64

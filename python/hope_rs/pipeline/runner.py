@@ -3,13 +3,20 @@
 :func:`run_match` takes two :class:`~hope_rs.Shape` objects and an initial map or descriptor
 kind, translates to the shapes' internal numbering, runs the stages
 (:func:`~hope_rs.pipeline.stages.default_stages` by default) and translates the result back.
-Every stage's :meth:`~hope_rs.pipeline.state.Stage.close` runs on every exit, so no
-background work outlives the match.
+
+:func:`run_stages` owns the flow between the stages (see :mod:`hope_rs.pipeline.state`):
+a :class:`~hope_rs.pipeline.state.Halt` a stage returns, or a later stage declares after it
+(:meth:`~hope_rs.pipeline.state.Stage.final_after`), skips the stages after it that would
+change the map; each stage's :class:`~hope_rs.pipeline.state.Background` work runs alongside
+the stage it names and ends with it on every exit, and every stage's
+:meth:`~hope_rs.pipeline.state.Stage.close` runs on every exit, so no background work
+outlives the match.
 """
 
 from __future__ import annotations
 
 import time
+from contextlib import ExitStack
 from typing import Callable
 
 import numpy as np
@@ -20,20 +27,23 @@ from .config import MatchConfig
 from .progress import StageLog
 from .result import MatchResult
 from .stages import default_stages
-from .state import QUIET, MatchState, Stage
+from .state import QUIET, Halt, MatchState, Stage
 
 __all__ = ["run_match", "run_stages"]
 
 
 def run_stages(state: MatchState, stages: list[Stage]) -> MatchState:
     """Runs ``stages`` on ``state`` in order (see :class:`~hope_rs.pipeline.state.Stage`)."""
+    halt: Halt | None = None
     try:
         for stage in stages:
             stage.attach(state)
-        for stage in stages:
+        for i, stage in enumerate(stages):
             reason = stage.skip_reason(state)
+            if reason is None and halt is not None and not stage.runs_on_final_map:
+                reason = halt.reason
             if reason is None:
-                stage.run(state)
+                halt = _run_one(state, stage, stages[i + 1 :]) or halt
             elif reason is not QUIET:
                 state.log.skipped(stage.name, reason)
             state.hooks.emit("stage_end", state, stage.name)
@@ -41,6 +51,25 @@ def run_stages(state: MatchState, stages: list[Stage]) -> MatchState:
         for stage in reversed(stages):
             stage.close(state)
     return state
+
+
+def _run_one(state: MatchState, stage: Stage, later: list[Stage]) -> Halt | None:
+    """Runs ``stage`` with the background work of the ``later`` stages that runs alongside
+    it; the stage's halt, or the first later stage's verdict that the map is final now."""
+    with ExitStack() as stack:
+        work = []
+        for s in later:
+            bg = s.background(state) if s.alongside == stage.name else None
+            if bg is not None:
+                work.append(stack.enter_context(bg))
+        halt = stage.run(state)
+        if halt is None:
+            reasons = (s.final_after(state, stage.name) for s in later)
+            reason = next((r for r in reasons if r is not None), None)
+            halt = None if reason is None else Halt(reason)
+        for bg in work:
+            bg.keep = halt is None
+    return halt
 
 
 def run_match(
@@ -81,16 +110,16 @@ def run_match(
     confidence = None if state.confidence is None else state.confidence[a.rank]
     quality = state_quality(state)
     return MatchResult(
-        a.map_out(b, state.f).astype(np.int64),
-        a.map_out(b, state.f0).astype(np.int64),
-        state.history,
-        state.timings,
-        state.coarse,
-        a.map_out(b, state.hope_map).astype(np.int64),
-        log.stages,
-        state.config,
-        confidence,
-        quality,
+        map=a.map_out(b, state.f).astype(np.int64),
+        init_map=a.map_out(b, state.f0).astype(np.int64),
+        history=state.history,
+        timings=state.timings,
+        coarse=state.coarse,
+        hope_map=a.map_out(b, state.hope_map).astype(np.int64),
+        stages=log.stages,
+        config=state.config,
+        confidence=confidence,
+        quality=quality,
     )
 
 

@@ -33,7 +33,7 @@ from ..shape import Shape
 from .config import FinishConfig, RefineConfig
 from .growth import grow
 from .handles import face_handles, large_patches
-from .refine import assign_by_overlap
+from .overlap import assign_by_overlap
 from .state import MatchState, Stage, StepClock
 
 
@@ -112,7 +112,7 @@ def finish(
     """The map after the finishing rounds and, if any ran, the growth from their trusted
     patches (:func:`hope_rs.pipeline.growth.grow`), in the internal numbering; and how many
     rounds ran. ``refine``: the settings of the HOPE steps after each round (``top_k``...);
-    ``clock``: adds up those steps' seconds (see :func:`~hope_rs.pipeline.refine.assign_by_overlap`)."""
+    ``clock``: adds up those steps' seconds (see :func:`~hope_rs.pipeline.overlap.assign_by_overlap`)."""
     cfg = config
     f = np.asarray(f, dtype=np.int64)
     n_a = a.n_vertices
@@ -146,23 +146,26 @@ class FinishStage(Stage):
     """The "faces" stage: :func:`finish` on shapes that share most of their triangulation.
 
     Answers the refinement's "stop_refining" question (a map with enough handles is the
-    finish's to improve) and, at "refine_end", sets ``state.done`` when the refined map
-    already sends every face of A onto a face of B one to one (the spectral pass's region
-    choice would keep it, and the finish has nothing to do).
+    finish's to improve) and, after the refinement, finds the map final when it already
+    sends every face of A onto a face of B one to one (the spectral pass's region choice
+    would keep it, and the finish has nothing to do).
     """
 
     name = "faces"
 
+    def __init__(self):
+        self.attached = False
+
     def attach(self, state: MatchState) -> None:
         cfg = state.config.finish
-        if cfg.enabled and applies(state.a, state.b, cfg):
+        self.attached = cfg.enabled and applies(state.a, state.b, cfg)
+        if self.attached:
             state.hooks.on("stop_refining", lambda f: qualifies(state.a, state.b, f, cfg))
-            state.hooks.on("refine_end", self._refine_end)
 
-    @staticmethod
-    def _refine_end(state: MatchState, res) -> None:
-        if res is not None and not res.settled and face_handles(state.a, state.b, res.map).all():
-            state.done = "HOPE's map already sends every face of A onto a face of B, one to one"
+    def final_after(self, state: MatchState, name: str) -> str | None:
+        if self.attached and name == "refine" and face_handles(state.a, state.b, state.f).all():
+            return "HOPE's map already sends every face of A onto a face of B, one to one"
+        return None
 
     def skip_reason(self, state: MatchState):
         cfg = state.config.finish
@@ -170,7 +173,7 @@ class FinishStage(Stage):
             return "turned off (shared_faces=False)"
         if not applies(state.a, state.b, cfg):
             return f"a shape has more than {cfg.max_vertices} vertices"
-        return state.done
+        return None
 
     def run(self, state: MatchState) -> None:
         a, b, cfg = state.a, state.b, state.config.finish

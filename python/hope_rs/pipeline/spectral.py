@@ -38,8 +38,7 @@ from .anchors import distance_fields, farthest_witnesses, reachable
 from .config import RefineConfig, RepairConfig, SpectralConfig
 from .landmarks import landmark_embedding
 from .lmd import local_map_distortion
-from .refine import RefineResult
-from .state import MatchState, Stage
+from .state import Background, MatchState, Stage
 
 
 def basis_sizes(k_start: int, k_end: int, step: int) -> list[int]:
@@ -408,38 +407,30 @@ def long_range_discrepancy(
     return out
 
 
-class SpectralStage(Stage):
-    """The "spectral" stage: :func:`spectral_refine` of the refinement's map.
-
-    While HOPE refines, both eigenbases are solved in a background thread
-    (:class:`BasisPrefetch`, from the "refine_start" event) and ZoomOut starts during the last
-    pass (:class:`EarlyZoomOut`, from "last_pass"); at "refine_end" the stage waits for both,
-    or, when the refinement raised or settled (no spectral pass follows), stops them first.
-    Both threads have ended when the refinement stage returns or raises, and :meth:`close`
-    stops them on any other exit.
+class SpectralBackground(Background):
+    """The spectral pass's work while HOPE refines, and its BLAS scope: both eigenbases
+    solved in a background thread (:class:`BasisPrefetch`) and ZoomOut started during the
+    last pass (:class:`EarlyZoomOut`, from the "last_pass" event), inside one
+    :func:`~hope_rs._blas.single_threaded_blas` from before the solves start to after they
+    end. Leaving it waits for both threads (with ``keep``, when a spectral pass follows) or
+    stops them first; :attr:`zoomout` is then the early ZoomOut's map, or None.
     """
 
-    name = "spectral"
-
-    def __init__(self):
+    def __init__(self, state: MatchState):
+        self.state = state
+        self.extra: tuple[np.ndarray, np.ndarray] | None = None
+        self.zoomout: np.ndarray | None = None
+        #: When leaving began to wait for the threads (log seconds), if it did.
+        self.waited_from: float | None = None
         self.prefetch: BasisPrefetch | None = None
         self.early: EarlyZoomOut | None = None
-        self.blas: ExitStack | None = None
-        self.zoomout: np.ndarray | None = None
-        self.extra: tuple[np.ndarray, np.ndarray] | None = None
+        self.blas = ExitStack()
 
-    def attach(self, state: MatchState) -> None:
-        cfg = state.config.spectral
-        if cfg.enabled and applies(state.a, state.b, cfg):
-            state.hooks.on("refine_start", self._start)
-            state.hooks.on("last_pass", self._last_pass)
-            state.hooks.on("refine_end", self._refine_end)
-
-    def _start(self, state: MatchState) -> None:
-        cfg = state.config.spectral
-        lm = state.config.landmarks
+    def start(self) -> None:
+        state = self.state
+        cfg, lm = state.config.spectral, state.config.landmarks
         if state.landmarks is not None and lm.zoomout_weight > 0:
-            # Before the BLAS setting below, which only _stop restores.
+            # Before the BLAS limit below, at the process's own thread count.
             self.extra = landmark_embedding(
                 state.a,
                 state.b,
@@ -450,64 +441,90 @@ class SpectralStage(Stage):
                 near_radius=lm.near_radius,
             )
         # One BLAS thread from before the solves start to after they end (see BasisPrefetch).
-        self.blas = ExitStack()
         self.blas.enter_context(single_threaded_blas())
-        self.prefetch = BasisPrefetch(state.a, state.b, cfg.k_end)
-        self.early = EarlyZoomOut(state.a, state.b, self.prefetch, cfg, self.extra)
-        self.prefetch.start()
+        try:
+            self.prefetch = BasisPrefetch(state.a, state.b, cfg.k_end)
+            self.early = EarlyZoomOut(state.a, state.b, self.prefetch, cfg, self.extra)
+            self.prefetch.start()
+        except BaseException:
+            self.blas.close()  # the runner leaves only what it entered
+            raise
 
-    def _last_pass(self, f: np.ndarray, n_pass: int) -> None:
+    def last_pass(self, f: np.ndarray, n_pass: int) -> None:
         if self.early is not None:
             self.early.start(f, n_pass)
 
-    def _refine_end(self, state: MatchState, res: RefineResult | None) -> None:
-        if self.prefetch is None:
-            return
-        cancel = res is None or res.settled
-        if not cancel and res.history and res.history[-1].polish:
-            state.log.start("spectral", detail="finishing the eigenbases and ZoomOut")
-        early = self.early
-        self._stop(cancel)
-        if res is not None:
-            self.zoomout = early.result
-
-    def _stop(self, cancel: bool) -> None:
-        """Joins both threads (told to stop first with ``cancel``) and restores BLAS."""
-        prefetch, early, blas = self.prefetch, self.early, self.blas
-        self.prefetch = self.early = self.blas = None
+    def stop(self, keep: bool) -> None:
+        prefetch, early = self.prefetch, self.early
+        self.prefetch = self.early = None
         try:
-            if cancel:
+            if prefetch is None:
+                return
+            history = self.state.history
+            if keep and history and history[-1].polish:
+                self.waited_from = self.state.log.start(
+                    "spectral", detail="finishing the eigenbases and ZoomOut"
+                )
+            if not keep:
                 # Both flags before any wait, so that a second Ctrl-C during the joins below
                 # still leaves the threads stopping.
                 early.stop.set()
                 prefetch.stop.set()
-            early.join(cancel=cancel)
+            early.join(cancel=not keep)
             prefetch.finish()
+            self.zoomout = early.result
         finally:
-            blas.close()
+            self.blas.close()
 
-    def close(self, state: MatchState) -> None:
-        if self.prefetch is not None:
-            self._stop(cancel=True)
+
+class SpectralStage(Stage):
+    """The "spectral" stage: :func:`spectral_refine` of the refinement's map, from the
+    ZoomOut its :class:`SpectralBackground` started while the refinement ran, when it did.
+    """
+
+    name = "spectral"
+    alongside = "refine"
+
+    def __init__(self):
+        self.work: SpectralBackground | None = None
+
+    def attach(self, state: MatchState) -> None:
+        if self._applies(state):
+            state.hooks.on("last_pass", self._last_pass)
+
+    @staticmethod
+    def _applies(state: MatchState) -> bool:
+        cfg = state.config.spectral
+        return cfg.enabled and applies(state.a, state.b, cfg)
+
+    def background(self, state: MatchState) -> SpectralBackground | None:
+        self.work = SpectralBackground(state) if self._applies(state) else None
+        return self.work
+
+    def _last_pass(self, f: np.ndarray, n_pass: int) -> None:
+        if self.work is not None:
+            self.work.last_pass(f, n_pass)
 
     def skip_reason(self, state: MatchState):
         if not state.config.spectral.enabled:
             return "turned off (spectral=False)"
-        return state.done
+        return None
 
     def run(self, state: MatchState) -> None:
-        a, b, cfg = state.a, state.b, state.config.spectral
+        a, b, cfg, work = state.a, state.b, state.config.spectral, self.work
         t = state.log.start("spectral", detail="ZoomOut from HOPE's map, chosen region by region")
+        if work is not None and work.waited_from is not None:
+            t = work.waited_from  # the wait for the background work is the pass's too
         h = state.f
         f, z = spectral_refine(
             a,
             b,
             h,
-            self.zoomout,
+            None if work is None else work.zoomout,
             cfg,
             min_consistent=state.config.refine.min_consistent,
             repair=state.config.refine.repair,
-            extra=self.extra,
+            extra=None if work is None else work.extra,
         )
         if z is None:
             if not applies(a, b, cfg):

@@ -1,33 +1,52 @@
-"""What the stages of a match share: the match state, the runner's hooks and the stage interface.
+"""What the stages of a match share: the match state, the stage interface and its outcomes.
 
 A stage (:class:`Stage`) says whether it applies to a state and transforms it; the runner
-(:mod:`hope_rs.pipeline.runner`) runs a list of them in order. Stages that cooperate (the
-spectral pass solving its eigenbases while HOPE refines, the shared-face finish ending the
-refinement early) do so through named events of :class:`Hooks`, never through each other's
-fields.
+(:mod:`hope_rs.pipeline.runner`) runs a list of them in order and owns the control flow
+between them:
+
+* a stage that finds the map final returns :class:`Halt` from :meth:`Stage.run` (the partial
+  stage's inverse, a settled refinement), or says so when the runner asks it after an earlier
+  stage ran (:meth:`Stage.final_after`: the shared-face finish after the refinement); the
+  runner then skips every later stage that would change the map, giving the halt's reason;
+* work a stage runs in threads while an earlier stage runs (the spectral pass's eigenbases
+  during the refinement) is a :class:`Background` the runner enters before that stage and
+  leaves after it, on every exit (:attr:`Stage.alongside`);
+* events inside a stage that another stage acts on (the refinement's last pass, the question
+  whether to stop refining) go through :class:`Hooks`, never through each other's fields.
 """
 
 from __future__ import annotations
 
 from collections import defaultdict
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Callable
 
 import numpy as np
 
 from ..shape import Shape
 from .config import MatchConfig
+from .iteration import Iteration, StepClock
+from .part_info import PartialInfo
 from .progress import StageLog
+from .result import MatchResult
 
-__all__ = ["EVENTS", "QUIET", "Hooks", "Iteration", "MatchState", "Stage", "StepClock"]
+__all__ = [
+    "EVENTS",
+    "QUIET",
+    "Background",
+    "Halt",
+    "Hooks",
+    "Iteration",
+    "MatchState",
+    "Stage",
+    "StepClock",
+]
 
 #: The events of :class:`Hooks` and their arguments. "stop_refining" is a question: the
 #: refinement ends after the current pass when any subscriber answers True.
 EVENTS = {
-    "refine_start": "(state) before the refinement's first step",
-    "last_pass": "(f, n_pass) once the first step of the refinement's last pass has run",
+    "last_pass": "(f, n_pass) once the first k-hop step of the refinement's last pass has run",
     "stop_refining": "(f) -> bool at the start of every pass from the second on",
-    "refine_end": "(state, result) when the refinement returned (result None: it raised)",
     "stage_end": "(state, name) after each stage of the runner's list, run or skipped",
 }
 
@@ -36,44 +55,37 @@ EVENTS = {
 QUIET = object()
 
 
-@dataclass
-class Iteration:
-    """What one refinement step did."""
+@dataclass(frozen=True)
+class Halt:
+    """A stage's outcome: the map is final. The runner skips every later stage that would
+    change it (those without :attr:`Stage.runs_on_final_map`), recording ``reason``."""
 
-    #: Hop radius of the step; 0 for a global repair step.
-    k: int
-    witness_fraction: float
-    changed: int
-    seconds: float
-    #: The 0-based pass the step belongs to (the polish: the last pass that ran).
-    n_pass: int = 0
-    #: The final polishing step (see ``polish_k``), not a step of a pass.
-    polish: bool = False
-    #: Of ``seconds``, those spent building the overlap cost and solving its assignment (0 for
-    #: a repair step and for the polish, which is not one to one).
-    cost_seconds: float = 0.0
-    assign_seconds: float = 0.0
+    reason: str
 
 
-@dataclass
-class StepClock:
-    """Seconds the HOPE steps of a stage spent in their two halves, summed over its steps:
-    building the overlap cost (parallel) and solving the assignment (sequential)."""
+class Background:
+    """Work a stage runs in threads while an earlier stage runs (:attr:`Stage.alongside`).
 
-    cost: float = 0.0
-    assign: float = 0.0
-    steps: int = 0
+    The runner enters it before that stage and leaves it after, on every exit: with
+    :attr:`keep` True (the default) leaving waits for the work, whose results the stage
+    then uses; the runner sets it False when that stage raised or halted (:class:`Halt`), and
+    leaving then stops the work first.
+    """
 
-    def add(self, cost: float, assign: float) -> None:
-        self.cost += cost
-        self.assign += assign
-        self.steps += 1
+    keep: bool = True
 
-    def record(self, timings: dict, stage: str) -> None:
-        """Adds ``stage + ".cost"`` and ``stage + ".assign"`` to ``timings`` when a step ran."""
-        if self.steps:
-            timings[f"{stage}.cost"] = self.cost
-            timings[f"{stage}.assign"] = self.assign
+    def __enter__(self):
+        self.start()
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        self.stop(keep=self.keep and exc_type is None)
+
+    def start(self) -> None:
+        """Starts the work."""
+
+    def stop(self, keep: bool) -> None:
+        """Ends the work (see the class notes)."""
 
 
 class Hooks:
@@ -119,7 +131,7 @@ class MatchState:
     run : callable
         The runner itself, ``run(a, b, init, config, progress=..., landmarks=...,
         on_stage=...)`` → MatchResult, for stages that match other shapes (the multiscale
-        stage's coarse copies, the partial stage's reverse match).
+        stage's coarse copies; the trials of :mod:`hope_rs.pipeline.trials`).
     f0, f : ndarray or None
         The initial map, and the current map.
     hope_map : ndarray or None
@@ -129,8 +141,6 @@ class MatchState:
         Seconds per stage.
     settled : bool
         The refinement reached a fixed point that LMD trusts everywhere.
-    done : str or None
-        Why the map needs no further stage, once a stage found that out.
     coarse : MatchResult or None
         The multiscale stage's match of the coarse copies.
     zoomout : ndarray or None
@@ -147,23 +157,22 @@ class MatchState:
     a: Shape
     b: Shape
     config: MatchConfig
-    init: Any
+    init: str | np.ndarray
     log: StageLog
     hooks: Hooks = field(default_factory=Hooks)
     callback: Callable | None = None
-    run: Callable | None = None
+    run: Callable[..., MatchResult] | None = None
     f0: np.ndarray | None = None
     f: np.ndarray | None = None
     hope_map: np.ndarray | None = None
     history: list[Iteration] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
     settled: bool = False
-    done: str | None = None
-    coarse: Any = None
+    coarse: MatchResult | None = None
     zoomout: np.ndarray | None = None
     confidence: np.ndarray | None = None
     landmarks: np.ndarray | None = None
-    partial: Any = None
+    partial: PartialInfo | None = None
 
 
 class Stage:
@@ -172,22 +181,40 @@ class Stage:
     Subclasses set :attr:`name` (one of :data:`hope_rs.pipeline.progress.STAGES`) and
     implement :meth:`run`; the others have defaults. The runner calls :meth:`attach` on every
     stage before the first runs, then for each in order :meth:`skip_reason` and, when it is
-    ``None``, :meth:`run`; :meth:`close` on every stage on every exit, an error included.
+    ``None`` and no earlier stage made the map final (or the stage runs on a final map),
+    :meth:`run`; after a stage ran, it asks the later ones :meth:`final_after`; and
+    :meth:`close` on every stage on every exit, an error included.
     """
 
     name: str = ""
+    #: Whether the stage still runs once a stage made the map final (:class:`Halt`): those
+    #: that only read the map or its start (the confidence, the landmarks' re-pinning).
+    runs_on_final_map: bool = False
+    #: The name of an earlier stage while which this stage's :meth:`background` work runs.
+    alongside: str | None = None
 
     def attach(self, state: MatchState) -> None:
         """Subscribe to the events of ``state.hooks`` this stage needs."""
 
-    def skip_reason(self, state: MatchState):
+    def skip_reason(self, state: MatchState) -> object:
         """``None`` when the stage runs on ``state``, else why not (recorded as skipped), or
         :data:`QUIET` (not recorded)."""
-        return
+        return None
 
-    def run(self, state: MatchState) -> None:
-        """Transform ``state`` (and record the stage in ``state.log``)."""
+    def run(self, state: MatchState) -> Halt | None:
+        """Transform ``state`` (and record the stage in ``state.log``); a :class:`Halt` when
+        the map is final."""
         raise NotImplementedError
 
+    def final_after(self, state: MatchState, name: str) -> str | None:
+        """Asked after the earlier stage ``name`` ran: why the map is final now (as if that
+        stage had returned a :class:`Halt`), or ``None``."""
+        return None
+
+    def background(self, state: MatchState) -> Background | None:
+        """The work to run while the stage :attr:`alongside` runs, or ``None`` (asked just
+        before that stage runs)."""
+        return None
+
     def close(self, state: MatchState) -> None:
-        """Stop any background work (called on every exit)."""
+        """Release what the stage holds (called on every exit)."""

@@ -1,0 +1,157 @@
+"""Trials: match several candidates, score each, keep one.
+
+Some choices cannot be made before matching: at which scale a part of a shape settles on the
+right region of the whole (the partial stage), which of several hypotheses keeps a map's
+orientation. A stage makes such a choice with the runner's own match of each candidate: a
+:class:`Candidate` names the shapes, the start and the settings of one match,
+:func:`run_trials` runs the candidates with ``state.run`` (the runner, with fresh stages),
+scores each with the caller's function and returns the kept :class:`Trial`, and
+:func:`adopt` makes the kept match the state's. Every trial is recorded with its score in the
+stage's :class:`~hope_rs.pipeline.progress.StageInfo` (``res.stage(name).trials``), the kept
+one marked.
+
+Example: keep the best of a map and two alternative starts by a score of the result::
+
+    def score(t: Trial) -> float:
+        return -distortion(t.result) - orientation_penalty(t.result)
+
+    cands = [
+        Candidate(label, state.a, state.b, state.a.map_out(state.b, f), config)
+        for label, f in (("as is", state.f), ("mirrored", g), ("reseeded", h))
+    ]
+    kept = run_trials(state, "repair", cands, score).kept
+    adopt(state, kept)
+
+Several rounds refine a choice: a round given ``against`` (a trial kept before) keeps its
+own best only when that beats it (strictly, or by at least ``margin``), each scored by the
+round's function; :func:`run_trial` runs one candidate unscored (a first match whose result
+decides the next candidates).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from ..shape import Shape
+from .config import MatchConfig
+from .progress import Tried
+from .result import MatchResult
+from .state import MatchState
+
+__all__ = ["Candidate", "Trial", "Trials", "adopt", "mean_confidence", "run_trial", "run_trials"]
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One match to try.
+
+    Attributes
+    ----------
+    label : str
+        How the trial is recorded ("x0.95", "mirrored").
+    a, b : Shape
+        The shapes (views such as :meth:`~hope_rs.Shape.at_scale` included).
+    init : str or ndarray
+        A descriptor kind, or a start map in the shapes' input numbering
+        (``a.map_out(b, f)`` of a map ``f`` in their internal numbering).
+    config : MatchConfig
+        The settings of the match; turn off the stage that runs the trials in it (as the
+        partial stage does) or it runs them again.
+    landmarks : (m, 2) ndarray or None
+        Landmarks in the shapes' input numbering.
+    """
+
+    label: str
+    a: Shape
+    b: Shape
+    init: str | np.ndarray
+    config: MatchConfig
+    landmarks: np.ndarray | None = None
+
+
+@dataclass
+class Trial:
+    """A candidate's match and its score (``None`` until scored)."""
+
+    candidate: Candidate
+    result: MatchResult
+    score: float | None
+    record: Tried
+
+
+@dataclass
+class Trials:
+    """A round of :func:`run_trials`: the kept trial and the trials it ran, in order."""
+
+    kept: Trial
+    tried: list[Trial]
+
+
+def run_trial(state: MatchState, stage: str, candidate: Candidate) -> Trial:
+    """The match of ``candidate`` (the runner's stages, fresh), recorded under ``stage``
+    unscored; the trial is kept until a later round keeps another."""
+    c = candidate
+    result = state.run(c.a, c.b, c.init, c.config, landmarks=c.landmarks)
+    trial = Trial(c, result, None, Tried(c.label))
+    state.log.tried(stage, trial.record)
+    _mark_kept(state, stage, trial)
+    return trial
+
+
+def run_trials(
+    state: MatchState,
+    stage: str,
+    candidates: Sequence[Candidate],
+    score: Callable[[Trial], float],
+    *,
+    against: Trial | None = None,
+    margin: float | None = None,
+) -> Trials:
+    """Matches every candidate in order, scores each with ``score`` (higher is better) and
+    keeps the first of the highest score. With ``against`` (a trial kept before, scored
+    again by ``score``), that one stays kept unless the round's best beats it: by a higher
+    score, or with ``margin`` by at least ``margin``. Records every trial under ``stage``."""
+    if not candidates:
+        raise ValueError("run_trials needs at least one candidate")
+    tried = []
+    for c in candidates:
+        t = run_trial(state, stage, c)
+        t.score = t.record.score = float(score(t))
+        tried.append(t)
+    best = max(tried, key=lambda t: t.score)
+    kept = best
+    if against is not None:
+        against.score = against.record.score = float(score(against))
+        beats = (
+            best.score > against.score if margin is None else best.score >= against.score + margin
+        )
+        kept = best if beats else against
+    _mark_kept(state, stage, kept)
+    return Trials(kept, tried)
+
+
+def _mark_kept(state: MatchState, stage: str, kept: Trial) -> None:
+    for r in state.log.trials.get(stage, []):
+        r.kept = r is kept.record
+
+
+def adopt(state: MatchState, trial: Trial) -> None:
+    """Makes ``trial``'s match the state's: its shapes, its maps (initial, final, HOPE's, in
+    the shapes' internal numbering) and history, and its stages' seconds within the state's
+    timings."""
+    c, r = trial.candidate, trial.result
+    state.a, state.b = c.a, c.b
+    state.f0 = c.a.map_in(c.b, r.init_map)
+    state.f = c.a.map_in(c.b, r.map)
+    state.hope_map = c.a.map_in(c.b, r.hope_map)
+    state.history = r.history
+    state.timings.update({k: v for k, v in r.timings.items() if k != "total"})
+
+
+def mean_confidence(trial: Trial) -> float:
+    """The mean confidence of a trial's match (its config must compute one)."""
+    return float(np.mean(trial.result.confidence))
