@@ -22,6 +22,14 @@ import math
 import numbers
 from dataclasses import dataclass, field
 
+try:
+    import tomllib
+except ImportError:  # Python < 3.11: the tomli backport, when installed
+    try:
+        import tomli as tomllib
+    except ImportError:
+        tomllib = None
+
 from ..kernels.search import SearchConfig
 from ..shape import ShapeConfig
 
@@ -39,6 +47,7 @@ __all__ = [
     "RefineConfig",
     "RepairConfig",
     "SpectralConfig",
+    "read_config",
 ]
 
 
@@ -393,6 +402,57 @@ class MultiscaleConfig:
     lift_ridge: float = 1e-3
 
 
+def _tuples(value):
+    """Lists (as JSON and TOML give sequences) as tuples, nested ones included."""
+    if isinstance(value, (list, tuple)):
+        return tuple(_tuples(v) for v in value)
+    return value
+
+
+def _from_dict(cls, data, path: str):
+    """An instance of the config dataclass ``cls`` from a (nested) dict of its fields."""
+    if not isinstance(data, dict):
+        raise TypeError(f"{path} must be a table of settings, got {type(data).__name__}")
+    fields = [f.name for f in dataclasses.fields(cls)]
+    unknown = sorted(set(data) - set(fields))
+    if unknown:
+        raise ValueError(
+            f"{path} has no setting {unknown[0]!r}; its settings are {', '.join(fields)}"
+        )
+    default = cls()
+    values = {}
+    for name, value in data.items():
+        ref = getattr(default, name)
+        if dataclasses.is_dataclass(ref):
+            values[name] = _from_dict(type(ref), value, f"{path}.{name}")
+        else:
+            values[name] = _tuples(value)
+    return cls(**values)
+
+
+def read_config(path) -> MatchConfig:
+    """The :class:`MatchConfig` of a TOML settings file: tables nested as :meth:`MatchConfig.to_dict`
+    nests the stages (``k_max = 6`` at the top, ``[refine]`` ``max_passes = 2``, ...); what the
+    file leaves out keeps its default. Needs Python 3.11+ (``tomllib``) or the ``tomli``
+    package."""
+    if tomllib is None:
+        raise ValueError(
+            f"reading the settings file {str(path)!r} needs Python 3.11 or later, or the tomli "
+            "package (pip install tomli)"
+        )
+    try:
+        with open(path, "rb") as fh:
+            data = tomllib.load(fh)
+    except FileNotFoundError:
+        raise FileNotFoundError(f"no such settings file: {str(path)!r}") from None
+    except tomllib.TOMLDecodeError as e:
+        raise ValueError(f"settings file {str(path)!r} is not valid TOML: {e}") from None
+    try:
+        return MatchConfig.from_dict(data)
+    except (TypeError, ValueError) as e:
+        raise type(e)(f"settings file {str(path)!r}: {e}") from None
+
+
 def _is_number(x) -> bool:
     """Whether ``x`` is a finite real number (``bool`` is not one)."""
     return not isinstance(x, bool) and isinstance(x, numbers.Real) and math.isfinite(x)
@@ -698,6 +758,13 @@ class MatchConfig:
     def to_dict(self) -> dict:
         """Every setting, nested by stage (JSON-serialisable)."""
         return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> MatchConfig:
+        """The config :meth:`to_dict` gave ``data`` (JSON or TOML lists are read as tuples);
+        settings missing from ``data`` keep their defaults, an unknown name is a one-line
+        error naming it. The values are checked where :func:`hope_rs.match` checks them."""
+        return _from_dict(cls, data, "MatchConfig")
 
     def key(self) -> str:
         """A SHA-256 (hex) of every setting: equal configs, equal keys."""
