@@ -117,7 +117,7 @@ def match(
     --------
     >>> import hope_rs
     >>> from hope_rs.evaluation.demo import demo_pair
-    >>> a, b, truth = demo_pair()
+    >>> a, b = demo_pair()
     >>> res = hope_rs.match(a, b)
     >>> res.map.shape == (a.n_vertices,)
     True
