@@ -2,7 +2,10 @@
 resumes that know what changed, and one bad pair or worker never stopping the others."""
 
 import json
+import os
 import shutil
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -292,3 +295,17 @@ def test_12_a_vertex_in_no_face_has_confidence_zero(meshes):
     assert res.confidence[N] == 0.0 and res.map_or_unmatched(0.0)[N] == res.map[N]
     assert res.map_or_unmatched(0.5)[N] == -1
     assert np.median(res.confidence[:N]) > 0.5
+
+
+# -- also found --------------------------------------------------------------------------------
+
+
+def test_rayon_threads_above_the_cores_are_capped_with_a_warning():
+    code = "import os, hope_rs; print(os.environ['RAYON_NUM_THREADS'])"
+    env = {**os.environ, "RAYON_NUM_THREADS": "1000"}
+    run = subprocess.run(
+        [sys.executable, "-c", code], check=False, env=env, capture_output=True, text=True
+    )
+    assert run.returncode == 0, run.stderr
+    assert int(run.stdout) == len(os.sched_getaffinity(0)) < 1000
+    assert "RAYON_NUM_THREADS=1000 is more than the" in run.stderr

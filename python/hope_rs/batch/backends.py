@@ -26,6 +26,7 @@ from typing import Any, Callable, Protocol
 
 import numpy as np
 
+from .._threads import available_cores
 from .progress import one_line_warning
 from .ray_backend import RayBackend
 from .tasks import error_text, limit_threads, pair_task
@@ -258,10 +259,8 @@ class PoolBackend:
 
 
 def cpu_count() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:
-        return os.cpu_count() or 1
+    """The cores this process may run on."""
+    return available_cores()
 
 
 def default_jobs() -> int:
