@@ -154,7 +154,7 @@ def cli_maps(folder, pa, pb, *flags: str) -> tuple[np.ndarray, np.ndarray]:
     batch = Path(folder) / f"batch{tag}"
     args = ["batch", str(pairs), "--out", str(batch), "-q", "-j", "1", "--no-cache", *flags]
     assert main(args) == 0
-    (got,) = list(batch.iterdir())
+    (got,) = list(batch.glob("*.txt"))
     return np.loadtxt(out, dtype=np.int64), np.loadtxt(got, dtype=np.int64)
 
 

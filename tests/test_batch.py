@@ -1,4 +1,3 @@
-import json
 import os
 
 import numpy as np
@@ -8,7 +7,7 @@ from meshes import bumpy_sphere, bumpy_sphere_files, write_off
 import hope_rs
 from hope_rs.batch.cache import ShapeCache, cached_shape, file_digest
 from hope_rs.batch.driver import imatch_many, map_name, read_pairs
-from hope_rs.batch.manifest import MANIFEST
+from hope_rs.batch.manifest import MANIFEST, Manifest
 from hope_rs.cli import main
 
 
@@ -50,7 +49,7 @@ def test_maps_are_written_atomically_and_a_rerun_skips_them(folder, tmp_path):
     assert [r.ok and not r.skipped for r in first] == [True] * 3
     files = sorted(f for f in out.iterdir() if f.name != MANIFEST)
     assert [f.name for f in files] == sorted(map_name(r.a, r.b) for r in first)  # no temp files
-    assert sorted(json.loads((out / MANIFEST).read_text())["maps"]) == [f.name for f in files]
+    assert sorted(Manifest(out).entries) == [f.name for f in files]
     for r in first:
         np.testing.assert_array_equal(np.loadtxt(r.path, dtype=np.int64), r.map)
         ref = hope_rs.match(hope_rs.load_mesh(shapes[idx[r.index][0]]),

@@ -21,7 +21,7 @@ from hope_rs import MatchConfig
 from hope_rs.batch.backends import DIED, PoolBackend
 from hope_rs.batch.cache import ShapeCache
 from hope_rs.batch.driver import imatch_many, read_pairs
-from hope_rs.batch.manifest import MANIFEST
+from hope_rs.batch.manifest import MANIFEST, Manifest
 from hope_rs.cli import main
 from hope_rs.features.descriptors import DescriptorConfig
 from hope_rs.pipeline.config import InitialConfig
@@ -160,6 +160,32 @@ def test_5_config_to_dict_and_from_dict_round_trip():
         MatchConfig.from_dict({"nope": 1})
 
 
+@pytest.mark.parametrize(
+    ("data", "error"),
+    [
+        ({"k_max": 100}, r"MatchConfig.k_max must be an integer in \[2, 64\], got 100"),
+        ({"initial": {"descriptor": "sift"}}, "MatchConfig.initial.descriptor must be one of"),
+        ({"refine": {"max_passes": 0}}, "MatchConfig.refine.max_passes must be an integer >= 1"),
+    ],
+)
+def test_5_a_config_is_checked_by_one_function_for_match_batch_and_cli(
+    data, error, files, tmp_path, capsys
+):
+    """The constraints declared on the config's fields, checked before any work."""
+    cfg = MatchConfig.from_dict(data)
+    a, b = files / "s0.off", files / "s1.off"
+    with pytest.raises(ValueError, match=error):
+        hope_rs.match(hope_rs.load_mesh(a), hope_rs.load_mesh(b), config=cfg)
+    with pytest.raises(ValueError, match=error):
+        list(imatch_many([a, b], [(0, 1)], jobs=1, cache=False, config=cfg))
+    lines = [f"{k} = {v}" for k, v in data.items() if not isinstance(v, dict)]
+    for stage, table in ((k, v) for k, v in data.items() if isinstance(v, dict)):
+        lines += [f"[{stage}]"] + [f"{k} = {json.dumps(v)}" for k, v in table.items()]
+    (tmp_path / "s.toml").write_text("\n".join(lines) + "\n")
+    assert main(["match", str(a), str(b), "-q", "--config", str(tmp_path / "s.toml")]) == 2
+    assert error.replace("\\", "") in capsys.readouterr().err
+
+
 def test_6_shapes_are_cached_and_kept_under_their_own_config(meshes, tmp_path, configs):
     wide = ShapeConfig(descriptors=DescriptorConfig(shot_radius=0.2))
     custom = {f"m{s}": hope_rs.Shape(meshes[s], config=wide) for s in range(2)}
@@ -204,7 +230,7 @@ def test_7_a_rerun_redoes_pairs_whose_settings_or_meshes_changed(files, tmp_path
     with pytest.warns(RuntimeWarning, match="mesh s1 changed; computing it again"):
         (r,) = hope_rs.match_many(shapes, [(0, 1)], **run, **FAST)
     assert r.ok and not r.skipped
-    entry = json.loads((out / MANIFEST).read_text())["maps"]["s0__s1.txt"]
+    entry = Manifest(out).entries["s0__s1.txt"]
     assert set(entry) >= {"a_digest", "b_digest", "landmarks", "settings", "code"}
 
 

@@ -21,9 +21,8 @@ import numpy as np
 from ..geometry.map_io import check_writable_folder
 from ..geometry.mesh import as_mesh
 from ..matching import check_match_options
-from ..pipeline.config import MatchConfig
+from ..pipeline.config import INIT_KINDS, MatchConfig
 from ..pipeline.landmarks import check_landmarks
-from ..pipeline.options import INIT_KINDS
 from ..shape import Shape
 from .backends import check_backend, cpu_count, default_jobs, die_with_parent, make_backend
 from .cache import ShapeCache, code_fingerprint
@@ -294,7 +293,7 @@ def match_many(shapes, pairs=None, **kwargs) -> list[PairResult]:
         Indices into ``shapes`` or names; default every pair (i, j) with i < j.
     out_dir : path, keyword-only, optional
         Write each map to ``out_dir/<a>__<b>.txt`` (one B index per line) as soon as it is done,
-        atomically, and record it in ``out_dir/hope-rs-manifest.json`` (both meshes' content
+        atomically, and record it in ``out_dir/hope-rs-manifest.jsonl`` (both meshes' content
         digests, the landmarks', the settings and the code version). Names are made safe
         (other characters than letters, digits, ``_ . + -`` become ``_``) and get a short
         digest suffix when that changed them or two pairs would share a file

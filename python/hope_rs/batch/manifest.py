@@ -1,10 +1,17 @@
 """The batch manifest: what each map file of an output folder was computed from.
 
-``OUT/hope-rs-manifest.json`` holds, per map file, the two shapes' names and content digests,
-the landmarks' digest, the settings key (:meth:`~hope_rs.MatchConfig.key` and both shapes'
-:class:`~hope_rs.ShapeConfig`) and the code version. It is rewritten atomically after each pair.
-A rerun skips a pair only when its map file is whole and its entry matches the pair in every
-field; :meth:`Manifest.why_redo` says what differs.
+``OUT/hope-rs-manifest.jsonl`` records, per map file, the two shapes' names and content
+digests, the landmarks' digest, the settings key (:meth:`~hope_rs.MatchConfig.key` and both
+shapes' :class:`~hope_rs.ShapeConfig`) and the code version. A rerun skips a pair only when its
+map file is whole and its entry matches the pair in every field; :meth:`Manifest.why_redo`
+says what differs.
+
+The file is a journal, one JSON object a line, appended to and flushed to disk as each pair
+finishes (after its map is written): an entry costs one short write however many pairs the
+folder holds, and a batch killed at any moment leaves at worst a cut last line, which is
+ignored. An entry is dropped (a line saying so) before its map is rewritten, so that no entry
+describes another map than the one on disk; the last line about a map wins. When the journal
+has grown to several lines per map it is rewritten, atomically, with one line per map.
 """
 
 from __future__ import annotations
@@ -23,9 +30,9 @@ from ..geometry.map_io import atomic_write
 __all__ = ["MANIFEST", "Manifest", "landmarks_digest", "settings_key"]
 
 #: The manifest's file name in an output folder.
-MANIFEST = "hope-rs-manifest.json"
-#: Layout version of the manifest.
-FORMAT = 1
+MANIFEST = "hope-rs-manifest.jsonl"
+#: The first line of a manifest: its layout version.
+HEADER = {"hope_rs_manifest": 1}
 
 #: Entry fields and how a difference in each is reported.
 FIELDS = {
@@ -37,17 +44,13 @@ FIELDS = {
 }
 
 
-def _sha(text: str) -> str:
-    return hashlib.sha256(text.encode("utf-8")).hexdigest()
-
-
 def settings_key(match_key: str, config_a, config_b) -> str:
     """The settings of one pair: the MatchConfig key and the ShapeConfig of each shape."""
     parts = [match_key] + [
         json.dumps(dataclasses.asdict(c), sort_keys=True, default=list)
         for c in (config_a, config_b)
     ]
-    return _sha("\n".join(parts))
+    return hashlib.sha256("\n".join(parts).encode("utf-8")).hexdigest()
 
 
 def landmarks_digest(landmarks) -> str | None:
@@ -58,26 +61,70 @@ def landmarks_digest(landmarks) -> str | None:
     return hashlib.sha256(repr(arr.shape).encode() + arr.tobytes()).hexdigest()
 
 
+def _line(obj: dict) -> bytes:
+    return (json.dumps(obj, sort_keys=True) + "\n").encode("utf-8")
+
+
 class Manifest:
     """The manifest of the output folder ``folder`` (read when it exists)."""
 
     def __init__(self, folder: str | os.PathLike):
         self.path = Path(folder) / MANIFEST
         self.entries: dict[str, dict] = {}
-        if not self.path.exists():
-            return
+        lines = self._read()
+        if lines is None or lines > 2 * len(self.entries) + 64:
+            self._rewrite()  # new, unreadable or grown: one line per map
+
+    def _read(self) -> int | None:
+        """Read the entries; the number of lines, or None when there is no usable file."""
         try:
-            data = json.loads(self.path.read_text(encoding="utf-8"))
-            if data.get("format") != FORMAT or not isinstance(data.get("maps"), dict):
-                raise ValueError("unknown layout")
-            self.entries = data["maps"]
-        except (OSError, ValueError, AttributeError) as e:
+            text = self.path.read_bytes().decode("utf-8", errors="replace")
+        except FileNotFoundError:
+            return None
+        except OSError as e:
+            text, why = "", str(e)
+        else:
+            why = "it is not a hope_rs batch manifest"
+        lines = text.splitlines()
+        try:
+            ok = json.loads(lines[0]) == HEADER
+        except (IndexError, ValueError):
+            ok = False
+        if not ok:
             warnings.warn(
-                f"batch manifest {str(self.path)!r} is unreadable ({e}); the maps it listed "
-                "are computed again",
+                f"batch manifest {str(self.path)!r} is unreadable ({why}); the maps of this "
+                "folder are computed again",
                 RuntimeWarning,
-                stacklevel=2,
+                stacklevel=3,
             )
+            return None
+        for line in lines[1:]:
+            try:
+                item = json.loads(line)
+                name = item["map"]
+                if item.get("drop"):
+                    self.entries.pop(name, None)
+                else:
+                    self.entries[name] = dict(item["entry"])
+            except (ValueError, KeyError, TypeError, AttributeError):
+                continue  # a line cut short by a crash
+        if text and not text.endswith("\n"):
+            self._append(b"\n")  # so that the next line starts on its own
+        return len(lines)
+
+    def _append(self, data: bytes) -> None:
+        fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
+        try:
+            os.write(fd, data)
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+    def _rewrite(self) -> None:
+        text = _line(HEADER) + b"".join(
+            _line({"map": name, "entry": e}) for name, e in sorted(self.entries.items())
+        )
+        atomic_write(self.path, lambda fh: fh.write(text))
 
     def why_redo(self, name: str, entry: dict) -> str | None:
         """None when map file ``name`` was computed from exactly ``entry``, else why not."""
@@ -93,13 +140,9 @@ class Manifest:
         """Drop the entry of map file ``name`` (before its map is rewritten: a run cut short
         between the two must not leave a new map under an old entry)."""
         if self.entries.pop(name, None) is not None:
-            self._save()
+            self._append(_line({"map": name, "drop": True}))
 
     def record(self, name: str, entry: dict) -> None:
-        """Store ``entry`` for map file ``name`` and rewrite the manifest atomically."""
+        """Record ``entry`` for map file ``name`` (once its map is written)."""
         self.entries[name] = entry
-        self._save()
-
-    def _save(self) -> None:
-        text = json.dumps({"format": FORMAT, "maps": self.entries}, indent=1, sort_keys=True)
-        atomic_write(self.path, lambda fh: fh.write(text.encode("utf-8")))
+        self._append(_line({"map": name, "entry": entry}))

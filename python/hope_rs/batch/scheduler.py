@@ -154,13 +154,15 @@ def run(plan: Plan, ex: Backend, report: Callable) -> Iterator[PairResult]:
     ready: dict[int, dict] = {}
     failed: dict[int, str] = {}
 
-    def forget(n: int) -> None:
-        """The pair's map is about to be redone: its old entry goes first."""
+    def forget(n: int) -> str | None:
+        """The pair's map is about to be redone: its old entry goes first. The error, if the
+        manifest cannot be updated (the map is then left as it is)."""
         if manifest is not None and plan.paths[n] is not None:
             try:
                 manifest.forget(plan.paths[n].name)
             except OSError as e:
-                warnings.warn(f"cannot update {manifest.path}: {e}", RuntimeWarning)
+                return f"cannot update the batch manifest {str(manifest.path)!r}: {e.strerror or e}"
+        return None
 
     def finish(n: int, value: dict) -> PairResult:
         """The result of a pair task: its map written (and recorded), or its failure."""
@@ -188,56 +190,67 @@ def run(plan: Plan, ex: Backend, report: Callable) -> Iterator[PairResult]:
                     )
         return result(n, map=value["map"], timings=value["timings"])
 
-    while handles:
-        for h, value in ex.wait(list(handles)):
-            kind, what = handles.pop(h)
-            if kind == "pair":
-                yield finish(what, value)
-                continue
-            if "error" in value:
-                failed[what] = f"{names[what]}: {value['error']}"
-            else:
-                sizes[what], digests[what] = value["n_vertices"], value["digest"]
-                if kind == "prepare":
-                    # the arrays themselves (Ray), else the cache digest and the shape's config
-                    ready[what] = value.get("token") or {
-                        "digest": value["digest"], "config": specs[what]["config"],
-                    }  # fmt: skip
-            still = []
-            for n, check in waiting:
-                i, j = plan.pairs[n]
-                if i in failed or j in failed:
-                    yield result(n, error=failed.get(i) or failed.get(j))
+    def loop() -> Iterator[PairResult]:
+        """Start tasks as their inputs are ready; yield each pair's result."""
+        nonlocal waiting
+        while handles:
+            for h, value in ex.wait(list(handles)):
+                kind, what = handles.pop(h)
+                if kind == "pair":
+                    yield finish(what, value)
                     continue
-                if check:
-                    if i not in sizes or j not in sizes:
-                        still.append((n, check))
-                        continue
-                    lm, bad = _checked_landmarks(plan.landmarks[n], sizes[i], sizes[j])
-                    if bad is not None:
-                        yield result(n, error=bad)
-                        continue
-                    m, why = existing_map(plan.paths[n], sizes[i], sizes[j])
-                    if why is None and manifest is not None:
-                        why = manifest.why_redo(plan.paths[n].name, entry(n))
-                    if why is None:
-                        yield result(n, map=m, skipped=True)
-                        continue
-                    warnings.warn(
-                        f"{plan.paths[n].name}: {why}; computing it again", RuntimeWarning
-                    )
-                    check = False
-                    forget(n)
-                    prepare(i, True)
-                    prepare(j, True)
-                if i in ready and j in ready:
-                    lm, bad = _checked_landmarks(plan.landmarks[n], sizes[i], sizes[j])
-                    if bad is not None:
-                        yield result(n, error=bad)
-                        continue
-                    handles[ex.submit(pair_task, plan.job, ready[i], ready[j], lm)] = ("pair", n)
+                if "error" in value:
+                    failed[what] = f"{names[what]}: {value['error']}"
                 else:
-                    still.append((n, check))
-            waiting = still
-    for n, _ in waiting:  # every pair ends as a map, a skip or a failure: never dropped
-        yield result(n, error="not run: its shapes were never prepared (an internal error)")
+                    sizes[what], digests[what] = value["n_vertices"], value["digest"]
+                    if kind == "prepare":
+                        # the arrays themselves (Ray), else the cache digest and the shape's config
+                        ready[what] = value.get("token") or {
+                            "digest": value["digest"], "config": specs[what]["config"],
+                        }  # fmt: skip
+                still = []
+                for n, check in waiting:
+                    i, j = plan.pairs[n]
+                    if i in failed or j in failed:
+                        yield result(n, error=failed.get(i) or failed.get(j))
+                        continue
+                    if check:
+                        if i not in sizes or j not in sizes:
+                            still.append((n, check))
+                            continue
+                        lm, bad = _checked_landmarks(plan.landmarks[n], sizes[i], sizes[j])
+                        if bad is not None:
+                            yield result(n, error=bad)
+                            continue
+                        m, why = existing_map(plan.paths[n], sizes[i], sizes[j])
+                        if why is None and manifest is not None:
+                            why = manifest.why_redo(plan.paths[n].name, entry(n))
+                        if why is None:
+                            yield result(n, map=m, skipped=True)
+                            continue
+                        warnings.warn(
+                            f"{plan.paths[n].name}: {why}; computing it again", RuntimeWarning
+                        )
+                        check = False
+                        bad = forget(n)
+                        if bad is not None:
+                            yield result(n, error=bad)
+                            continue
+                        prepare(i, True)
+                        prepare(j, True)
+                    if i in ready and j in ready:
+                        lm, bad = _checked_landmarks(plan.landmarks[n], sizes[i], sizes[j])
+                        if bad is not None:
+                            yield result(n, error=bad)
+                            continue
+                        handles[ex.submit(pair_task, plan.job, ready[i], ready[j], lm)] = (
+                            "pair",
+                            n,
+                        )
+                    else:
+                        still.append((n, check))
+                waiting = still
+        for n, _ in waiting:  # every pair ends as a map, a skip or a failure: never dropped
+            yield result(n, error="not run: its shapes were never prepared (an internal error)")
+
+    yield from loop()

@@ -106,7 +106,7 @@ def add_batch_parser(sub) -> None:
             "the two with a tab; an optional third field names the pair's landmark file, as "
             "hope-rs match --landmarks reads it). Each map is written atomically to "
             "OUT/<a>__<b>.txt (or .npy) as soon as it is done, and recorded in "
-            "OUT/hope-rs-manifest.json with the digests of both meshes and of the landmarks, "
+            "OUT/hope-rs-manifest.jsonl with the digests of both meshes and of the landmarks, "
             "the settings and the code version; a rerun (e.g. after Ctrl-C or a crash) skips "
             "pairs whose map file is whole and whose record matches, and redoes the others, "
             "saying why. Exit status 1 when some pair failed (the others still finish).",

@@ -33,8 +33,12 @@ except ImportError:  # Python < 3.11: the tomli backport, when installed
 from ..kernels.search import SearchConfig
 from ..shape import ShapeConfig
 
+#: The descriptors an initial map can compare.
+INIT_KINDS = ("shot", "wks", "hks")
+
 __all__ = [
     "CONFIDENCE_FEATURES",
+    "INIT_KINDS",
     "KEYWORDS",
     "ConfidenceConfig",
     "FinishConfig",
@@ -47,6 +51,7 @@ __all__ = [
     "RefineConfig",
     "RepairConfig",
     "SpectralConfig",
+    "declared",
     "read_config",
 ]
 
@@ -63,7 +68,7 @@ class InitialConfig:
         The nearest-descriptor search (PCA dimensions, exact vs inverted-file search).
     """
 
-    descriptor: str = "shot"
+    descriptor: str = field(default="shot", metadata={"choices": INIT_KINDS})
     search: SearchConfig = field(default_factory=SearchConfig)
 
 
@@ -221,9 +226,10 @@ class RefineConfig:
     """
 
     schedule: tuple[int, ...] | None = None
-    max_passes: int = 4
-    min_consistent: float = 0.5
-    top_k: int = 48
+    max_passes: int = field(default=4, metadata={"range": (1, None)})
+    min_consistent: float = field(default=0.5, metadata={"range": (0.0, 1.0)})
+    # Column counts are 32-bit in the Rust core.
+    top_k: int = field(default=48, metadata={"range": (1, 2**31 - 1)})
     min_witness_fraction: float = 0.1
     polish_k: int | None = 3
     global_step: bool = True
@@ -400,6 +406,14 @@ class MultiscaleConfig:
     fine_passes_small: int = 2
     fine_passes_small_vertices: int = 60_000
     lift_ridge: float = 1e-3
+
+
+def declared(option: str) -> dict:
+    """The constraints declared on the config field behind ``match``'s keyword ``option``
+    (see :data:`KEYWORDS`): ``range`` (lo, hi; None: unbounded), ``choices``, ``finite``."""
+    stage, attr = KEYWORDS[option]
+    cls = MatchConfig if stage is None else type(getattr(MatchConfig(), stage))
+    return dict(next(f.metadata for f in dataclasses.fields(cls) if f.name == attr))
 
 
 def _tuples(value):
@@ -717,7 +731,8 @@ class MatchConfig:
     True
     """
 
-    k_max: int = 8
+    # LMD reads 2-rings; the hop balls of much larger radii cover most of a mesh.
+    k_max: int = field(default=8, metadata={"range": (2, 64)})
     shape: ShapeConfig = field(default_factory=ShapeConfig)
     initial: InitialConfig = field(default_factory=InitialConfig)
     refine: RefineConfig = field(default_factory=RefineConfig)
