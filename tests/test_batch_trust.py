@@ -335,3 +335,24 @@ def test_rayon_threads_above_the_cores_are_capped_with_a_warning():
     assert run.returncode == 0, run.stderr
     assert int(run.stdout) == len(os.sched_getaffinity(0)) < 1000
     assert "RAYON_NUM_THREADS=1000 is more than the" in run.stderr
+
+
+def test_7_the_manifest_journal_survives_a_cut_last_line_and_keeps_the_last_word(tmp_path):
+    entry = {"a": "x", "b": "y", "a_digest": "1", "b_digest": "2", "landmarks": None,
+             "settings": "s", "code": "c"}  # fmt: skip
+    m = Manifest(tmp_path)
+    m.record("x__y.txt", entry)
+    m.record("x__z.txt", entry)
+    m.forget("x__z.txt")
+    m.record("x__y.txt", {**entry, "settings": "t"})
+    with open(tmp_path / MANIFEST, "ab") as fh:  # a batch killed in the middle of a line
+        fh.write(b'{"map": "x__w.txt", "ent')
+    again = Manifest(tmp_path)
+    assert again.entries == {"x__y.txt": {**entry, "settings": "t"}}
+    assert again.why_redo("x__y.txt", entry) == "the settings changed"
+    assert again.why_redo("x__z.txt", entry) == "the manifest has no entry for it"
+    again.record("x__v.txt", entry)  # starts on a line of its own
+    assert set(Manifest(tmp_path).entries) == {"x__y.txt", "x__v.txt"}
+    (tmp_path / MANIFEST).write_text("not a manifest\n")
+    with pytest.warns(RuntimeWarning, match="unreadable"):
+        assert Manifest(tmp_path).entries == {}
