@@ -9,6 +9,8 @@ import sys
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from meshes import bumpy_sphere, echo_or_die, relabel, write_off
 
 import hope_rs
@@ -22,6 +24,7 @@ from hope_rs.batch.backends import DIED, PoolBackend
 from hope_rs.batch.cache import ShapeCache
 from hope_rs.batch.driver import imatch_many, read_pairs
 from hope_rs.batch.manifest import MANIFEST, Manifest
+from hope_rs.batch.naming import map_names
 from hope_rs.cli import main
 from hope_rs.features.descriptors import DescriptorConfig
 from hope_rs.pipeline.config import InitialConfig
@@ -104,6 +107,23 @@ def test_2_map_files_stay_inside_out_dir(meshes, tmp_path):
     for r in res:
         assert r.path.parent == out and r.path.is_file() and not r.path.name.startswith(".")
     assert len(maps_in(out)) == 3
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.tuples(st.text(min_size=0, max_size=300), st.text(max_size=300)), max_size=8))
+def test_1_2_map_names_are_unique_plain_and_short_for_any_shape_names(pairs):
+    """Any names: one file per distinct pair, no separator, no hidden or parent name, at most
+    255 bytes; names listed twice are refused."""
+    idents = [(f"key {a!r}", f"key {b!r}") for a, b in pairs]
+    if len(set(idents)) < len(idents):
+        with pytest.raises(ValueError, match="would both write the map file"):
+            map_names(pairs, idents, "txt")
+        return
+    names = map_names(pairs, idents, "txt")
+    assert len({n.casefold() for n in names}) == len(names)
+    for n in names:
+        assert "/" not in n and "\\" not in n and "\0" not in n and not n.startswith(".")
+        assert len(n.encode("utf-8")) <= 255 and n.endswith(".txt")
 
 
 def test_3_a_hash_inside_a_pairs_file_path_is_part_of_the_path(tmp_path):

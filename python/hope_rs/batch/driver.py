@@ -262,10 +262,11 @@ def imatch_many(
             tmp.cleanup()
         raise
     basis = cfg.spectral.k_end if cfg.spectral.enabled else 0
+    key = cfg.key()
     plan = Plan(
         names=names, specs=specs, pairs=ij, paths=paths, landmarks=marks,
         settings=[
-            settings_key(cfg.key(), specs[i]["config"], specs[j]["config"]) for i, j in ij
+            settings_key(key, specs[i]["config"], specs[j]["config"]) for i, j in ij
         ],
         job={"cache_root": str(cache.root), "config": cfg,
              "threads": getattr(ex, "threads", None), "basis": basis},
