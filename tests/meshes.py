@@ -154,5 +154,18 @@ def cli_maps(folder, pa, pb, *flags: str) -> tuple[np.ndarray, np.ndarray]:
     batch = Path(folder) / f"batch{tag}"
     args = ["batch", str(pairs), "--out", str(batch), "-q", "-j", "1", "--no-cache", *flags]
     assert main(args) == 0
-    (got,) = list(batch.iterdir())
+    (got,) = list(batch.glob("*.txt"))
     return np.loadtxt(out, dtype=np.int64), np.loadtxt(got, dtype=np.int64)
+
+
+def echo_or_die(x: str, pause: float = 0.0) -> dict:
+    """A task for a batch backend's worker: ``{"x": x}`` after ``pause`` seconds, or, for
+    ``x == "die"``, the worker process killed with SIGKILL (as the out-of-memory killer does)."""
+    import os
+    import signal
+    import time
+
+    if x == "die":
+        os.kill(os.getpid(), signal.SIGKILL)
+    time.sleep(pause)
+    return {"x": x}

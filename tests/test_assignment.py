@@ -56,7 +56,6 @@ def test_sparse_value_equals_scipy(cost):
         return
     g = hope_rs.auction_assignment(cost)
     check_valid(g, n_rows, n_cols)
-    assert np.all(np.asarray(cost.tocsr()[np.flatnonzero(g >= 0), g[g >= 0]]).size)
     want = float(np.asarray(ref_cost[r, c]).sum())
     tol = 1e-9 * max(1.0, float(np.abs(cost.data).max())) * min(cost.shape)
     assert value(cost, g) == pytest.approx(want, abs=tol)
@@ -64,7 +63,7 @@ def test_sparse_value_equals_scipy(cost):
     rows = np.flatnonzero(g >= 0)
     pattern = cost.tocsr().copy()
     pattern.data = np.ones_like(pattern.data)
-    assert np.all(np.asarray(pattern[rows, g[rows]]) == 1)
+    assert rows.size == 0 or np.asarray(pattern[rows, g[rows]]).min() == 1
 
 
 def test_explicit_zero_is_allowed_and_missing_is_forbidden():

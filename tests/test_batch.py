@@ -7,6 +7,7 @@ from meshes import bumpy_sphere, bumpy_sphere_files, write_off
 import hope_rs
 from hope_rs.batch.cache import ShapeCache, cached_shape, file_digest
 from hope_rs.batch.driver import imatch_many, map_name, read_pairs
+from hope_rs.batch.manifest import MANIFEST, Manifest
 from hope_rs.cli import main
 
 
@@ -46,8 +47,9 @@ def test_maps_are_written_atomically_and_a_rerun_skips_them(folder, tmp_path):
     out, cache = tmp_path / "out", tmp_path / "cache"
     first = hope_rs.match_many(shapes, idx, out_dir=out, jobs=1, cache=cache)
     assert [r.ok and not r.skipped for r in first] == [True] * 3
-    files = sorted(out.iterdir())
+    files = sorted(f for f in out.iterdir() if f.name != MANIFEST)
     assert [f.name for f in files] == sorted(map_name(r.a, r.b) for r in first)  # no temp files
+    assert sorted(Manifest(out).entries) == [f.name for f in files]
     for r in first:
         np.testing.assert_array_equal(np.loadtxt(r.path, dtype=np.int64), r.map)
         ref = hope_rs.match(hope_rs.load_mesh(shapes[idx[r.index][0]]),
@@ -74,7 +76,7 @@ def test_a_bad_mesh_fails_its_pairs_only(folder, tmp_path):
     assert [r.ok for r in res] == [True, False, False, True]
     assert len(seen) == 4
     assert "bad.off" in res[1].error and "OFF header" in res[1].error
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["s0__s1.txt", "s1__s2.txt"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [MANIFEST, "s0__s1.txt", "s1__s2.txt"]
 
 
 @pytest.mark.slow
@@ -251,7 +253,7 @@ def test_a_rerun_redoes_a_map_that_does_not_keep_its_new_landmarks(folder, tmp_p
     out, cache = tmp_path / "out", tmp_path / "cache"
     (free,) = hope_rs.match_many(shapes, [(0, 1)], out_dir=out, jobs=1, cache=cache)
     lm = np.array([[0, free.map[5]]])  # not kept by the map already written
-    with pytest.warns(RuntimeWarning, match="does not keep the pair's landmarks"):
+    with pytest.warns(RuntimeWarning, match="its landmarks changed; computing it again"):
         (again,) = hope_rs.match_many(
             shapes, [(0, 1)], out_dir=out, jobs=1, cache=cache, landmarks=[lm]
         )

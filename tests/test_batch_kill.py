@@ -176,6 +176,6 @@ def test_ctrl_c_of_a_pool_batch_prints_the_summary_and_ends_its_workers(many_pai
     assert "Traceback" not in stderr and "rerun the same command" in stderr
     done = sorted(out.glob("*.txt"))
     assert f"{total} pairs: {len(done)} matched, 0 skipped, 0 failed" in stdout
-    assert f"{total - len(done)} not done (interrupted)" in stdout
+    assert f"{total - len(done)} not run (interrupted)" in stdout
     assert_whole(done)
     assert_no_survivors(tag, grace=5)

@@ -17,6 +17,7 @@ import hope_rs.batch.tasks
 import hope_rs.matching
 from hope_rs.batch.cache import ShapeCache, cached_shape
 from hope_rs.batch.driver import imatch_many, map_name, read_pairs
+from hope_rs.batch.manifest import MANIFEST
 from hope_rs.cli import main
 from hope_rs.geometry.map_io import read_map
 
@@ -33,14 +34,20 @@ def folder(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def reference(folder, tmp_path_factory):
-    """The maps of the three pairs, keyed by file name."""
+def reference_run(folder, tmp_path_factory):
+    """The output folder of the three pairs and their maps, keyed by file name."""
     out = tmp_path_factory.mktemp("ref")
     res = hope_rs.match_many(
         [folder / f"s{s}.off" for s in range(3)], [(0, 1), (1, 2), (2, 0)], out_dir=out,
         jobs=1, cache=out / "cache",
     )  # fmt: skip
-    return {r.path.name: r.map for r in res}
+    return out, {r.path.name: r.map for r in res}
+
+
+@pytest.fixture(scope="module")
+def reference(reference_run):
+    """The maps of the three pairs, keyed by file name."""
+    return reference_run[1]
 
 
 def shapes_and_pairs(folder):
@@ -93,9 +100,9 @@ def test_ctrl_c_prints_the_summary_keeps_the_maps_and_a_rerun_finishes(
             "-q", "--cache", str(tmp_path / "c")]  # fmt: skip
     assert main(args) == 130
     cap = capsys.readouterr()
-    assert "3 pairs: 1 matched, 0 skipped, 0 failed, 2 not done (interrupted)" in cap.out
+    assert "3 pairs: 1 matched, 0 skipped, 0 failed, 2 not run (interrupted)" in cap.out
     assert "rerun the same command" in cap.err and "Traceback" not in cap.err
-    files = list(out.iterdir())
+    files = [f for f in out.iterdir() if f.name != MANIFEST]
     assert len(files) == 1  # the finished map, whole; no temporary file
     np.testing.assert_array_equal(read_map(files[0], N, N), reference[files[0].name])
     monkeypatch.setattr(hope_rs.batch.tasks, "match", real)
@@ -109,7 +116,8 @@ def test_ctrl_c_prints_the_summary_keeps_the_maps_and_a_rerun_finishes(
     "damage",
     ["empty", "truncated", "cut_in_last_line", "garbage", "out_of_range", "negative", "npy"],
 )
-def test_a_damaged_map_file_is_redone_not_skipped(folder, reference, tmp_path, damage):
+def test_a_damaged_map_file_is_redone_not_skipped(folder, reference_run, tmp_path, damage):
+    reference = reference_run[1]
     shapes, pairs = shapes_and_pairs(folder)
     name = map_name("s1", "s2")
     good = "".join(f"{x}\n" for x in reference[name])
@@ -127,6 +135,7 @@ def test_a_damaged_map_file_is_redone_not_skipped(folder, reference, tmp_path, d
         assert bad.count("\n") == N - 1 and 0 <= int(bad.rsplit("\n", 1)[1]) < N
     for n, m in reference.items():
         (tmp_path / n).write_text("".join(f"{x}\n" for x in m))
+    shutil.copy(reference_run[0] / MANIFEST, tmp_path)  # the maps' record: only damage differs
     (tmp_path / name).write_bytes(bad.encode("latin-1"))
     with pytest.warns(RuntimeWarning, match=f"{name}.*computing it again"):
         res = hope_rs.match_many(shapes, pairs, out_dir=tmp_path, jobs=1, cache=tmp_path / "c")

@@ -288,7 +288,7 @@ def test_trimesh_and_duck_typed_meshes_are_accepted_everywhere():
     assert err.shape == (len(v),)
     from hope_rs.batch.driver import _spec
 
-    assert _spec(tm)[0] == "mesh"
+    assert _spec(tm, hope_rs.shape.ShapeConfig())["kind"] == "mesh"
 
 
 @pytest.mark.parametrize("x", [42, "not a mesh", (TET_V,), object()])

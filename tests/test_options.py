@@ -8,6 +8,7 @@ from meshes import write_off
 
 import hope_rs
 import hope_rs.batch.driver
+import hope_rs.batch.scheduler
 import hope_rs.batch.tasks
 from hope_rs import cli, matching
 from hope_rs.evaluation.demo import demo_pair
@@ -140,7 +141,7 @@ def test_a_batch_checks_match_options_before_any_work(
     def forbidden(*args, **kwargs):
         raise AssertionError("the batch prepared a shape before checking the match options")
 
-    monkeypatch.setattr(hope_rs.batch.driver, "prepare_task", forbidden)
+    monkeypatch.setattr(hope_rs.batch.scheduler, "prepare_task", forbidden)
     with pytest.raises(exc, match=message):
         hope_rs.match_many(list(pair), out_dir=tmp_path / "maps", jobs=1, cache=False, **options)
     assert not (tmp_path / "maps").exists()

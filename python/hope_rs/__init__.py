@@ -5,6 +5,9 @@ other way: it lists, for each vertex of shape 2, a vertex of shape 1.)
 """
 
 from . import _compat
+from ._threads import cap_rayon_threads
+
+cap_rayon_threads()  # before any Rust call starts the thread pool
 from ._version import __version__ as __version__
 from .batch.cache import ShapeCache
 from .batch.driver import PairResult, match_many, read_pairs

@@ -117,7 +117,7 @@ def match(
     --------
     >>> import hope_rs
     >>> from hope_rs.evaluation.demo import demo_pair
-    >>> a, b, truth = demo_pair()
+    >>> a, b = demo_pair()
     >>> res = hope_rs.match(a, b)
     >>> res.map.shape == (a.n_vertices,)
     True
@@ -180,10 +180,10 @@ def _unknown_option(options: dict) -> str | None:
     )
 
 
-def check_match_options(**options) -> None:
+def check_match_options(**options) -> MatchConfig:
     """Check keyword options meant for :func:`match` (as a batch or the CLI passes them on)
     before any work: unknown names raise ``TypeError``, bad values what :func:`match` would
-    raise, in one line."""
+    raise, in one line. Returns the config :func:`match` would run with."""
     given = dict(options)
     config, init = given.pop("config", None), given.pop("init", None)
     callback, progress = given.pop("callback", None), given.pop("progress", None)
@@ -192,4 +192,4 @@ def check_match_options(**options) -> None:
         raise TypeError(
             f"not an option of hope_rs.match: match() got an unexpected keyword argument {unknown}"
         )
-    _effective_config(config, init, given, callback, progress)
+    return _effective_config(config, init, given, callback, progress)

@@ -38,8 +38,8 @@ from .. import _core
 from .._version import __version__
 from ..features.descriptors import (
     DescriptorConfig,
-    descriptors,
     laplacian_eigenpairs,
+    shot_as_numbered,
     spectral_basis_of,
     spectral_descriptors,
 )
@@ -204,23 +204,29 @@ class ShapeCache:
         self.put(digest, "mesh", {}, {"vertices": m.vertices, "faces": m.faces})
         return m
 
-    def descriptors(self, mesh: Mesh, kind: str, digest: str | None = None) -> np.ndarray:
-        """Descriptors of ``kind`` for ``mesh`` (default settings); WKS and HKS share cached
-        eigenpairs."""
+    def descriptors(
+        self,
+        mesh: Mesh,
+        kind: str,
+        digest: str | None = None,
+        config: DescriptorConfig = DescriptorConfig(),
+    ) -> np.ndarray:
+        """Descriptors of ``kind`` for ``mesh`` with the settings ``config`` (part of the
+        entry's key); WKS and HKS share cached eigenpairs."""
         digest = digest or mesh_digest(mesh)
-        params = descriptor_params(kind)
+        params = descriptor_params(kind, config)
         got = self.get(digest, kind, params)
         if got is not None:
             return got["d"]
         if kind == "shot":
-            d = descriptors(mesh, "shot")
+            canon, _, rank = canonical_mesh(mesh)
+            d = shot_as_numbered(canon, config.shot_radius, False, config.sites)[rank]
         else:
-            eig = self.get(digest, "eigen", descriptor_params("eigen"))
+            eig_params = descriptor_params("eigen", config)
+            eig = self.get(digest, "eigen", eig_params)
             if eig is None:
-                evals, evecs = laplacian_eigenpairs(mesh, DescriptorConfig.n_eigen)
-                self.put(
-                    digest, "eigen", descriptor_params("eigen"), {"vals": evals, "vecs": evecs}
-                )
+                evals, evecs = laplacian_eigenpairs(mesh, config.n_eigen)
+                self.put(digest, "eigen", eig_params, {"vals": evals, "vecs": evecs})
             else:
                 evals, evecs = eig["vals"], eig["vecs"]
             d = spectral_descriptors(kind, evals, evecs, mesh)
@@ -228,20 +234,28 @@ class ShapeCache:
         return d
 
     def spectral_basis(
-        self, mesh: Mesh, digest: str, k: int, *, compute: bool = True
+        self,
+        mesh: Mesh,
+        digest: str,
+        k: int,
+        *,
+        compute: bool = True,
+        config: ShapeConfig = ShapeConfig(),
     ) -> tuple[np.ndarray, np.ndarray] | None:
         """The spectral pass's eigenbasis of ``mesh``, ``k`` eigenpairs (eigenvectors and vertex
         masses, in the internal numbering of :class:`~hope_rs.Shape`): read, or with ``compute`` computed and
         stored. ``None`` when absent and not computed, or when the eigensolver fails (the pass
         then tries again, and warns, in the worker that needs it)."""
-        params = basis_params(k)
+        params = basis_params(k, config)
         got = self.get(digest, "basis", params)
         if got is not None:
             return got["vecs"], got["mass"]
         if not compute:
             return None
         try:
-            _, vecs, mass = spectral_basis_of(canonical_mesh(mesh)[0], params["k"])
+            _, vecs, mass = spectral_basis_of(
+                canonical_mesh(mesh)[0], params["k"], config=config.basis, coarsen=config.coarsen
+            )
         except (RuntimeError, ValueError):  # ARPACK did not converge, a singular factorisation
             return None
         self.put(digest, "basis", params, {"vecs": vecs, "mass": mass})
@@ -255,9 +269,11 @@ def cached_shape(
     kinds: tuple[str, ...] = ("shot",),
     k_max: int = 8,
     digest: str | None = None,
+    config: ShapeConfig = ShapeConfig(),
 ) -> Shape:
-    """A :class:`Shape` of ``source`` (a mesh file path or a Mesh) with ``kinds`` descriptors
-    filled from ``cache`` (computed and stored on a miss). ``cache=None`` computes everything."""
+    """A :class:`Shape` of ``source`` (a mesh file path or a Mesh) built with ``config``, with
+    ``kinds`` descriptors filled from ``cache`` (computed with that config and stored, under a
+    key holding it, on a miss). ``cache=None`` computes everything."""
     if isinstance(source, Mesh):
         mesh = source
         if cache is not None:
@@ -267,10 +283,10 @@ def cached_shape(
     else:
         digest = digest or file_digest(source)
         mesh = cache.mesh(source, digest)
-    shape = Shape(mesh, k_max=k_max)
+    shape = Shape(mesh, k_max=k_max, config=config)
     for kind in kinds:
         if cache is not None:
-            shape.set_descriptors(kind, cache.descriptors(mesh, kind, digest))
+            shape.set_descriptors(kind, cache.descriptors(mesh, kind, digest, config.descriptors))
         else:
             shape.descriptors(kind)
     return shape

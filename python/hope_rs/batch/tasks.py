@@ -34,37 +34,41 @@ def error_text(e: BaseException) -> str:
 
 
 def prepare_task(
-    spec: tuple, cache_root: str, kinds: tuple, want_data: bool = False, basis: int = 0
+    spec: dict, cache_root: str, kinds: tuple, want_data: bool = False, basis: int = 0
 ) -> dict:
-    """Parse a shape and compute its descriptors into the cache, and with ``basis`` > 0 the
-    spectral pass's eigenbasis of that many eigenpairs (on a shared disk only, for shapes the pass can run on);
-    returns its digest and size (and its arrays when ``want_data``, for backends whose workers
-    do not share a disk)."""
+    """Parse a shape and compute its descriptors into the cache with the shape's own
+    :class:`~hope_rs.ShapeConfig` (``spec["config"]``, part of every entry's key), and with
+    ``basis`` > 0 the spectral pass's eigenbasis of that many eigenpairs (on a shared disk
+    only, for shapes the pass can run on); returns its digest and size (and its arrays when
+    ``want_data``, for backends whose workers do not share a disk)."""
     try:
         cache = ShapeCache(cache_root)
-        if spec[0] == "path":
-            digest = file_digest(spec[1])
-            mesh = cache.mesh(spec[1], digest)
+        config = spec["config"]
+        if spec["kind"] == "path":
+            digest = file_digest(spec["path"])
+            mesh = cache.mesh(spec["path"], digest)
         else:
-            mesh = Mesh(spec[1], spec[2])
+            mesh = Mesh(spec["vertices"], spec["faces"])
             digest = mesh_digest(mesh)
             if cache.get(digest, "mesh", {}) is None:
                 cache.put(digest, "mesh", {}, {"vertices": mesh.vertices, "faces": mesh.faces})
-        given = spec[3] if spec[0] == "mesh" else {}
+        given = spec.get("descriptors", {})
         descr = {}
         for kind in kinds:
-            if kind in given:  # a Shape that already computed them
+            if kind in given:  # a Shape that already computed them (with its own config)
                 descr[kind] = given[kind]
-                cache.put(digest, kind, descriptor_params(kind), {"d": given[kind]})
+                cache.put(
+                    digest, kind, descriptor_params(kind, config.descriptors), {"d": given[kind]}
+                )
             else:
-                descr[kind] = cache.descriptors(mesh, kind, digest)
+                descr[kind] = cache.descriptors(mesh, kind, digest, config.descriptors)
         if basis and not want_data and applies_to_size(mesh.n_vertices):
-            cache.spectral_basis(mesh, digest, basis)
+            cache.spectral_basis(mesh, digest, basis, config=config)
         out = {"digest": digest, "n_vertices": mesh.n_vertices}
         if want_data:
             out["data"] = {
                 "digest": digest, "vertices": mesh.vertices, "faces": mesh.faces,
-                "descriptors": descr,
+                "descriptors": descr, "config": config,
             }  # fmt: skip
         return out
     except Exception as e:  # noqa: BLE001 - reported per shape, the batch goes on
@@ -74,30 +78,35 @@ def prepare_task(
 _SHAPES: OrderedDict = OrderedDict()
 
 
-def _shape(token, cache_root: str | None, kinds: tuple, k_max: int, basis: int = 0) -> Shape:
-    """The Shape of a digest (read from the cache) or of shipped arrays, kept for later pairs;
-    with ``basis`` > 0, the cached eigenbasis of that size too, when there is one."""
-    if isinstance(token, dict):  # arrays shipped with the task
-        key = (token["digest"], k_max)
-    else:
-        key = (token, k_max)
+def _shape(token: dict, cache_root: str | None, kinds: tuple, k_max: int, basis: int = 0) -> Shape:
+    """The Shape of a token: ``{"digest", "config"}`` (read from the cache) or shipped arrays
+    (``"vertices"``, ``"faces"``, ``"descriptors"`` too), kept for later pairs and keyed by
+    digest, k_max and the shape's own config; with ``basis`` > 0, the cached eigenbasis of that
+    size too, when there is one."""
+    config = token["config"]
+    key = (token["digest"], k_max, config)
     if key in _SHAPES:
         _SHAPES.move_to_end(key)
         return _SHAPES[key]
-    if isinstance(token, dict):
-        shape = Shape(Mesh(token["vertices"], token["faces"]), k_max=k_max)
+    if "vertices" in token:  # arrays shipped with the task
+        shape = Shape(Mesh(token["vertices"], token["faces"]), k_max=k_max, config=config)
         for kind, d in token["descriptors"].items():
             shape.set_descriptors(kind, d)
     else:
         cache = ShapeCache(cache_root)
-        got = cache.get(token, "mesh", {})
+        digest = token["digest"]
+        got = cache.get(digest, "mesh", {})
         if got is None:
-            raise RuntimeError(f"shape {token[:12]} vanished from the cache {cache_root}")
+            raise RuntimeError(f"shape {digest[:12]} vanished from the cache {cache_root}")
         shape = cached_shape(
             Mesh(got["vertices"], got["faces"]), cache=cache, kinds=kinds, k_max=k_max,
-            digest=token,
+            digest=digest, config=config,
         )  # fmt: skip
-        got = cache.spectral_basis(shape.mesh, token, basis, compute=False) if basis else None
+        got = (
+            cache.spectral_basis(shape.mesh, digest, basis, compute=False, config=config)
+            if basis
+            else None
+        )
         if got is not None:
             shape.set_spectral_basis(*got)
     _SHAPES[key] = shape
@@ -106,19 +115,19 @@ def _shape(token, cache_root: str | None, kinds: tuple, k_max: int, basis: int =
     return shape
 
 
-def pair_task(job: dict, a, b, landmarks=None) -> dict:
-    """Match one pair; ``a``/``b`` are cache digests or dicts of arrays; ``landmarks``: the
-    pair's, or ``None``."""
+def pair_task(job: dict, a: dict, b: dict, landmarks=None) -> dict:
+    """Match one pair with ``job["config"]`` (a :class:`~hope_rs.MatchConfig`); ``a``/``b`` are
+    shape tokens (see :func:`_shape`); ``landmarks``: the pair's, or ``None``."""
     limit_threads(job.get("threads"))
     try:
         t0 = time.perf_counter()
+        config = job["config"]
+        kinds = (config.initial.descriptor,)
         basis = job.get("basis", 0)
-        sa = _shape(a, job["cache_root"], job["kinds"], job["k_max"], basis)
-        sb = _shape(b, job["cache_root"], job["kinds"], job["k_max"], basis)
+        sa = _shape(a, job["cache_root"], kinds, config.k_max, basis)
+        sb = _shape(b, job["cache_root"], kinds, config.k_max, basis)
         load = time.perf_counter() - t0
-        res = match(
-            sa, sb, init=job["init"], k_max=job["k_max"], landmarks=landmarks, **job["options"]
-        )
+        res = match(sa, sb, config=config, landmarks=landmarks)
         return {"map": res.map, "timings": {"load": load, **res.timings}}
     except Exception as e:  # noqa: BLE001 - reported per pair, the batch goes on
         return {"error": error_text(e)}

@@ -3,13 +3,24 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import textwrap
 import time
 
 from ..batch.driver import imatch_many, read_pairs
+from ..matching import check_match_options
+from ..pipeline.config import MatchConfig, read_config
 
-__all__ = ["ENVIRONMENT", "EXIT_STATUS", "add_batch_parser", "cmd_batch", "environment_help"]
+__all__ = [
+    "ENVIRONMENT",
+    "EXIT_STATUS",
+    "add_batch_parser",
+    "add_setting_arguments",
+    "cmd_batch",
+    "config_from_args",
+    "environment_help",
+]
 
 #: Environment variables the command line reads, with what they do (the one list the help
 #: texts print and the README is checked against).
@@ -48,6 +59,42 @@ def environment_help() -> str:
     return "\n".join(lines)
 
 
+def add_setting_arguments(p) -> None:
+    """The options of ``match`` and ``batch`` that set the MatchConfig (see
+    :func:`config_from_args`): ``--config FILE`` and the shortcuts over it."""
+    p.add_argument(
+        "--config", metavar="SETTINGS.toml",
+        help="every setting of the match, as MatchConfig.to_dict() nests them (stage tables, "
+        "e.g. [refine] max_passes = 2); the options below are set over it",
+    )  # fmt: skip
+    p.add_argument(
+        "--init", choices=["shot", "wks", "hks"], help="descriptors (default: shot, or --config's)"
+    )
+    p.add_argument("--k-max", type=int, help="largest hop radius (default: 8, or --config's)")
+
+
+def config_from_args(args) -> MatchConfig:
+    """The MatchConfig of ``--config`` (default ``MatchConfig()``) with the command line's
+    shortcuts set through the same :meth:`~hope_rs.MatchConfig.with_options` as
+    :func:`hope_rs.match`'s keyword options, checked before any work."""
+    config = read_config(args.config) if args.config else MatchConfig()
+    options = {}
+    if args.k_max is not None:
+        options["k_max"] = args.k_max
+    if args.multiscale:
+        options["multiscale"] = True
+    if args.no_spectral:
+        options["spectral"] = False
+    if args.no_shared_faces:
+        options["shared_faces"] = False
+    config = check_match_options(config=config, init=args.init, **options)
+    if args.init is not None:
+        config = dataclasses.replace(
+            config, initial=dataclasses.replace(config.initial, descriptor=args.init)
+        )
+    return config
+
+
 def add_batch_parser(sub) -> None:
     """Register the ``batch`` subcommand on an argparse subparsers object."""
     p = sub.add_parser(
@@ -57,10 +104,12 @@ def add_batch_parser(sub) -> None:
             "Match every pair listed in PAIRS_FILE (one pair per line: two mesh paths, relative "
             "ones resolved against the file's folder; quote paths holding spaces or separate "
             "the two with a tab; an optional third field names the pair's landmark file, as "
-            "hope-rs match --landmarks reads it). Each map is written atomically to OUT/<a>__<b>.txt (or .npy) as soon as "
-            "it is done; a rerun (e.g. after Ctrl-C or a crash) skips pairs whose map file is "
-            "whole and redoes the others. Exit status 1 when some pair failed (the others still "
-            "finish).",
+            "hope-rs match --landmarks reads it). Each map is written atomically to "
+            "OUT/<a>__<b>.txt (or .npy) as soon as it is done, and recorded in "
+            "OUT/hope-rs-manifest.jsonl with the digests of both meshes and of the landmarks, "
+            "the settings and the code version; a rerun (e.g. after Ctrl-C or a crash) skips "
+            "pairs whose map file is whole and whose record matches, and redoes the others, "
+            "saying why. Exit status 1 when some pair failed (the others still finish).",
             78,
         ),
         epilog=environment_help(),
@@ -84,8 +133,7 @@ def add_batch_parser(sub) -> None:
     p.add_argument("--ray-address", help="Ray cluster address (default: ray.init()'s choice)")
     p.add_argument("--cache", help="per-shape cache folder (default: $HOPE_RS_CACHE)")
     p.add_argument("--no-cache", action="store_true", help="keep the cache for this run only")
-    p.add_argument("--init", default="shot", choices=["shot", "wks", "hks"], help="descriptors")
-    p.add_argument("--k-max", type=int, default=8, help="largest hop radius (default 8)")
+    add_setting_arguments(p)
     p.add_argument(
         "--multiscale", action="store_true", help="match(..., multiscale=True) for every pair"
     )
@@ -109,6 +157,7 @@ def cmd_batch(args) -> int:
         raise ValueError("--ray-address needs --backend ray")
     if args.jobs is not None and args.jobs < 1:
         raise ValueError(f"--jobs must be a positive integer, got {args.jobs}")
+    config = config_from_args(args)
     pairs, landmarks = read_pairs(args.pairs, ext=args.ext, with_landmarks=True)
     shapes = list(dict.fromkeys(p for pair in pairs for p in pair))
     index = {p: i for i, p in enumerate(shapes)}
@@ -122,11 +171,7 @@ def cmd_batch(args) -> int:
         jobs=args.jobs,
         backend=args.backend,
         cache=False if args.no_cache else (args.cache or True),
-        init=args.init,
-        k_max=args.k_max,
-        multiscale=args.multiscale,
-        spectral=not args.no_spectral,
-        shared_faces=not args.no_shared_faces,
+        config=config,
         progress=not args.quiet,
         ray_options={"address": args.ray_address} if args.backend == "ray" else None,
         map_format=args.format,
@@ -161,7 +206,7 @@ def _summary(args, total: int, counts: dict, failures: list, seconds: float, int
     left = total - sum(counts.values())
     print(
         f"{total} pairs: {counts['matched']} matched, {counts['skipped']} skipped, "
-        f"{counts['failed']} failed" + (f", {left} not done (interrupted)" if interrupted else "")
+        f"{counts['failed']} failed, {left} not run" + (" (interrupted)" if interrupted else "")
         + f" in {seconds:.1f} s ({rate:.1f} pairs/min) -> {args.out}",
         flush=True,
     )  # fmt: skip

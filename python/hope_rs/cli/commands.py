@@ -21,15 +21,16 @@ from ..evaluation import bench, partial, show
 from ..evaluation.demo import run_demo
 from ..geometry.map_io import (
     atomic_write,
-    check_writable_folder,
+    check_output_file,
     map_format,
     read_landmarks,
+    same_file,
     write_map,
 )
 from ..geometry.mesh import load_mesh
-from ..matching import check_match_options, match
+from ..matching import match
 from ..pipeline.progress import ProgressBar
-from .batch_cli import add_batch_parser, environment_help
+from .batch_cli import add_batch_parser, add_setting_arguments, config_from_args, environment_help
 
 
 def _summary(res) -> dict:
@@ -59,25 +60,28 @@ HINT_VERTICES = 100_000
 
 
 def cmd_match(args) -> int:
-    options = {
-        "init": args.init, "k_max": args.k_max, "multiscale": args.multiscale,
-        "spectral": not args.no_spectral, "shared_faces": not args.no_shared_faces,
-    }  # fmt: skip
-    check_match_options(**options)  # before any work, like the output below
+    config = config_from_args(args)  # before any work, like the outputs below
     if args.output:  # before any work: a known suffix, a folder we can write to
-        if os.path.isdir(args.output):
-            raise ValueError(f"output {args.output!r} is a folder; give a file name")
+        check_output_file(args.output, "output")
         map_format(args.output)
-        check_writable_folder(os.path.dirname(os.path.abspath(args.output)))
     if args.confidence_out:
         if not args.confidence_out.endswith(".npy"):
             raise ValueError(
                 f"--confidence-out {args.confidence_out!r} must end in .npy (a NumPy float array)"
             )
-        check_writable_folder(os.path.dirname(os.path.abspath(args.confidence_out)))
+        check_output_file(args.confidence_out, "--confidence-out")
+        if args.output and same_file(args.output, args.confidence_out):
+            raise ValueError(
+                f"-o and --confidence-out name the same file {args.output!r}; the confidence "
+                "would overwrite the map: give two file names"
+            )
     landmarks = None if args.landmarks is None else read_landmarks(args.landmarks)
     a, b = load_mesh(args.a), load_mesh(args.b)
-    if not args.multiscale and not args.quiet and min(a.n_vertices, b.n_vertices) >= HINT_VERTICES:
+    if (
+        not config.multiscale.enabled
+        and not args.quiet
+        and min(a.n_vertices, b.n_vertices) >= HINT_VERTICES
+    ):
         print(
             "hope-rs: hint: on meshes this large, --multiscale is about 3x faster, with a larger "
             "error (see docs/method.md, multiscale)",
@@ -87,7 +91,7 @@ def cmd_match(args) -> int:
     bar = ProgressBar()
     show_bar = bar.live and not args.quiet and not args.verbose
     try:
-        res = match(a, b, landmarks=landmarks, progress=bar if show_bar else None, **options)
+        res = match(a, b, landmarks=landmarks, progress=bar if show_bar else None, config=config)
     finally:
         bar.close()
     coarse = next((s for s in res.stages if s.name == "coarse"), None)
@@ -147,8 +151,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="map file: .txt or .csv (one B index per line) or .npy (NumPy int64); written "
         "atomically (default: standard output)",
     )  # fmt: skip
-    m.add_argument("--init", default="shot", choices=["shot", "wks", "hks"], help="descriptors")
-    m.add_argument("--k-max", type=int, default=8, help="largest hop radius (default 8)")
+    add_setting_arguments(m)
     m.add_argument(
         "--landmarks", metavar="FILE",
         help="vertex pairs known to correspond, one 'A_VERTEX B_VERTEX' line each (0-based): "

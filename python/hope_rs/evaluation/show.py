@@ -23,12 +23,13 @@ import os
 import numpy as np
 
 from .._validate import as_index_map
-from ..geometry.map_io import atomic_write, check_writable_folder, read_map
+from ..geometry.map_io import atomic_write, check_output_file, read_map
 from ..geometry.mesh import Mesh, load_mesh
 from .evaluate import geodesic_errors, load_vts
 
 __all__ = [
     "detect_up",
+    "ply_pair_paths",
     "position_colours",
     "pull_back_colours",
     "render_pair",
@@ -224,6 +225,14 @@ def render_pair(
     plt.close(fig)
 
 
+def ply_pair_paths(path) -> tuple[str, str]:
+    """The two files :func:`write_ply_pair` writes for ``path``: ``out.ply`` (or ``out``) names
+    ``out_A.ply`` and ``out_B.ply``."""
+    stem = os.fspath(path)
+    stem = stem[:-4] if stem.lower().endswith(".ply") else stem
+    return f"{stem}_A.ply", f"{stem}_B.ply"
+
+
 def write_ply_pair(a: Mesh, b: Mesh, mapping, path, *, up: str = "auto") -> tuple[str, str]:
     """Write the colour transfer as two PLY files with per-vertex colours: A coloured by
     position (:func:`position_colours`) and B coloured through ``mapping``
@@ -236,8 +245,7 @@ def write_ply_pair(a: Mesh, b: Mesh, mapping, path, *, up: str = "auto") -> tupl
     """
     import trimesh
 
-    stem = os.fspath(path)
-    stem = stem[:-4] if stem.lower().endswith(".ply") else stem
+    targets = ply_pair_paths(path)
     ca = position_colours(a, view_frame(a, up))
     cb = pull_back_colours(ca, mapping, b)
     out = []
@@ -246,7 +254,7 @@ def write_ply_pair(a: Mesh, b: Mesh, mapping, path, *, up: str = "auto") -> tupl
             [np.round(255 * np.clip(colours, 0, 1)), np.full((mesh.n_vertices, 1), 255)], axis=1
         ).astype(np.uint8)
         tm = trimesh.Trimesh(mesh.vertices, mesh.faces, vertex_colors=rgba, process=False)
-        target = f"{stem}_{tag}.ply"
+        target = targets[0 if tag == "A" else 1]
         atomic_write(target, lambda fh, tm=tm: tm.export(file_obj=fh, file_type="ply"))
         out.append(target)
     return out[0], out[1]
@@ -356,9 +364,13 @@ def cmd_show(args) -> int:
         )
     if args.png:
         require_matplotlib()
-    for out in (args.png, args.ply):  # before any work
-        if out:
-            check_writable_folder(os.path.dirname(os.path.abspath(out)))
+    if args.png:  # before any work
+        check_output_file(args.png, "--png")
+    if args.ply:
+        if os.path.isdir(args.ply):
+            raise ValueError(f"--ply {args.ply!r} is a folder; give a file name such as out.ply")
+        for target in ply_pair_paths(args.ply):
+            check_output_file(target, "--ply")
     a, b = load_mesh(args.a), load_mesh(args.b)
     f = read_map(args.map, a.n_vertices, b.n_vertices)
     values, label, top, cmap = None, "", None, "inferno_r"

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import io
 import os
+import shutil
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -25,9 +26,11 @@ import numpy as np
 __all__ = [
     "MAP_SUFFIXES",
     "atomic_write",
+    "check_output_file",
     "check_writable_folder",
     "read_landmarks",
     "read_map",
+    "same_file",
     "write_map",
 ]
 
@@ -88,20 +91,23 @@ def atomic_write(path: str | os.PathLike, write: Callable[[io.BufferedWriter], N
         raise
 
 
-def check_writable_folder(folder: str | os.PathLike, *, create: bool = False) -> Path:
+def check_writable_folder(
+    folder: str | os.PathLike, *, create: bool = False, need_bytes: int = 0, what: str = "output"
+) -> Path:
     """Fail early, with a one-line ValueError naming ``folder``, unless files can be created in
-    it: a probe file is created and removed. With ``create``, a missing folder is made first."""
+    it (a probe file is created and removed) and its disk has ``need_bytes`` free. With
+    ``create``, a missing folder is made first. ``what`` names the folder in the message."""
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
-        raise ValueError(f"output {str(folder)!r} exists and is not a folder")
+        raise ValueError(f"{what} {str(folder)!r} exists and is not a folder")
     if not folder.exists():
         if not create:
-            raise ValueError(f"output folder {str(folder)!r} does not exist; create it first")
+            raise ValueError(f"{what} folder {str(folder)!r} does not exist; create it first")
         try:
             folder.mkdir(parents=True, exist_ok=True)
         except OSError as e:
             raise ValueError(
-                f"cannot create output folder {str(folder)!r}: {e.strerror or e}"
+                f"cannot create {what} folder {str(folder)!r}: {e.strerror or e}"
             ) from None
     try:
         fd, probe = tempfile.mkstemp(dir=folder, prefix=TEMP_PREFIX, suffix=".probe")
@@ -109,9 +115,38 @@ def check_writable_folder(folder: str | os.PathLike, *, create: bool = False) ->
         os.unlink(probe)
     except OSError as e:
         raise ValueError(
-            f"cannot write to output folder {str(folder)!r}: {e.strerror or e}"
+            f"cannot write to {what} folder {str(folder)!r}: {e.strerror or e}"
         ) from None
+    if need_bytes > 0:
+        try:
+            free = shutil.disk_usage(folder).free
+        except OSError:
+            free = None  # unknown: the writes themselves will say
+        if free is not None and free < need_bytes:
+            raise ValueError(
+                f"{what} folder {str(folder)!r} has {free / 2**20:.1f} MiB free, less than the "
+                f"{need_bytes / 2**20:.1f} MiB one entry needs; free some space or choose "
+                "another folder"
+            )
     return folder
+
+
+def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
+    """Whether the paths ``a`` and ``b`` name one file (links followed; either may not exist
+    yet)."""
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        norm = os.path.normcase
+        return norm(os.path.realpath(a)) == norm(os.path.realpath(b))
+
+
+def check_output_file(path: str | os.PathLike, option: str) -> None:
+    """Fail early, with a one-line ValueError naming the ``option``, when the file ``path``
+    cannot be written: it is a folder, or its folder does not take new files."""
+    if os.path.isdir(path):
+        raise ValueError(f"{option} {os.fspath(path)!r} is a folder; give a file name")
+    check_writable_folder(os.path.dirname(os.path.abspath(path)))
 
 
 def write_map(path: str | os.PathLike, mapping) -> None:

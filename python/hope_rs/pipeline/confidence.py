@@ -202,7 +202,7 @@ class ConfidenceStage(Stage):
     """The "confidence" stage: ``state.confidence`` from :func:`confidence_features` of the
     final map, HOPE's and ZoomOut's (``state.zoomout``), by :func:`predict_confidence`; 0 on
     the vertices of a whole that the partial stage found without a counterpart on the part
-    (``state.partial.counterpart``)."""
+    (``state.partial.counterpart``) and on vertices in no face."""
 
     name = "confidence"
     runs_on_final_map = True
@@ -231,6 +231,10 @@ class ConfidenceStage(Stage):
         if counterpart is not None:
             # A vertex of the whole without a counterpart on the part has no right match.
             state.confidence = np.where(counterpart, state.confidence, 0.0)
+        # A vertex in no face has no surface around it to match by: its target is arbitrary.
+        in_face = np.zeros(state.confidence.shape[0], dtype=bool)
+        in_face[state.a.internal.faces.ravel()] = True
+        state.confidence = np.where(in_face, state.confidence, 0.0)
         state.timings["confidence"] = time.perf_counter() - t
         share = float((state.confidence >= cfg.threshold).mean())
         state.log.ran(

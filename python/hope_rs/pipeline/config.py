@@ -22,11 +22,23 @@ import math
 import numbers
 from dataclasses import dataclass, field
 
+try:
+    import tomllib
+except ImportError:  # Python < 3.11: the tomli backport, when installed
+    try:
+        import tomli as tomllib
+    except ImportError:
+        tomllib = None
+
 from ..kernels.search import SearchConfig
 from ..shape import ShapeConfig
 
+#: The descriptors an initial map can compare.
+INIT_KINDS = ("shot", "wks", "hks")
+
 __all__ = [
     "CONFIDENCE_FEATURES",
+    "INIT_KINDS",
     "KEYWORDS",
     "ConfidenceConfig",
     "FinishConfig",
@@ -39,6 +51,8 @@ __all__ = [
     "RefineConfig",
     "RepairConfig",
     "SpectralConfig",
+    "declared",
+    "read_config",
 ]
 
 
@@ -54,7 +68,7 @@ class InitialConfig:
         The nearest-descriptor search (PCA dimensions, exact vs inverted-file search).
     """
 
-    descriptor: str = "shot"
+    descriptor: str = field(default="shot", metadata={"choices": INIT_KINDS})
     search: SearchConfig = field(default_factory=SearchConfig)
 
 
@@ -212,9 +226,10 @@ class RefineConfig:
     """
 
     schedule: tuple[int, ...] | None = None
-    max_passes: int = 4
-    min_consistent: float = 0.5
-    top_k: int = 48
+    max_passes: int = field(default=4, metadata={"range": (1, None)})
+    min_consistent: float = field(default=0.5, metadata={"range": (0.0, 1.0)})
+    # Column counts are 32-bit in the Rust core.
+    top_k: int = field(default=48, metadata={"range": (1, 2**31 - 1)})
     min_witness_fraction: float = 0.1
     polish_k: int | None = 3
     global_step: bool = True
@@ -391,6 +406,65 @@ class MultiscaleConfig:
     fine_passes_small: int = 2
     fine_passes_small_vertices: int = 60_000
     lift_ridge: float = 1e-3
+
+
+def declared(option: str) -> dict:
+    """The constraints declared on the config field behind ``match``'s keyword ``option``
+    (see :data:`KEYWORDS`): ``range`` (lo, hi; None: unbounded), ``choices``, ``finite``."""
+    stage, attr = KEYWORDS[option]
+    cls = MatchConfig if stage is None else type(getattr(MatchConfig(), stage))
+    return dict(next(f.metadata for f in dataclasses.fields(cls) if f.name == attr))
+
+
+def _tuples(value):
+    """Lists (as JSON and TOML give sequences) as tuples, nested ones included."""
+    if isinstance(value, (list, tuple)):
+        return tuple(_tuples(v) for v in value)
+    return value
+
+
+def _from_dict(cls, data, path: str):
+    """An instance of the config dataclass ``cls`` from a (nested) dict of its fields."""
+    if not isinstance(data, dict):
+        raise TypeError(f"{path} must be a table of settings, got {type(data).__name__}")
+    fields = [f.name for f in dataclasses.fields(cls)]
+    unknown = sorted(set(data) - set(fields))
+    if unknown:
+        raise ValueError(
+            f"{path} has no setting {unknown[0]!r}; its settings are {', '.join(fields)}"
+        )
+    default = cls()
+    values = {}
+    for name, value in data.items():
+        ref = getattr(default, name)
+        if dataclasses.is_dataclass(ref):
+            values[name] = _from_dict(type(ref), value, f"{path}.{name}")
+        else:
+            values[name] = _tuples(value)
+    return cls(**values)
+
+
+def read_config(path) -> MatchConfig:
+    """The :class:`MatchConfig` of a TOML settings file: tables nested as :meth:`MatchConfig.to_dict`
+    nests the stages (``k_max = 6`` at the top, ``[refine]`` ``max_passes = 2``, ...); what the
+    file leaves out keeps its default. Needs Python 3.11+ (``tomllib``) or the ``tomli``
+    package."""
+    if tomllib is None:
+        raise ValueError(
+            f"reading the settings file {str(path)!r} needs Python 3.11 or later, or the tomli "
+            "package (pip install tomli)"
+        )
+    try:
+        with open(path, "rb") as fh:
+            data = tomllib.load(fh)
+    except FileNotFoundError:
+        raise FileNotFoundError(f"no such settings file: {str(path)!r}") from None
+    except tomllib.TOMLDecodeError as e:
+        raise ValueError(f"settings file {str(path)!r} is not valid TOML: {e}") from None
+    try:
+        return MatchConfig.from_dict(data)
+    except (TypeError, ValueError) as e:
+        raise type(e)(f"settings file {str(path)!r}: {e}") from None
 
 
 def _is_number(x) -> bool:
@@ -657,7 +731,8 @@ class MatchConfig:
     True
     """
 
-    k_max: int = 8
+    # LMD reads 2-rings; the hop balls of much larger radii cover most of a mesh.
+    k_max: int = field(default=8, metadata={"range": (2, 64)})
     shape: ShapeConfig = field(default_factory=ShapeConfig)
     initial: InitialConfig = field(default_factory=InitialConfig)
     refine: RefineConfig = field(default_factory=RefineConfig)
@@ -698,6 +773,13 @@ class MatchConfig:
     def to_dict(self) -> dict:
         """Every setting, nested by stage (JSON-serialisable)."""
         return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> MatchConfig:
+        """The config :meth:`to_dict` gave ``data`` (JSON or TOML lists are read as tuples);
+        settings missing from ``data`` keep their defaults, an unknown name is a one-line
+        error naming it. The values are checked where :func:`hope_rs.match` checks them."""
+        return _from_dict(cls, data, "MatchConfig")
 
     def key(self) -> str:
         """A SHA-256 (hex) of every setting: equal configs, equal keys."""

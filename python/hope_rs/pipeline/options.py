@@ -12,13 +12,14 @@ import numbers
 import numpy as np
 
 from ..features.descriptors import check_kind
+from .config import INIT_KINDS, declared
 
-#: Hop radii a :class:`~hope_rs.Shape` supports: LMD reads 2-rings, and the hop balls of much
-#: larger radii cover most of a mesh.
-K_MAX_RANGE = (2, 64)
-#: Largest ``top_k``: column counts are 32-bit in the Rust core.
-TOP_K_LIMIT = 2**31 - 1
-INIT_KINDS = ("shot", "wks", "hks")
+__all__ = ["INIT_KINDS", "K_MAX_RANGE", "TOP_K_LIMIT", "check_config", "check_options"]
+
+#: Hop radii a :class:`~hope_rs.Shape` supports (declared on ``MatchConfig.k_max``).
+K_MAX_RANGE = declared("k_max")["range"]
+#: Largest ``top_k`` (declared on ``RefineConfig.top_k``).
+TOP_K_LIMIT = declared("top_k")["range"][1]
 
 
 def check_options(
@@ -52,7 +53,7 @@ def check_options(
         )
     if schedule is not None:
         _check_schedule(schedule, k_max)
-    _integer("max_passes", max_passes, 1, None, "an integer >= 1")
+    _integer("max_passes", max_passes, *declared("max_passes")["range"], "an integer >= 1")
     _unit_number("min_consistent", min_consistent)
     allowed = f"an integer in [1, {TOP_K_LIMIT}] (candidates kept per vertex)"
     _integer("top_k", top_k, 1, TOP_K_LIMIT, allowed)
@@ -121,7 +122,8 @@ def check_config(config, path: str = "MatchConfig") -> None:
     """Raise ``TypeError`` or ``ValueError`` (one line, naming the field) for a setting of a
     config dataclass that cannot be right: a number of another kind than its default, not
     NaN, or negative where the default is not (pass indices, counts, sizes, tolerances), nor
-    infinite where the field's metadata says ``finite``.
+    infinite where the field's metadata says ``finite``, nor outside its declared ``range``
+    or ``choices``: the constraints are declared once, on the field.
     Nested configs are checked too; fields whose default is ``None``, a string or a tuple are
     left to their own checks."""
     default = type(config)()
@@ -130,6 +132,11 @@ def check_config(config, path: str = "MatchConfig") -> None:
         name = f"{path}.{f.name}"
         if value is None and "None" in str(f.type):
             continue
+        choices = f.metadata.get("choices")
+        if choices is not None and (not isinstance(value, type(ref)) or value not in choices):
+            raise ValueError(
+                f"{name} must be one of {', '.join(map(repr, choices))}, got {value!r}"
+            )
         if dataclasses.is_dataclass(ref):
             if type(value) is not type(ref):
                 raise TypeError(
@@ -140,7 +147,9 @@ def check_config(config, path: str = "MatchConfig") -> None:
             if not isinstance(value, (bool, np.bool_)):
                 raise TypeError(f"{name} must be True or False, got {value!r}")
         elif isinstance(ref, int):
-            _integer(name, value, 0 if ref >= 0 else -(2**63), None, _sign(ref, "an integer"))
+            lo, hi = f.metadata.get("range", (0 if ref >= 0 else -(2**63), None))
+            allowed = _sign(ref, "an integer") if "range" not in f.metadata else _span(lo, hi)
+            _integer(name, value, lo, hi, allowed)
         elif isinstance(ref, float):
             if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
                 raise TypeError(f"{name} must be a number, got {type(value).__name__} {value!r}")
@@ -148,6 +157,14 @@ def check_config(config, path: str = "MatchConfig") -> None:
                 raise ValueError(f"{name} must be {_sign(ref, 'a number')}, got {value}")
             if f.metadata.get("finite") and not math.isfinite(value):
                 raise ValueError(f"{name} must be a finite number (default {ref}), got {value}")
+            if "range" in f.metadata:
+                lo, hi = f.metadata["range"]
+                if value < lo or (hi is not None and value > hi):
+                    raise ValueError(f"{name} must be {_span(lo, hi, 'a number')}, got {value}")
+
+
+def _span(lo, hi, what: str = "an integer") -> str:
+    return f"{what} >= {lo}" if hi is None else f"{what} in [{lo}, {hi}]"
 
 
 def _sign(ref, what: str) -> str:

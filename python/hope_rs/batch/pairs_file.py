@@ -1,0 +1,135 @@
+"""Pairs files: one pair of mesh paths a line (and optionally the pair's landmark file)."""
+
+from __future__ import annotations
+
+import os
+import shlex
+from pathlib import Path
+from typing import Literal, overload
+
+import numpy as np
+
+from ..geometry.map_io import read_landmarks
+from ..pipeline.landmarks import check_landmarks
+
+__all__ = ["all_pairs", "read_pairs", "strip_comment"]
+
+
+def strip_comment(line: str) -> str:
+    """``line`` without its comment: a ``#`` starts one only at the start of the line or after
+    white space, and not inside quotes (``scan#2.off`` and ``"a #b.off"`` are paths)."""
+    quote = None
+    escaped = False
+    for i, c in enumerate(line):
+        if escaped:
+            escaped = False
+        elif c == "\\" and quote != "'":
+            escaped = True
+        elif quote is not None:
+            if c == quote:
+                quote = None
+        elif c in "'\"":
+            quote = c
+        elif c == "#" and (i == 0 or line[i - 1].isspace()):
+            return line[:i]
+    return line
+
+
+def _pair_fields(line: str) -> list[str]:
+    """The fields of one pairs-file line: tab-separated when the line has a tab (paths may then
+    hold spaces), else shell-like words (quote paths with spaces); see :func:`strip_comment`."""
+    if "\t" in line:
+        cut = (i for i, c in enumerate(line) if c == "#" and (i == 0 or line[i - 1].isspace()))
+        body = line[: next(cut, len(line))]
+        if "\t" in body.strip():
+            return [f.strip() for f in body.split("\t") if f.strip()]
+    return shlex.split(strip_comment(line), comments=False)
+
+
+@overload
+def read_pairs(
+    path: str | os.PathLike, *, ext: str = "", with_landmarks: Literal[False] = False
+) -> list[tuple[Path, Path]]: ...
+@overload
+def read_pairs(
+    path: str | os.PathLike, *, ext: str = "", with_landmarks: Literal[True]
+) -> tuple[list[tuple[Path, Path]], list[np.ndarray | None]]: ...
+def read_pairs(path: str | os.PathLike, *, ext: str = "", with_landmarks: bool = False):
+    """Read a pairs file: one pair per line, two mesh paths.
+
+    The two paths are separated by white space (quote a path holding spaces, as in a shell:
+    ``"my meshes/a.off" b.off``) or by a tab (then each field is taken as it is, spaces
+    included). Relative paths are resolved against the file's folder; ``ext`` (e.g. ``".off"``)
+    is appended to names that do not already end with it, so the ``pairs.txt`` of the shared
+    benchmark sets (``tr_reg_002 tr_reg_007``) work as they are. Blank lines are ignored, and
+    so is a comment: a ``#`` at the start of a line or after white space (outside quotes) and
+    the rest of the line; a ``#`` inside a name (``scan#2``) is part of the path. A malformed
+    line raises ValueError naming the file and line.
+
+    With ``with_landmarks``, a line may name a third file: the pair's landmarks (read with
+    :func:`hope_rs.read_landmarks`, relative paths against the pairs file's folder, no ``ext``
+    added), and the result is ``(pairs, landmarks)`` with one (m, 2) array or ``None`` per pair.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> folder = pathlib.Path(tempfile.mkdtemp())
+    >>> _ = (folder / "scan.lm").write_text("0 5\\n17 3\\n")
+    >>> _ = (folder / "pairs.txt").write_text("template scan scan.lm\\ntemplate scan#2 # 2nd\\n")
+    >>> pairs, landmarks = read_pairs(folder / "pairs.txt", ext=".off", with_landmarks=True)
+    >>> [(a.name, b.name) for a, b in pairs], landmarks[0].tolist(), landmarks[1]
+    ([('template.off', 'scan.off'), ('template.off', 'scan#2.off')], [[0, 5], [17, 3]], None)
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no such pairs file: {str(path)!r}")
+    if ext and not ext.startswith("."):
+        ext = "." + ext
+    folder = path.resolve().parent
+    try:
+        text = path.read_text()
+    except UnicodeDecodeError:
+        raise ValueError(f"{path} is not a text file of mesh paths") from None
+    out, marks = [], []
+    for no, line in enumerate(text.splitlines(), 1):
+        try:
+            tokens = _pair_fields(line)
+        except ValueError as e:  # shlex: an unclosed quote
+            raise ValueError(f"{path}:{no}: {e}: {line.strip()!r}") from None
+        if not tokens:
+            continue
+        if len(tokens) != 2 and not (with_landmarks and len(tokens) == 3):
+            want = "two mesh paths (and a landmark file)" if with_landmarks else "two mesh paths"
+            raise ValueError(
+                f"{path}:{no}: expected {want} separated by white space or a tab, got "
+                f"{len(tokens)} field(s) (quote paths holding spaces): {line.strip()!r}"
+            )
+        if len(tokens) == 3:
+            lm = Path(tokens[2])
+            try:
+                marks.append(
+                    check_landmarks(
+                        read_landmarks(lm if lm.is_absolute() else folder / lm), None, None
+                    )
+                )
+            except (OSError, TypeError, ValueError) as e:
+                raise ValueError(
+                    f"{path}:{no}: a third field names the pair's landmark file: {e}"
+                ) from None
+        else:
+            marks.append(None)
+        pair = []
+        for t in tokens[:2]:
+            if ext and not t.endswith(ext):
+                t += ext
+            p = Path(t)
+            pair.append(p if p.is_absolute() else folder / p)
+        out.append((pair[0], pair[1]))
+    if not out:
+        raise ValueError(f"{path} lists no pairs (expected lines of two mesh paths)")
+    return (out, marks) if with_landmarks else out
+
+
+def all_pairs(n: int) -> list[tuple[int, int]]:
+    """Every unordered pair (i, j), i < j, of n shapes."""
+    return [(i, j) for i in range(n) for j in range(i + 1, n)]
