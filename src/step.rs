@@ -143,8 +143,9 @@ pub fn best_overlap<A: Rows, B: Rows>(
         .collect())
 }
 
-/// The overlap cost with the match bonus, `keep[p]` stored in every row p.
-fn step_cost<A: Rows, B: Rows>(
+/// The overlap cost with the match bonus, `keep[p]` stored in every row p: the cost one
+/// [`overlap_assignment`] step solves.
+pub fn step_cost<A: Rows, B: Rows>(
     nbrs_a: &A,
     nbrs_b: &B,
     f: &[u32],

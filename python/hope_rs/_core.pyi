@@ -81,6 +81,26 @@ def overlap_assignment_graphs(
     floor_div: int,
     stay: int,
 ) -> tuple[npt.NDArray[np.int64], float, float]: ...
+def overlap_step_cost_graphs(
+    a: MeshGraph,
+    b: MeshGraph,
+    k: int,
+    f: npt.NDArray[np.int64],
+    witnesses: npt.NDArray[np.bool_],
+    top_k: int | None,
+    keep: npt.NDArray[np.int64],
+    stay: int,
+) -> _Csr: ...
+def warm_assignment_int(
+    indptr: npt.NDArray[np.int64],
+    indices: npt.NDArray[np.int32],
+    data: npt.NDArray[np.int64],
+    n_rows: int,
+    n_cols: int,
+    prev: npt.NDArray[np.int64],
+    prices: npt.NDArray[np.int64],
+    max_repair: int,
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], int, bool] | None: ...
 def local_map_distortion_graphs(
     a: MeshGraph,
     b: MeshGraph,

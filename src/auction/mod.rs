@@ -20,7 +20,8 @@
 //! rescans the whole row when the candidates can no longer certify the best and second best.
 //!
 //! Files: `checks` (input checks), `person_csr` (the person-major view), `hopcroft_karp`
-//! (feasibility), `bidding` (the epsilon-scaling auction), `tests`.
+//! (feasibility), `bidding` (the epsilon-scaling auction), `warm` (repairing a previous optimum
+//! by shortest augmenting paths), `tests`, `warm_tests`.
 
 mod bidding;
 mod checks;
@@ -28,6 +29,9 @@ mod hopcroft_karp;
 mod person_csr;
 #[cfg(test)]
 mod tests;
+mod warm;
+#[cfg(test)]
+mod warm_tests;
 
 use rayon::prelude::*;
 
@@ -41,6 +45,7 @@ use checks::{
 };
 use hopcroft_karp::hopcroft_karp;
 use person_csr::{compact_columns, PersonCsr};
+pub use warm::{warm_assignment, WarmSolution};
 
 /// Sentinels: no person or object; an object held by a dummy person; no arc.
 const NONE: u32 = u32::MAX;

@@ -4,29 +4,29 @@ use super::*;
 use crate::csr::Csr;
 use crate::error::CoreError;
 
-struct Rng(u64);
+pub(super) struct Rng(pub(super) u64);
 impl Rng {
-    fn next(&mut self) -> u64 {
+    pub(super) fn next(&mut self) -> u64 {
         self.0 ^= self.0 << 13;
         self.0 ^= self.0 >> 7;
         self.0 ^= self.0 << 17;
         self.0
     }
-    fn below(&mut self, n: u64) -> u64 {
+    pub(super) fn below(&mut self, n: u64) -> u64 {
         self.next() % n
     }
-    fn range(&mut self, lo: i64, hi: i64) -> i64 {
+    pub(super) fn range(&mut self, lo: i64, hi: i64) -> i64 {
         lo + self.below((hi - lo + 1) as u64) as i64
     }
-    fn unit(&mut self) -> f64 {
+    pub(super) fn unit(&mut self) -> f64 {
         (self.next() >> 11) as f64 / (1u64 << 53) as f64
     }
 }
 
-type Dense<T> = Vec<Vec<Option<T>>>;
+pub(super) type Dense<T> = Vec<Vec<Option<T>>>;
 
 /// Dense -> CSR; with `shuffle`, rows are stored in a scrambled column order.
-fn to_csr<T: Copy>(d: &Dense<T>, nc: usize, rng: Option<&mut Rng>) -> Csr<T> {
+pub(super) fn to_csr<T: Copy>(d: &Dense<T>, nc: usize, rng: Option<&mut Rng>) -> Csr<T> {
     let mut indptr = vec![0];
     let mut indices = Vec::new();
     let mut data = Vec::new();
@@ -126,7 +126,7 @@ hungarian!(hungarian_i, i128, i128::MAX / 4);
 hungarian!(hungarian_f, f64, f64::INFINITY);
 
 /// (forbidden pairs needed, optimal total) by the reference.
-fn reference_int(d: &Dense<i64>, nc: usize, maximize: bool) -> (usize, i128) {
+pub(super) fn reference_int(d: &Dense<i64>, nc: usize, maximize: bool) -> (usize, i128) {
     let nr = d.len();
     let big: i128 = 1 << 80;
     let get = |r: usize, c: usize| d[r][c].map(|x| if maximize { -(x as i128) } else { x as i128 });
@@ -352,7 +352,7 @@ fn check_float(d: &Dense<f64>, nc: usize, maximize: bool, rng: &mut Rng) {
     );
 }
 
-fn random_dense<T>(
+pub(super) fn random_dense<T>(
     rng: &mut Rng,
     nr: usize,
     nc: usize,

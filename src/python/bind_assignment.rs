@@ -1,7 +1,9 @@
 //! The exact sparse assignment solvers on integer and float costs given as CSR arrays.
 use super::convert::{convert_vec, cost_csr, owned, plain_vec};
 use super::detached;
-use crate::auction::{auction_assignment_float, auction_assignment_int_hinted, DEFAULT_FLOOR_DIV};
+use crate::auction::{
+    auction_assignment_float, auction_assignment_int_hinted, warm_assignment, DEFAULT_FLOOR_DIV,
+};
 use crate::csr::{Csr, CsrView};
 use numpy::{PyArray1, PyReadonlyArray1};
 use pyo3::prelude::*;
@@ -65,4 +67,44 @@ pub(super) fn py_auction_assignment_float<'py>(
 ) -> PyResult<Bound<'py, PyArray1<i64>>> {
     let cost = cost_csr(&indptr, &indices, plain_vec(&data), n_rows, n_cols)?;
     solve_assignment(py, cost, |c| auction_assignment_float(c, maximize))
+}
+
+/// A warm-started exact solve (see `auction::warm_assignment`) of a maximisation on an integer
+/// sparse cost: (assignment, prices, rows repaired, unique) or None when the warm start does
+/// not apply (the caller then solves cold).
+#[pyfunction]
+#[pyo3(name = "warm_assignment_int")]
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+pub(super) fn py_warm_assignment_int<'py>(
+    py: Python<'py>,
+    indptr: PyReadonlyArray1<'py, i64>,
+    indices: PyReadonlyArray1<'py, i32>,
+    data: PyReadonlyArray1<'py, i64>,
+    n_rows: usize,
+    n_cols: usize,
+    prev: PyReadonlyArray1<'py, i64>,
+    prices: PyReadonlyArray1<'py, i64>,
+    max_repair: usize,
+) -> PyResult<
+    Option<(
+        Bound<'py, PyArray1<i64>>,
+        Bound<'py, PyArray1<i64>>,
+        usize,
+        bool,
+    )>,
+> {
+    let cost = cost_csr(&indptr, &indices, plain_vec(&data), n_rows, n_cols)?;
+    let prev = plain_vec(&prev);
+    let prices = plain_vec(&prices);
+    let out = detached(py, || {
+        warm_assignment(&cost.view(), &prev, &prices, max_repair)
+    })?;
+    Ok(out.map(|s| {
+        (
+            owned(py, &s.assign),
+            owned(py, &s.prices),
+            s.repaired,
+            s.unique,
+        )
+    }))
 }

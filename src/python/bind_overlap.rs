@@ -1,10 +1,10 @@
 //! The overlap cost and the HOPE step kernels between two `MeshGraph`s: the cost as CSR
 //! arrays, each vertex's best overlap, and the exactly solved step.
 use super::bind_graph::MeshGraph;
-use super::convert::{owned, pattern, plain_vec, u32_vec, PyCsr};
+use super::convert::{csr_out, owned, pattern, plain_vec, u32_vec, PyCsr};
 use super::detached;
 use crate::overlap::{overlap_rows, BallsAt, OverlapOptions, OverlapRows};
-use crate::step::{best_overlap, overlap_assignment_timed, StepOptions};
+use crate::step::{best_overlap, overlap_assignment_timed, step_cost, StepOptions};
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -135,4 +135,26 @@ pub(super) fn overlap_assignment_graphs<'py>(
         overlap_assignment_timed(&ra, &rb, &f, &w, &keep, &hint, opts)
     })?;
     Ok((owned(py, &g), t.cost, t.assign))
+}
+
+/// The cost one [`overlap_assignment_graphs`] step solves (overlap counts with the
+/// current-match bonus, `keep` stored in every row), as CSR arrays: for replaying steps.
+#[pyfunction]
+#[pyo3(signature = (a, b, k, f, witnesses, top_k, keep, stay))]
+#[allow(clippy::too_many_arguments)]
+pub(super) fn overlap_step_cost_graphs<'py>(
+    py: Python<'py>,
+    a: &MeshGraph,
+    b: &MeshGraph,
+    k: usize,
+    f: PyReadonlyArray1<'py, i64>,
+    witnesses: PyReadonlyArray1<'py, bool>,
+    top_k: Option<usize>,
+    keep: PyReadonlyArray1<'py, i64>,
+    stay: u32,
+) -> PyResult<PyCsr<'py, i64>> {
+    let (ra, rb, f, w) = step_inputs(a, b, k, &f, &witnesses)?;
+    let keep = u32_vec(&keep, "keep")?;
+    let cost = detached(py, || step_cost(&ra, &rb, &f, &w, top_k, &keep, stay))?;
+    Ok(csr_out(py, cost))
 }

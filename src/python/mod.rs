@@ -10,12 +10,16 @@ mod bind_overlap;
 mod convert;
 
 use crate::error::CoreError;
-use bind_assignment::{py_auction_assignment_float, py_auction_assignment_int};
+use bind_assignment::{
+    py_auction_assignment_float, py_auction_assignment_int, py_warm_assignment_int,
+};
 use bind_descriptors::{py_nearest_among, py_shot_descriptors};
 use bind_geometry::{closest_rotations, greedy_pairs, grow_across_faces, PyPointClusters};
 use bind_graph::{khop_neighbourhoods, MeshGraph};
 use bind_lmd::local_map_distortion_graphs;
-use bind_overlap::{best_overlap_graphs, overlap_assignment_graphs, overlap_cost_csr};
+use bind_overlap::{
+    best_overlap_graphs, overlap_assignment_graphs, overlap_cost_csr, overlap_step_cost_graphs,
+};
 use pyo3::exceptions::{PyMemoryError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -64,6 +68,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(local_map_distortion_graphs, m)?)?;
     m.add_function(wrap_pyfunction!(py_auction_assignment_int, m)?)?;
     m.add_function(wrap_pyfunction!(overlap_assignment_graphs, m)?)?;
+    m.add_function(wrap_pyfunction!(overlap_step_cost_graphs, m)?)?;
+    m.add_function(wrap_pyfunction!(py_warm_assignment_int, m)?)?;
     m.add_function(wrap_pyfunction!(py_auction_assignment_float, m)?)?;
     m.add_function(wrap_pyfunction!(py_shot_descriptors, m)?)?;
     m.add_function(wrap_pyfunction!(greedy_pairs, m)?)?;
