@@ -179,3 +179,36 @@ def test_ctrl_c_of_a_pool_batch_prints_the_summary_and_ends_its_workers(many_pai
     assert f"{total - len(done)} not run (interrupted)" in stdout
     assert_whole(done)
     assert_no_survivors(tag, grace=5)
+
+
+def test_a_killed_worker_fails_at_most_its_pair_and_the_batch_finishes(pairs_file, tmp_path):
+    """As the out-of-memory killer would: one worker of a running pool batch gets SIGKILL. The
+    pool is restarted; every pair ends matched, or failed when it was the one being matched."""
+    pairs, total = pairs_file
+    out, tag = tmp_path / "out", uuid.uuid4().hex
+    cmd = batch_command(pairs, out, tmp_path / "cache", 2)
+    proc = subprocess.Popen(
+        cmd, env=environment(tag), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    try:
+        while not list(out.glob("*.txt")) and proc.poll() is None:
+            time.sleep(0.02)
+        # pool workers run spawn_main (the resource tracker, also tagged, does not)
+        workers = [int(w.split()[0]) for w in tagged(tag) if "spawn_main" in w]
+        assert workers, "found none of the batch's workers"
+        os.kill(workers[0], signal.SIGKILL)
+        stdout, stderr = proc.communicate(timeout=600)
+    finally:
+        proc.kill()
+    assert proc.returncode in (0, 1), stderr
+    assert "Traceback" not in stderr
+    failed = stderr.count("hope-rs: pair failed:")
+    assert failed <= 1 and (failed == 0) == (proc.returncode == 0)
+    if failed:
+        assert "worker process died" in stderr
+    assert (
+        f"{total} pairs: {total - failed} matched, 0 skipped, {failed} failed, 0 not run" in stdout
+    )
+    assert_whole(sorted(out.glob("*.txt")))
+    assert len(list(out.glob("*.txt"))) == total - failed
+    assert_no_survivors(tag, grace=5)

@@ -306,8 +306,9 @@ def match_many(shapes, pairs=None, **kwargs) -> list[PairResult]:
         Format of the map files (:func:`hope_rs.write_map`).
     jobs : int, optional
         Local worker processes (default :func:`default_jobs`: one per two cores, each with
-        cores / jobs Rust threads); 1 runs in this process. A worker that dies (e.g. killed
-        for lack of memory) fails the pair it was matching; the others run on.
+        cores / jobs Rust threads); 1 runs in this process. When a worker dies (e.g. killed
+        for lack of memory) the pool is restarted, the pairs that were running are run again
+        one at a time, and one whose worker dies again, alone, fails; the others run on.
     backend : {"local", "ray"}
         ``"ray"`` runs the tasks on the Ray cluster ``ray.init()`` connects to (``pip install
         'hope-rs[ray]'``); ``ray_options`` are passed to :class:`hope_rs.batch.ray_backend.RayBackend`.
