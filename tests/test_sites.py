@@ -1,7 +1,7 @@
 """SHOT on dense meshes: one descriptor per grid cell, computed at the cell's site."""
 
 import numpy as np
-from meshes import renumbered
+from meshes import renumbered, subdivided
 
 import hope_rs
 from hope_rs import _core
@@ -87,15 +87,6 @@ def test_match_from_sites_recovers_the_same_connectivity_pair(faust_pair):
     e0 = hope_rs.geodesic_errors(sb, res.init_map)
     assert e0.mean() < 0.15  # about 0.11, against 0.074 with every vertex described
     assert np.mean(hope_rs.geodesic_errors(sb, res.map) == 0) == 1.0
-
-
-def subdivided(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Each face split into four at its edges' midpoints."""
-    edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
-    uniq, inv = np.unique(edges, axis=0, return_inverse=True)
-    mid = v.shape[0] + inv.reshape(3, -1).T
-    corners = [np.stack([f[:, i], mid[:, i], mid[:, (i + 2) % 3]], 1) for i in range(3)]
-    return np.vstack([v, v[uniq].mean(axis=1)]), np.concatenate([*corners, mid])
 
 
 def test_sites_follow_the_density_not_the_scale(faust_pair):

@@ -4,7 +4,6 @@
 other way: it lists, for each vertex of shape 2, a vertex of shape 1.)
 """
 
-from . import _compat
 from ._version import __version__ as __version__
 from .batch.cache import ShapeCache
 from .batch.driver import PairResult, match_many, read_pairs
@@ -38,5 +37,3 @@ __all__ = [
     "score",
     "write_map",
 ]
-
-_compat.install()
