@@ -7,6 +7,7 @@ import hope_rs
 from hope_rs import _core
 from hope_rs.features.descriptors import DescriptorConfig
 from hope_rs.geometry import sites as S
+from hope_rs.geometry.numbering import canonical_mesh
 from hope_rs.geometry.sites import SiteConfig
 from hope_rs.pipeline.initial import initial_map, shapes_initial_map
 from hope_rs.shape import ShapeConfig
@@ -14,7 +15,6 @@ from hope_rs.shape import ShapeConfig
 SHOT_RADIUS = DescriptorConfig().shot_radius
 #: Cells wide enough that the 6890-vertex FAUST meshes use sites (2.7 vertices each).
 COARSE_SITES = ShapeConfig(descriptors=DescriptorConfig(sites=SiteConfig(spacing=0.25)))
-from hope_rs.geometry.numbering import canonical_mesh
 
 
 def test_grid_cells_group_exactly_the_vertices_of_one_grid_cell():

@@ -24,6 +24,7 @@ cut short, files swapped by hand) is recomputed and rewritten, with a warning na
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import json
@@ -181,10 +182,8 @@ class ShapeCache:
             RuntimeWarning,
             stacklevel=3,
         )
-        try:
+        with contextlib.suppress(OSError):  # already replaced or removed by a concurrent writer
             path.unlink()
-        except OSError:
-            pass  # already replaced or removed by a concurrent writer
 
     def put(self, digest: str, what: str, params: dict, arrays: dict[str, np.ndarray]) -> None:
         self.misses += 1

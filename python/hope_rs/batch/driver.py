@@ -590,7 +590,9 @@ def imatch_many(
                                 report(r)
                                 yield r
                                 continue
-                            warnings.warn(f"{why}; computing it again", RuntimeWarning)
+                            warnings.warn(
+                                f"{why}; computing it again", RuntimeWarning, stacklevel=2
+                            )
                             t = (n, i, j, path, False)
                             prepare(i, True)
                             prepare(j, True)

@@ -77,10 +77,8 @@ _SHAPES: OrderedDict = OrderedDict()
 def _shape(token, cache_root: str | None, kinds: tuple, k_max: int, basis: int = 0) -> Shape:
     """The Shape of a digest (read from the cache) or of shipped arrays, kept for later pairs;
     with ``basis`` > 0, the cached eigenbasis of that size too, when there is one."""
-    if isinstance(token, dict):  # arrays shipped with the task
-        key = (token["digest"], k_max)
-    else:
-        key = (token, k_max)
+    # A dict token holds arrays shipped with the task.
+    key = (token["digest"] if isinstance(token, dict) else token, k_max)
     if key in _SHAPES:
         _SHAPES.move_to_end(key)
         return _SHAPES[key]

@@ -256,7 +256,9 @@ def _parse_size(text: str) -> tuple[int, int]:
     try:
         w, h = (int(x) for x in text.lower().split("x"))
     except ValueError:
-        raise ValueError(f"--size must be WIDTHxHEIGHT in pixels, e.g. 1600x900, got {text!r}")
+        raise ValueError(
+            f"--size must be WIDTHxHEIGHT in pixels, e.g. 1600x900, got {text!r}"
+        ) from None
     if w < 100 or h < 100 or w > 20000 or h > 20000:
         raise ValueError(f"--size must be between 100x100 and 20000x20000 pixels, got {text!r}")
     return w, h
