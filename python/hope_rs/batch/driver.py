@@ -22,7 +22,7 @@ import tempfile
 import threading
 import time
 import warnings
-from collections.abc import Iterator
+from collections.abc import Generator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal, overload
@@ -466,7 +466,7 @@ def imatch_many(
     map_format: str = "txt",
     landmarks=None,
     **match_options,
-) -> Iterator[PairResult]:
+) -> Generator[PairResult, None, None]:
     """Like :func:`match_many`, but yields each :class:`PairResult` as soon as it is done
     (finished pairs first, in no particular order). Closing the generator early (or an
     exception, Ctrl-C) ends the workers at once; the maps already written stay."""
@@ -571,19 +571,24 @@ def imatch_many(
                     for t in waiting:
                         n, i, j, path, check = t
                         if i in failed or j in failed:
-                            yield failed_pair(n, i, j, path, failed.get(i) or failed.get(j))
+                            yield failed_pair(n, i, j, path, failed.get(i) or failed[j])
                             continue
                         if check:
                             if i not in sizes or j not in sizes:
                                 still.append(t)
                                 continue
+                            assert path is not None  # a pair to check has a map file
                             m, why = existing_map(path, sizes[i], sizes[j])
                             if why is None and marks[n] is not None:
                                 lm, bad = _checked_landmarks(marks[n], sizes[i], sizes[j])
                                 if bad is not None:
                                     yield failed_pair(n, i, j, path, bad)
                                     continue
-                                if lm is not None and (m[lm[:, 0]] != lm[:, 1]).any():
+                                if (
+                                    lm is not None
+                                    and m is not None
+                                    and (m[lm[:, 0]] != lm[:, 1]).any()
+                                ):
                                     why = f"{path} does not keep the pair's landmarks"
                             if why is None:
                                 r = PairResult(n, names[i], names[j], m, skipped=True, path=path)

@@ -95,9 +95,9 @@ def _shape(token, cache_root: str | None, kinds: tuple, k_max: int, basis: int =
             Mesh(got["vertices"], got["faces"]), cache=cache, kinds=kinds, k_max=k_max,
             digest=token,
         )  # fmt: skip
-        got = cache.spectral_basis(shape.mesh, token, basis, compute=False) if basis else None
-        if got is not None:
-            shape.set_spectral_basis(*got)
+        eig = cache.spectral_basis(shape.mesh, token, basis, compute=False) if basis else None
+        if eig is not None:
+            shape.set_spectral_basis(*eig)
     _SHAPES[key] = shape
     while sum(s.n_vertices for s in _SHAPES.values()) > SHAPE_BUDGET and len(_SHAPES) > 2:
         _SHAPES.popitem(last=False)

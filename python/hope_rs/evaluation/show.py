@@ -18,6 +18,7 @@ axis (FAUST: y up, TOSCA: z up), which ``up="auto"`` finds from where the shape 
 
 from __future__ import annotations
 
+import functools
 import os
 
 import numpy as np
@@ -76,7 +77,7 @@ def pull_back_colours(colours_a: np.ndarray, mapping, mesh_b: Mesh) -> np.ndarra
     return out
 
 
-def detect_up(mesh: Mesh) -> tuple[int, int]:
+def detect_up(mesh: Mesh | np.ndarray) -> tuple[int, int]:
     """(axis, sign) of the file's coordinate axis drawn upwards: the axis of largest extent,
     pointing along its positive direction, e.g. (1, +1) for +y.
 
@@ -247,7 +248,7 @@ def write_ply_pair(a: Mesh, b: Mesh, mapping, path, *, up: str = "auto") -> tupl
         ).astype(np.uint8)
         tm = trimesh.Trimesh(mesh.vertices, mesh.faces, vertex_colors=rgba, process=False)
         target = f"{stem}_{tag}.ply"
-        atomic_write(target, lambda fh, tm=tm: tm.export(file_obj=fh, file_type="ply"))
+        atomic_write(target, functools.partial(tm.export, file_type="ply"))
         out.append(target)
     return out[0], out[1]
 

@@ -164,7 +164,8 @@ class PartialStage(Stage):
             info = self._rescale_part(state, info)
         elif reverse:
             # The nested match detects B as the part of its pair and scales it itself.
-            nested = {}
+            nested: dict = {}
+            assert state.run is not None  # the runner sets it
             back = state.run(
                 state.b,
                 state.a,
@@ -221,10 +222,12 @@ class PartialStage(Stage):
         init = state.init if isinstance(state.init, str) else a.map_out(b, state.init)
         guess = a.at_scale(info.scale) if info.scale != a.scale else a
         landmarks = input_landmarks(state)
+        run = state.run
+        assert run is not None  # the runner sets it
 
         def at(view: Shape) -> tuple:
             """(view, the part's match at that view's scale)."""
-            return view, state.run(view, b, init, off, landmarks=landmarks)
+            return view, run(view, b, init, off, landmarks=landmarks)
 
         best, first = at(guess)
         share = covered_share(b, guess.map_in(b, first.map))
@@ -285,6 +288,7 @@ def _refined_merge(state: MatchState, runs: list, config, landmarks, rings: int)
         conf = p @ conf
     merged = maps[np.argmax(conf, axis=1), np.arange(a.n_vertices)]
     view = max(runs, key=_mean_confidence)[0]
+    assert state.run is not None  # the runner sets it
     return view, state.run(view, b, a.map_out(b, merged), config, landmarks=landmarks)
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -140,6 +141,7 @@ def refine(
             if landmark_config.refine_trust
             else w.copy()
         )
+        assert landmarks is not None  # coords come with landmarks
         w[landmarks[:, 0]] = True
         return w
 
@@ -325,7 +327,9 @@ def best_overlap(a: Shape, b: Shape, k: int, f, witnesses, *, top_k: int) -> np.
     return _core.best_overlap_graphs(*_step_args(a, b, k, f, witnesses), top_k)
 
 
-def _step_args(a: Shape, b: Shape, k: int, f, witnesses) -> tuple:
+def _step_args(
+    a: Shape, b: Shape, k: int, f, witnesses
+) -> tuple[_core.MeshGraph, _core.MeshGraph, int, np.ndarray, np.ndarray]:
     """The leading arguments of the Rust step functions: both graphs, k, the map, the voters."""
     return (
         a.graph,
@@ -395,12 +399,13 @@ class _RefineSteps:
 
     def __init__(self, sa: Shape, sb: Shape, log: StageLog, cfg: RefineConfig, user):
         self.log, self.user = log, user
-        schedule = cfg.schedule
+        schedule: Sequence[int] | None = cfg.schedule
         if schedule is None:
             schedule = default_schedule(min(sa.k_max, sb.k_max))
         self.n_passes = cfg.max_passes
         self.per_pass = len(schedule) + (1 if cfg.global_step else 0)
         self.total = self.n_passes * self.per_pass
+        self.polish: Iteration | None
         self.done, self.passes, self.t0, self.polish = 0, 0, time.perf_counter(), None
 
     def __call__(self, it: Iteration) -> None:

@@ -363,6 +363,7 @@ def spectral_refine(
         return h, None
     # LMD of both maps once: the region choice reads the means, the guard's anchors the
     # consistent fractions.
+    assert z is not None  # zoomout without a stop event returns a map
     mh, ch = local_map_distortion(a, b, h)
     mz, cz = local_map_distortion(a, b, z)
     f = _choose(a, h, z, mh.astype(np.float64) - mz, config.smoothing_steps, config.margin)
@@ -464,9 +465,10 @@ class SpectralStage(Stage):
         if self.prefetch is None:
             return
         cancel = res is None or res.settled
-        if not cancel and res.history and res.history[-1].polish:
+        if res is not None and not cancel and res.history and res.history[-1].polish:
             state.log.start("spectral", detail="finishing the eigenbases and ZoomOut")
         early = self.early
+        assert early is not None  # started with the prefetch
         self._stop(cancel)
         if res is not None:
             self.zoomout = early.result
@@ -475,6 +477,7 @@ class SpectralStage(Stage):
         """Joins both threads (told to stop first with ``cancel``) and restores BLAS."""
         prefetch, early, blas = self.prefetch, self.early, self.blas
         self.prefetch = self.early = self.blas = None
+        assert prefetch is not None and early is not None and blas is not None  # all started
         try:
             if cancel:
                 # Both flags before any wait, so that a second Ctrl-C during the joins below
@@ -499,6 +502,7 @@ class SpectralStage(Stage):
         a, b, cfg = state.a, state.b, state.config.spectral
         t = state.log.start("spectral", detail="ZoomOut from HOPE's map, chosen region by region")
         h = state.f
+        assert h is not None  # the refinement's map
         f, z = spectral_refine(
             a,
             b,
