@@ -93,7 +93,9 @@ def test_version_files_agree():
     assert not re.search(r"^version\s*=", pyproject, re.MULTILINE)
     cff = re.search(r"^version:\s*(\S+)\s*$", (ROOT / "CITATION.cff").read_text(), re.MULTILINE)
     changes = (ROOT / "CHANGELOG.md").read_text(encoding="utf-8")
-    release = re.search(r"^## \[(\d[^\]]*)\] - (?:\d{4}-\d{2}-\d{2}|Unreleased)$", changes, re.MULTILINE)
+    release = re.search(
+        r"^## \[(\d[^\]]*)\] - (?:\d{4}-\d{2}-\d{2}|Unreleased)$", changes, re.MULTILINE
+    )
     assert cff and release, "CITATION.cff or CHANGELOG.md names no version"
     assert cff.group(1) == release.group(1) == project_version()
 
