@@ -64,10 +64,10 @@ def main() -> int:
                 s.kill()
                 s.wait()
         print(f"round {r + 1}: quiet {quiet[-1]:.2f} s, beside {args.busy} busy {busy[-1]:.2f} s")
-    q, l = statistics.median(quiet), statistics.median(busy)
+    q, loaded = statistics.median(quiet), statistics.median(busy)
     print(
         f"match {a.stem} -> {b.stem} (spectral={spectral}): quiet median {q:.2f} s, "
-        f"beside {args.busy} busy processes median {l:.2f} s, ratio {l / q:.1f}x"
+        f"beside {args.busy} busy processes median {loaded:.2f} s, ratio {loaded / q:.1f}x"
     )
     return 0
 

@@ -5,6 +5,7 @@ import pytest
 from hypothesis import settings
 
 from hope_rs.evaluation.demo import demo_pair
+from hope_rs.geometry.map_io import check_writable_folder
 from hope_rs.geometry.mesh import load_mesh
 
 # CI runs a fixed sequence of examples, so a landing never hinges on the draw; local runs stay
@@ -39,3 +40,24 @@ def pytest_configure(config):
     config.addinivalue_line(
         "markers", "slow: takes more than a few seconds (28k meshes, remeshed data, Ray, kills)"
     )
+
+
+def unwritable_folder(tmp_path):
+    """A folder this process cannot create files in (root ignores permission bits; /sys
+    refuses new files even to root)."""
+    if os.geteuid() != 0:
+        d = tmp_path / "ro"
+        d.mkdir()
+        d.chmod(0o555)
+        return d
+    if os.path.isdir("/sys") and _refuses("/sys"):
+        return "/sys"
+    pytest.skip("no folder this process cannot write to")
+
+
+def _refuses(folder) -> bool:
+    try:
+        check_writable_folder(folder)
+    except ValueError:
+        return True
+    return False

@@ -169,3 +169,21 @@ def echo_or_die(x: str, pause: float = 0.0) -> dict:
         os.kill(os.getpid(), signal.SIGKILL)
     time.sleep(pause)
     return {"x": x}
+
+
+def subdivided(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each face split into four at its edges' midpoints."""
+    edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+    uniq, inv = np.unique(edges, axis=0, return_inverse=True)
+    mid = v.shape[0] + inv.reshape(3, -1).T
+    corners = [np.stack([f[:, i], mid[:, i], mid[:, (i + 2) % 3]], 1) for i in range(3)]
+    return np.vstack([v, v[uniq].mean(axis=1)]), np.concatenate([*corners, mid])
+
+
+def legless(a: hope_rs.Mesh) -> tuple[hope_rs.Mesh, np.ndarray]:
+    """A without its lowest 30% of vertices (a FAUST body's legs), and the kept vertices."""
+    keep = a.vertices[:, 1] > np.quantile(a.vertices[:, 1], 0.3)
+    idx = np.flatnonzero(keep)
+    new = np.full(a.n_vertices, -1)
+    new[idx] = np.arange(idx.size)
+    return hope_rs.Mesh(a.vertices[idx], new[a.faces[keep[a.faces].all(axis=1)]]), idx

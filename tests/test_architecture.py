@@ -18,8 +18,7 @@ PACKAGE = Path(hope_rs.__file__).parent
 
 #: Layer of each top-level module or subpackage, lowest first.
 LAYERS = {
-    "_core": 0, "_blas": 0, "_cancel": 0, "_validate": 0, "_version": 0, "_compat": 0,
-    "_threads": 0,
+    "_core": 0, "_blas": 0, "_cancel": 0, "_validate": 0, "_version": 0, "_threads": 0,
     "geometry": 1,
     "kernels": 2,
     "features": 3,
@@ -131,3 +130,18 @@ def test_no_import_cycle():
 def test_every_module_has_a_layer():
     missing = sorted({n.split(".")[0] for n, _ in modules()} - set(LAYERS))
     assert not missing, f"modules without a layer in LAYERS: {missing}"
+
+
+TESTS = Path(__file__).resolve().parent
+
+
+@pytest.mark.parametrize("path", sorted(TESTS.glob("test_*.py")), ids=lambda p: p.name)
+def test_test_helpers_come_from_meshes_or_conftest(path):
+    # A test file imports no other test file: shared helpers live in meshes.py or conftest.py.
+    imported = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.module:
+            imported.add(node.module.split(".")[0])
+        elif isinstance(node, ast.Import):
+            imported.update(alias.name.split(".")[0] for alias in node.names)
+    assert not {m for m in imported if m.startswith("test_")}, f"{path.name} imports a test file"

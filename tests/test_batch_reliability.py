@@ -8,8 +8,8 @@ import warnings
 
 import numpy as np
 import pytest
+from conftest import unwritable_folder
 from meshes import bumpy_sphere_files
-from test_map_io import unwritable_folder
 
 import hope_rs
 import hope_rs.batch.driver

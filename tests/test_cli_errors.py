@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import unwritable_folder
 from meshes import bumpy_sphere_files
-from test_map_io import unwritable_folder
 
 import hope_rs
 import hope_rs.cli.commands

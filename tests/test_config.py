@@ -6,7 +6,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from test_shared_faces import legless
+from meshes import legless
 
 import hope_rs
 from hope_rs import MatchConfig

@@ -31,10 +31,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scipy
+
 # scipy.linalg loads SciPy's BLAS, so the platform read below lists it.
 import scipy.linalg
 from conftest import DATA
-from test_sites import subdivided
+from meshes import subdivided
 from threadpoolctl import threadpool_info
 
 import hope_rs

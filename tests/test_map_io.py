@@ -5,32 +5,12 @@ import stat
 
 import numpy as np
 import pytest
+from conftest import unwritable_folder
 
 import hope_rs
 from hope_rs.geometry.map_io import atomic_write, check_writable_folder, read_map, write_map
 
 MAP = np.array([3, 0, 2, 2, 1], dtype=np.int64)
-
-
-def unwritable_folder(tmp_path):
-    """A folder this process cannot create files in (root ignores permission bits; /sys
-    refuses new files even to root)."""
-    if os.geteuid() != 0:
-        d = tmp_path / "ro"
-        d.mkdir()
-        d.chmod(0o555)
-        return d
-    if os.path.isdir("/sys") and _refuses("/sys"):
-        return "/sys"
-    pytest.skip("no folder this process cannot write to")
-
-
-def _refuses(folder) -> bool:
-    try:
-        check_writable_folder(folder)
-    except ValueError:
-        return True
-    return False
 
 
 @pytest.mark.parametrize("name", ["m.txt", "m.csv", "m", "m.npy", "M.NPY"])

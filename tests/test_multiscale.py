@@ -5,8 +5,7 @@ import json
 import numpy as np
 import pytest
 from conftest import data_path
-from meshes import bumpy_sphere, renumbered, signed_volume, write_off
-from test_sites import subdivided
+from meshes import bumpy_sphere, renumbered, signed_volume, subdivided, write_off
 
 import hope_rs
 from hope_rs import MatchConfig

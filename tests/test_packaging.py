@@ -42,10 +42,11 @@ def relative_links(markdown: str) -> list[str]:
 
 
 def project_version() -> str:
-    """``[project] version`` of pyproject.toml (a regex: tomllib is 3.11+)."""
-    text = (ROOT / "pyproject.toml").read_text()
-    m = re.search(r'^\[project\]$[^\[]*?^version\s*=\s*"([^"]+)"', text, re.MULTILINE | re.DOTALL)
-    assert m, "pyproject.toml has no static [project] version"
+    """``[package] version`` of Cargo.toml, the one place the version is set (a regex:
+    tomllib is 3.11+)."""
+    text = (ROOT / "Cargo.toml").read_text()
+    m = re.search(r'^\[package\]$[^\[]*?^version\s*=\s*"([^"]+)"', text, re.MULTILINE | re.DOTALL)
+    assert m, "Cargo.toml has no [package] version"
     return m.group(1)
 
 
@@ -85,11 +86,18 @@ def test_version_comes_from_the_installed_distribution():
 
 
 def test_version_files_agree():
-    cargo = (ROOT / "Cargo.toml").read_text()
-    m = re.search(r'^\[package\]$[^\[]*?^version\s*=\s*"([^"]+)"', cargo, re.MULTILINE | re.DOTALL)
+    # pyproject.toml takes the version from Cargo.toml; the citation and the changelog's
+    # latest release name it too.
+    pyproject = (ROOT / "pyproject.toml").read_text()
+    assert re.search(r'^dynamic\s*=\s*\[[^\]]*"version"', pyproject, re.MULTILINE)
+    assert not re.search(r"^version\s*=", pyproject, re.MULTILINE)
     cff = re.search(r"^version:\s*(\S+)\s*$", (ROOT / "CITATION.cff").read_text(), re.MULTILINE)
-    assert m and cff
-    assert m.group(1) == cff.group(1) == project_version()
+    changes = (ROOT / "CHANGELOG.md").read_text(encoding="utf-8")
+    release = re.search(
+        r"^## \[(\d[^\]]*)\] - (?:\d{4}-\d{2}-\d{2}|Unreleased)$", changes, re.MULTILINE
+    )
+    assert cff and release, "CITATION.cff or CHANGELOG.md names no version"
+    assert cff.group(1) == release.group(1) == project_version()
 
 
 def test_version_flag_prints_the_version(capsys):

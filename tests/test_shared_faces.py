@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 from conftest import data_path
-from meshes import bumpy_sphere, cli_maps, drifted, moved_copy, random_rigid, write_off
+from meshes import bumpy_sphere, cli_maps, drifted, legless, moved_copy, random_rigid, write_off
 
 import hope_rs
 from hope_rs import _core
@@ -101,15 +101,6 @@ def test_finish_leaves_differently_triangulated_shapes_alone():
     res = hope_rs.match(a, b)
     assert "faces" not in res.timings
     np.testing.assert_array_equal(res.map, f)
-
-
-def legless(a: hope_rs.Mesh) -> tuple[hope_rs.Mesh, np.ndarray]:
-    """A without its lowest 30% of vertices (a FAUST body's legs), and the kept vertices."""
-    keep = a.vertices[:, 1] > np.quantile(a.vertices[:, 1], 0.3)
-    idx = np.flatnonzero(keep)
-    new = np.full(a.n_vertices, -1)
-    new[idx] = np.arange(idx.size)
-    return hope_rs.Mesh(a.vertices[idx], new[a.faces[keep[a.faces].all(axis=1)]]), idx
 
 
 def test_a_partial_shape_of_the_same_triangulation_becomes_exact(faust_pair):

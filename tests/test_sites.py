@@ -1,12 +1,13 @@
 """SHOT on dense meshes: one descriptor per grid cell, computed at the cell's site."""
 
 import numpy as np
-from meshes import renumbered
+from meshes import renumbered, subdivided
 
 import hope_rs
 from hope_rs import _core
 from hope_rs.features.descriptors import DescriptorConfig
 from hope_rs.geometry import sites as S
+from hope_rs.geometry.numbering import canonical_mesh
 from hope_rs.geometry.sites import SiteConfig
 from hope_rs.pipeline.initial import initial_map, shapes_initial_map
 from hope_rs.shape import ShapeConfig
@@ -14,7 +15,6 @@ from hope_rs.shape import ShapeConfig
 SHOT_RADIUS = DescriptorConfig().shot_radius
 #: Cells wide enough that the 6890-vertex FAUST meshes use sites (2.7 vertices each).
 COARSE_SITES = ShapeConfig(descriptors=DescriptorConfig(sites=SiteConfig(spacing=0.25)))
-from hope_rs.geometry.numbering import canonical_mesh
 
 
 def test_grid_cells_group_exactly_the_vertices_of_one_grid_cell():
@@ -87,15 +87,6 @@ def test_match_from_sites_recovers_the_same_connectivity_pair(faust_pair):
     e0 = hope_rs.geodesic_errors(sb, res.init_map)
     assert e0.mean() < 0.15  # about 0.11, against 0.074 with every vertex described
     assert np.mean(hope_rs.geodesic_errors(sb, res.map) == 0) == 1.0
-
-
-def subdivided(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Each face split into four at its edges' midpoints."""
-    edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
-    uniq, inv = np.unique(edges, axis=0, return_inverse=True)
-    mid = v.shape[0] + inv.reshape(3, -1).T
-    corners = [np.stack([f[:, i], mid[:, i], mid[:, (i + 2) % 3]], 1) for i in range(3)]
-    return np.vstack([v, v[uniq].mean(axis=1)]), np.concatenate([*corners, mid])
 
 
 def test_sites_follow_the_density_not_the_scale(faust_pair):

@@ -4,10 +4,7 @@
 other way: it lists, for each vertex of shape 2, a vertex of shape 1.)
 """
 
-from . import _compat
 from ._threads import cap_rayon_threads
-
-cap_rayon_threads()  # before any Rust call starts the thread pool
 from ._version import __version__ as __version__
 from .batch.cache import ShapeCache
 from .batch.driver import PairResult, match_many, read_pairs
@@ -19,6 +16,8 @@ from .kernels.khop import khop_neighbourhoods, overlap_cost
 from .matching import MatchConfig, MatchResult, match
 from .pipeline.confidence import MatchQuality
 from .shape import Shape
+
+cap_rayon_threads()  # before any Rust call starts the thread pool (importing calls none)
 
 __all__ = [
     "MatchConfig",
@@ -41,5 +40,3 @@ __all__ = [
     "score",
     "write_map",
 ]
-
-_compat.install()

@@ -8,17 +8,36 @@ as the kernel returns.
 
 import numpy as np
 import numpy.typing as npt
-from typing_extensions import TypeAlias
+from typing_extensions import TypeAlias, final
+
+__all__ = [
+    "MeshGraph",
+    "PointClusters",
+    "DuplicateEntries",
+    "khop_neighbourhoods",
+    "overlap_cost_csr",
+    "best_overlap_graphs",
+    "local_map_distortion_graphs",
+    "auction_assignment_int",
+    "overlap_assignment_graphs",
+    "auction_assignment_float",
+    "shot_descriptors",
+    "greedy_pairs",
+    "nearest_among",
+    "closest_rotations",
+    "grow_across_faces",
+]
 
 _Csr: TypeAlias = tuple[npt.NDArray[np.int64], npt.NDArray[np.int32], np.ndarray]
 
 class DuplicateEntries(ValueError):
     """A sparse cost stores one entry twice."""
 
+@final
 class MeshGraph:
-    def __init__(
-        self, vertices: npt.NDArray[np.float64], faces: npt.NDArray[np.int64], k_max: int
-    ) -> None: ...
+    def __new__(
+        cls, vertices: npt.NDArray[np.float64], faces: npt.NDArray[np.int64], k_max: int
+    ) -> MeshGraph: ...
     @property
     def n_vertices(self) -> int: ...
     @property
@@ -35,10 +54,11 @@ class MeshGraph:
         distance fields, (len(samples), n_vertices); ``scale`` divides the distances compared."""
     def mean_edge_length(self) -> float: ...
 
+@final
 class PointClusters:
     """Exact nearest points of a fixed (n, d) float point set, d > 0, for many queries."""
 
-    def __init__(self, points: npt.NDArray[np.float64]) -> None: ...
+    def __new__(cls, points: npt.NDArray[np.float64]) -> PointClusters: ...
     def nearest(
         self, queries: npt.NDArray[np.float64]
     ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.bool_]]:
@@ -117,9 +137,12 @@ def auction_assignment_int(
     n_rows: int,
     n_cols: int,
     maximize: bool,
-    floor_div: int = 1024,
+    floor_div: int = ...,
     hint: npt.NDArray[np.int64] | None = None,
-) -> npt.NDArray[np.int64]: ...
+) -> npt.NDArray[np.int64]:
+    """``floor_div``: the final epsilon's divisor (default 1024, src/auction's
+    ``DEFAULT_FLOOR_DIV``)."""
+
 def auction_assignment_float(
     indptr: npt.NDArray[np.int64],
     indices: npt.NDArray[np.int32],

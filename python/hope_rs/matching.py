@@ -115,14 +115,15 @@ def match(
 
     Examples
     --------
-    >>> import hope_rs
-    >>> from hope_rs.evaluation.demo import demo_pair
-    >>> a, b = demo_pair()
+    >>> import hope_rs, trimesh
+    >>> a = trimesh.creation.icosphere(subdivisions=3)  # 642 vertices; or hope_rs.load_mesh(path)
+    >>> b = a.copy()
+    >>> b.vertices *= [1.0, 1.2, 0.9]  # a stretched copy
     >>> res = hope_rs.match(a, b)
-    >>> res.map.shape == (a.n_vertices,)
+    >>> res.map.shape == (len(a.vertices),)
     True
-    >>> [s.name for s in res.stages][:3]
-    ['shapes', 'descriptors', 'init']
+    >>> [s.name for s in res.stages][:4]
+    ['shapes', 'descriptors', 'init', 'refine']
     """
     t0 = time.perf_counter()
     # Every option, then the inputs, before any expensive work.

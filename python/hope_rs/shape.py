@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 import scipy.sparse as sp
@@ -16,7 +17,7 @@ from .features.descriptors import (
     shot_as_numbered,
     spectral_basis_of,
 )
-from .geometry.coarsen import CoarsenConfig, coarse_mesh
+from .geometry.coarsen import Coarse, CoarsenConfig, coarse_mesh
 from .geometry.mesh import as_mesh, scale_exponent, unique_edges
 from .geometry.numbering import canonical_mesh
 from .geometry.sites import shot_sites
@@ -97,8 +98,9 @@ class Shape:
         # In the internal numbering: the initial map reads them there, and a second copy in
         # the input's numbering would double their memory.
         self._descriptors: dict[str, np.ndarray] = {}
-        self._sites: tuple[np.ndarray, np.ndarray] | None | bool = False  # False: not yet known
-        self._coarse: tuple | None | bool = False
+        # False: not yet known.
+        self._sites: tuple[np.ndarray, np.ndarray] | None | Literal[False] = False
+        self._coarse: tuple[Coarse, Shape] | None | Literal[False] = False
         self._basis: tuple[np.ndarray, np.ndarray] | None = None
         self._edges: np.ndarray | None = None
         self._ring: sp.csr_matrix | None = None
@@ -186,7 +188,7 @@ class Shape:
         """Whether descriptors of ``kind`` are computed or set already."""
         return kind in self._descriptors
 
-    def coarse_level(self):
+    def coarse_level(self) -> tuple[Coarse, Shape] | None:
         """(:class:`~hope_rs.geometry.coarsen.Coarse`, its :class:`Shape`) of this shape's internal
         mesh for multiscale matching, built once; ``None`` when the mesh is not dense enough
         to coarsen (see :func:`hope_rs.geometry.coarsen.coarse_mesh`)."""
@@ -222,7 +224,7 @@ class Shape:
         ``stop``: a :class:`threading.Event`; once set, the solve raises
         :class:`~hope_rs._cancel.Cancelled` at its next step."""
         # The multiscale coarse copy, when built already, seeds the basis.
-        coarse = self._coarse if self._coarse in (False, None) else self._coarse[0]
+        coarse = self._coarse[0] if isinstance(self._coarse, tuple) else self._coarse
         cfg = self.config
         _, evecs, mass = spectral_basis_of(
             self.internal, k, coarse=coarse, config=cfg.basis, coarsen=cfg.coarsen, stop=stop

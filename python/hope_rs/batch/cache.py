@@ -24,6 +24,7 @@ cut short, files swapped by hand) is recomputed and rewritten, with a warning na
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import json
@@ -121,7 +122,8 @@ def _checksum(arrays: dict[str, np.ndarray]) -> str:
 
 def _atomic_save(path: Path, arrays: dict[str, np.ndarray]) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write(path, lambda fh: np.savez(fh, **arrays))
+    # numpy's stub types **kwds as if they could fill savez's allow_pickle.
+    atomic_write(path, lambda fh: np.savez(fh, **arrays))  # type: ignore[arg-type]
 
 
 class ShapeCache:
@@ -166,12 +168,15 @@ class ShapeCache:
             raise  # says nothing about the entry: keep it
         except Exception as e:  # noqa: BLE001 - BadZipFile, zlib.error, ValueError (refused
             # pickle, bad header), EOFError, OSError, KeyError...: all mean a damaged file
-            return self._damaged(path, f"unreadable: {type(e).__name__}")
+            self._damaged(path, f"unreadable: {type(e).__name__}")
+            return None
         stored_key, stored_sum = out.pop(_KEY, None), out.pop(_SUM, None)
         if stored_key is None or stored_key.shape != () or str(stored_key) != key:
-            return self._damaged(path, "it holds another entry")
+            self._damaged(path, "it holds another entry")
+            return None
         if stored_sum is None or stored_sum.shape != () or str(stored_sum) != _checksum(out):
-            return self._damaged(path, "checksum mismatch")
+            self._damaged(path, "checksum mismatch")
+            return None
         self.hits += 1
         return out
 
@@ -181,10 +186,8 @@ class ShapeCache:
             RuntimeWarning,
             stacklevel=3,
         )
-        try:
+        with contextlib.suppress(OSError):  # already replaced or removed by a concurrent writer
             path.unlink()
-        except OSError:
-            pass  # already replaced or removed by a concurrent writer
 
     def put(self, digest: str, what: str, params: dict, arrays: dict[str, np.ndarray]) -> None:
         self.misses += 1

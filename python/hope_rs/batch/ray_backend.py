@@ -66,8 +66,8 @@ class RayBackend:
             _prepare_split
         )
         self._pair = ray.remote(num_cpus=self.threads, runtime_env=env)(pair_task)
-        self._data = {}
-        self._pending = set()  # submitted and not yet returned by wait
+        self._data: dict = {}
+        self._pending: set = set()  # submitted and not yet returned by wait
 
     def submit(self, fn, *args):
         if fn is prepare_task:

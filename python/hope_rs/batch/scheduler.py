@@ -187,6 +187,7 @@ def run(plan: Plan, ex: Backend, report: Callable) -> Iterator[PairResult]:
                         f"cannot update the batch manifest {str(manifest.path)!r} "
                         f"({e.strerror or e}); a rerun computes {path.name} again",
                         RuntimeWarning,
+                        stacklevel=2,
                     )
         return result(n, map=value["map"], timings=value["timings"])
 
@@ -229,7 +230,9 @@ def run(plan: Plan, ex: Backend, report: Callable) -> Iterator[PairResult]:
                             yield result(n, map=m, skipped=True)
                             continue
                         warnings.warn(
-                            f"{plan.paths[n].name}: {why}; computing it again", RuntimeWarning
+                            f"{plan.paths[n].name}: {why}; computing it again",
+                            RuntimeWarning,
+                            stacklevel=2,
                         )
                         check = False
                         bad = forget(n)

@@ -99,6 +99,7 @@ def cmd_match(args) -> int:
         print(f"hope-rs: note: --multiscale: {coarse.reason}", file=sys.stderr)
     if args.confidence_out:
         conf = res.confidence
+        assert conf is not None  # the command never turns the confidence stage off
         atomic_write(args.confidence_out, lambda fh: np.save(fh, conf, allow_pickle=False))
     if res.quality is not None and res.quality.likely_failed and not args.quiet:
         print(
@@ -247,12 +248,18 @@ def main(argv=None) -> int:
             logger.setLevel(handler.previous_level)
 
 
-def _log_to_stderr(verbose: int) -> logging.Handler | None:
+class _StderrHandler(logging.StreamHandler):
+    """A handler that remembers the logger's level before it was added."""
+
+    previous_level: int = logging.NOTSET
+
+
+def _log_to_stderr(verbose: int) -> _StderrHandler | None:
     """With -v, the package logger's INFO lines (one per stage) on stderr; -vv adds DEBUG
     (one per refinement step). Returns the handler, to remove when the command ends."""
     if not verbose:
         return None
-    handler = logging.StreamHandler(sys.stderr)
+    handler = _StderrHandler(sys.stderr)
     handler.setFormatter(logging.Formatter("hope-rs: %(message)s"))
     logger = logging.getLogger("hope_rs")
     handler.previous_level = logger.level

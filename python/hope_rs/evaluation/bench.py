@@ -283,7 +283,8 @@ def run_bench(
             for pair, ms in (p for p in plan if p[0].dataset == folder.name):
                 a, b = load_mesh(pair.a), load_mesh(pair.b)
                 ai, bi = pair.ground_truth(a.n_vertices, b.n_vertices)
-                ctx, starts = PairContext(a, b), {}
+                ctx = PairContext(a, b)
+                starts: dict = {}
                 for m in ms:
                     res = run_method(m, ctx)
                     row, e = _score_row(pair, m, res, ctx, ai, bi, starts)

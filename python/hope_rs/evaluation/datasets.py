@@ -59,6 +59,7 @@ class Pair:
             if max_points is not None and n_a > max_points:
                 idx = np.unique(np.linspace(0, n_a - 1, max_points).round().astype(np.int64))
             return idx, idx
+        assert self.b_vts is not None  # given with a_vts
         ai, bi = load_vts(self.a_vts), load_vts(self.b_vts)
         if ai.size != bi.size:
             raise ValueError(

@@ -45,7 +45,7 @@ REMESHED_NOTE = (
 def _load(name: str) -> dict:
     if name not in DEMO_PAIRS:
         raise ValueError(f"no bundled pair {name!r}; choose from {', '.join(DEMO_PAIRS)}")
-    path = resources.files("hope_rs").joinpath("data", DEMO_PAIRS[name][0])
+    path = resources.files("hope_rs").joinpath("data").joinpath(DEMO_PAIRS[name][0])
     with path.open("rb") as fh, np.load(fh) as z:
         return {k: z[k] for k in z.files}
 

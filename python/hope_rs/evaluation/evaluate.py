@@ -21,6 +21,7 @@ import os
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.integrate import trapezoid
 
 from .. import _core
 from .._validate import as_index_map
@@ -137,8 +138,7 @@ def geodesic_errors(b, mapping, *, a_idx=None, b_idx=None, method: str = "graph"
 
 
 def _trapezoid(y: np.ndarray, x: np.ndarray) -> float:
-    f = np.trapezoid if hasattr(np, "trapezoid") else np.trapz  # numpy < 2 has only trapz
-    return float(f(y, x))
+    return float(trapezoid(y, x))  # scipy's: numpy < 2 names it trapz, numpy 2 trapezoid
 
 
 def error_curve(

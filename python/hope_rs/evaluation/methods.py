@@ -106,6 +106,7 @@ def _init(kind: str) -> Callable[[PairContext], MethodResult]:
 
 def _hope(*, kind: str = "shot", k_max: int = 8, degrade: float = 0.0, **kw):
     def run(ctx: PairContext) -> MethodResult:
+        key: str | None
         if degrade:
             key, f0, t_init = ctx.degraded(degrade, kind)
         else:

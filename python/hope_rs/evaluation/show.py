@@ -18,6 +18,7 @@ axis (FAUST: y up, TOSCA: z up), which ``up="auto"`` finds from where the shape 
 
 from __future__ import annotations
 
+import functools
 import os
 
 import numpy as np
@@ -77,7 +78,7 @@ def pull_back_colours(colours_a: np.ndarray, mapping, mesh_b: Mesh) -> np.ndarra
     return out
 
 
-def detect_up(mesh: Mesh) -> tuple[int, int]:
+def detect_up(mesh: Mesh | np.ndarray) -> tuple[int, int]:
     """(axis, sign) of the file's coordinate axis drawn upwards: the axis of largest extent,
     pointing along its positive direction, e.g. (1, +1) for +y.
 
@@ -255,7 +256,7 @@ def write_ply_pair(a: Mesh, b: Mesh, mapping, path, *, up: str = "auto") -> tupl
         ).astype(np.uint8)
         tm = trimesh.Trimesh(mesh.vertices, mesh.faces, vertex_colors=rgba, process=False)
         target = targets[0 if tag == "A" else 1]
-        atomic_write(target, lambda fh, tm=tm: tm.export(file_obj=fh, file_type="ply"))
+        atomic_write(target, functools.partial(tm.export, file_type="ply"))
         out.append(target)
     return out[0], out[1]
 
@@ -264,7 +265,9 @@ def _parse_size(text: str) -> tuple[int, int]:
     try:
         w, h = (int(x) for x in text.lower().split("x"))
     except ValueError:
-        raise ValueError(f"--size must be WIDTHxHEIGHT in pixels, e.g. 1600x900, got {text!r}")
+        raise ValueError(
+            f"--size must be WIDTHxHEIGHT in pixels, e.g. 1600x900, got {text!r}"
+        ) from None
     if w < 100 or h < 100 or w > 20000 or h > 20000:
         raise ValueError(f"--size must be between 100x100 and 20000x20000 pixels, got {text!r}")
     return w, h

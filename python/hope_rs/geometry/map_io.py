@@ -68,7 +68,7 @@ def _umask() -> int:
     return mask
 
 
-def atomic_write(path: str | os.PathLike, write: Callable[[io.BufferedWriter], None]) -> None:
+def atomic_write(path: str | os.PathLike, write: Callable[[io.BufferedWriter], object]) -> None:
     """Write a file through ``write(binary_file)`` so that it appears whole or not at all.
 
     The data go to a temporary file in the same folder, are flushed to disk, get the mode a

@@ -291,7 +291,8 @@ def read_ply(data: bytes) -> tuple[np.ndarray, np.ndarray]:
         header = data[: end.start()].decode("ascii")
     except UnicodeDecodeError:
         raise ValueError("the PLY header is not ASCII text") from None
-    fmt, elements = None, []  # elements: [name, count, [(name, type) or (name, count, item)]]
+    fmt: str | None = None
+    elements: list[list] = []  # [name, count, [(name, type) or (name, count, item)]]
     for no, line in enumerate(header.split("\n")[1:], 2):
         t = line.split()
         if not t or t[0] in ("comment", "obj_info"):
@@ -338,7 +339,7 @@ def _fan(lists) -> np.ndarray:
     """Fan-triangulate a list of polygons (an (M, k) array or a list of index lists)."""
     if isinstance(lists, np.ndarray) and lists.ndim == 2 and lists.shape[1] == 3:
         return lists.astype(np.int64)
-    tris = []
+    tris: list[list[int]] = []
     for poly in lists:
         poly = [int(i) for i in poly]
         if len(poly) < 3:
@@ -422,7 +423,7 @@ def _ply_binary_lists(body, off, count, props, endian, name):
                 break
             pos += np.dtype(p[1]).itemsize
     if k is not None and 0 <= k <= 64:
-        fields = []
+        fields: list[tuple] = []
         for p in props:
             if len(p) == 2:
                 fields.append((p[0], endian + p[1]))

@@ -68,7 +68,7 @@ def cell_sites(vertices: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.
 def _sites_of(v: np.ndarray, owner: np.ndarray, n_cells: int) -> np.ndarray:
     """The site of each of ``n_cells`` cells, vertex ``i`` being in cell ``owner[i]``."""
     count = np.bincount(owner, minlength=n_cells).astype(np.float64)
-    centroid = np.stack(
+    centroid: np.ndarray = np.stack(
         [np.bincount(owner, weights=v[:, d], minlength=n_cells) for d in range(3)], axis=1
     )
     centroid /= count[:, None]

@@ -45,15 +45,16 @@ def auction_assignment(cost, *, maximize: bool = True) -> np.ndarray:
         m = sp.csr_matrix(cost)
         if m.ndim != 2:
             raise ValueError(f"cost must be 2-D, got shape {m.shape}")
+        n_rows, n_cols = m.shape
         try:
-            return _solve(m.indptr, m.indices, m.data, *m.shape, maximize)
+            return _solve(m.indptr, m.indices, m.data, n_rows, n_cols, maximize)
         except _core.DuplicateEntries:
             # scipy's convention: duplicates add up. Looked for by the solver's own parallel
             # scan, which costs nothing extra, rather than by scipy's canonical-format check up
             # front.
             m = m.copy()
             m.sum_duplicates()
-            return _solve(m.indptr, m.indices, m.data, *m.shape, maximize)
+            return _solve(m.indptr, m.indices, m.data, n_rows, n_cols, maximize)
     else:
         a = np.asarray(cost)
         if a.ndim != 2:

@@ -188,7 +188,7 @@ class AnchorPlacement:
         # clusters (Rust) answers instead; queries whose two nearest points tie up to rounding
         # go to the k-d tree, so every answer equals the k-d tree's.
         self.clusters = _core.PointClusters(self.points)
-        self._tree = None
+        self._tree: cKDTree | None = None
 
     def place(self, moved: np.ndarray) -> np.ndarray:
         """For each vertex ``moved`` of A, the vertex of B whose distances to the anchors'

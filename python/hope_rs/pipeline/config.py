@@ -15,6 +15,7 @@ True
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import json
@@ -249,10 +250,8 @@ class RefineConfig:
         _check_share("RefineConfig.max_turned", self.max_turned)
         # A tuple, so that the config stays hashable whatever sequence was given.
         if self.schedule is not None and not isinstance(self.schedule, tuple):
-            try:
+            with contextlib.suppress(TypeError):  # not a sequence: match's option check says so
                 object.__setattr__(self, "schedule", tuple(self.schedule))
-            except TypeError:
-                pass  # not a sequence: match's option check says so
 
 
 @dataclass(frozen=True)

@@ -283,6 +283,8 @@ class LandmarkStage(Stage):
 
     def run(self, state: MatchState) -> None:
         a, b, lm = state.a, state.b, state.landmarks
+        assert lm is not None  # skip_reason skips the stage without landmarks
+        assert state.f0 is not None  # the initial map, made before
         detail = f"{len(lm)} landmarks"
         t = state.log.start("landmarks", detail=detail)
         kind = state.init if isinstance(state.init, str) else None

@@ -63,7 +63,7 @@ class LmdTracker:
 
     def __init__(self, a: Shape, b: Shape):
         self.a, self.b = a, b
-        self._last = None
+        self._last: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def local_map_distortion(self, f) -> tuple[np.ndarray, np.ndarray]:
         """Same as :func:`local_map_distortion` for ``f``."""

@@ -160,6 +160,7 @@ class MultiscaleStage(Stage):
         lm = None
         if state.landmarks is not None:
             lm = coarse_landmarks(state.landmarks, ca.owner, cb.owner)
+        assert state.run is not None  # the runner sets it
         res = state.run(
             csa, csb, init, coarse_cfg, callback=state.callback, progress=relay, landmarks=lm
         )

@@ -95,7 +95,7 @@ def _integer(name: str, value, lo: int, hi: int | None, allowed: str) -> int:
 def _unit_number(name: str, value) -> None:
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
         raise TypeError(f"{name} must be a number in [0, 1], got {type(value).__name__}")
-    if not (math.isfinite(value) and 0 <= value <= 1):
+    if not (math.isfinite(value) and 0 <= float(value) <= 1):
         raise ValueError(f"{name} must be a number in [0, 1], got {value}")
 
 

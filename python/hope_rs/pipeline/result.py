@@ -150,11 +150,7 @@ class MatchResult:
         vertex of ``mesh2``, a vertex of ``mesh1``; it goes with the functional map ``FM_12``,
         which carries functions on ``mesh1`` to ``mesh2`` (``pyFM.spectral.mesh_p2p_to_FM(p2p_21,
         mesh1, mesh2)``). ``match(A, B).map`` gives a vertex of B for each vertex of A, so it is
-        ``p2p_21`` with ``mesh1`` built from B and ``mesh2`` from A::
-
-            res = hope_rs.match(a, b)
-            mesh1, mesh2 = TriMesh(b.vertices, b.faces), TriMesh(a.vertices, a.faces)
-            fm_12 = mesh_p2p_to_FM(res.to_pyfm(), mesh1, mesh2, dims=30)  # functions on B -> A
+        ``p2p_21`` with ``mesh1`` built from B and ``mesh2`` from A.
 
         With ``mesh1`` = A and ``mesh2`` = B instead, match the other way:
         ``hope_rs.match(b, a).to_pyfm()`` (a map is not one-to-one, so reversing it would lose
@@ -164,5 +160,20 @@ class MatchResult:
         -------
         (n_a,) int64
             A copy of :attr:`map`.
+
+        Examples
+        --------
+        >>> import hope_rs, trimesh
+        >>> from pyFM.mesh import TriMesh
+        >>> from pyFM.spectral import mesh_p2p_to_FM
+        >>> a = trimesh.creation.icosphere(subdivisions=2)
+        >>> b = a.copy()
+        >>> b.vertices *= [1.0, 1.2, 0.9]
+        >>> res = hope_rs.match(a, b)
+        >>> mesh1 = TriMesh(b.vertices, b.faces).process(k=30)  # B, with 30 eigenfunctions
+        >>> mesh2 = TriMesh(a.vertices, a.faces).process(k=30)  # A
+        >>> fm_12 = mesh_p2p_to_FM(res.to_pyfm(), mesh1, mesh2, dims=30)  # functions on B -> A
+        >>> fm_12.shape
+        (30, 30)
         """
         return np.array(self.map, dtype=np.int64)

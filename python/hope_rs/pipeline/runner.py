@@ -109,6 +109,7 @@ def run_match(
     state.timings["total"] = time.perf_counter() - t0
     confidence = None if state.confidence is None else state.confidence[a.rank]
     quality = state_quality(state)
+    assert state.f is not None and state.f0 is not None and state.hope_map is not None
     return MatchResult(
         map=a.map_out(b, state.f).astype(np.int64),
         init_map=a.map_out(b, state.f0).astype(np.int64),

@@ -131,6 +131,7 @@ def finish(
             # In B's units, so that a scaled copy deforms by rotations alone.
             arap = _Arap(a.points * (b.scale / a.scale), a.edges, cfg)
             tree = cKDTree(b.points)
+        assert tree is not None  # built with arap
         g = tree.query(arap.fit(b.points[f], handles))[1].astype(np.int64)
         g[handles] = f[handles]
         for _ in range(cfg.steps):
