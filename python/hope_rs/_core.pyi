@@ -20,6 +20,8 @@ __all__ = [
     "local_map_distortion_graphs",
     "auction_assignment_int",
     "overlap_assignment_graphs",
+    "overlap_step_cost_graphs",
+    "warm_assignment_int",
     "auction_assignment_float",
     "shot_descriptors",
     "greedy_pairs",

@@ -19,7 +19,7 @@ import threading
 import time
 import warnings
 from collections import deque
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor
 from concurrent.futures import wait as wait_futures
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Callable, Protocol
@@ -51,8 +51,10 @@ class Backend(Protocol):
 
     #: Whether pair tasks get the shapes' arrays (no shared disk) rather than cache digests.
     ships_data: bool
-    #: Rust threads per task (None: the process's own setting).
-    threads: int | None
+
+    @property
+    def threads(self) -> int | None:
+        """Rust threads per task (None: the process's own setting)."""
 
     def submit(self, fn: Callable[..., dict], *args) -> Any:
         """Start ``fn(*args)``; returns a handle."""
@@ -138,6 +140,8 @@ class _Job:
 
     __slots__ = ("args", "fn", "future", "id")
 
+    future: Future[dict] | None
+
     def __init__(self, task_id: int, fn, args):
         self.id, self.fn, self.args, self.future = task_id, fn, args, None
 
@@ -211,11 +215,14 @@ class PoolBackend:
         the started ones queued to run alone."""
         old = self.ex
         # A broken pool fails every task it holds at once; wait for that to be recorded.
-        wait_futures([j.future for j in self.live], timeout=30)
+        # Every live task has a future: the filter only tells the type checker so.
+        futures: list[Future[dict]] = [j.future for j in self.live if j.future is not None]
+        wait_futures(futures, timeout=30)
         self._kill(old)
         self.ex = self._executor(self.jobs)
         for job in list(self.live):
             f = job.future
+            assert f is not None  # a live task has a future in self.ex
             if f.done() and not f.cancelled() and f.exception() is None:
                 continue  # finished before the pool broke: its result is waited for next
             if os.path.exists(os.path.join(self.marks, str(job.id))):

@@ -13,7 +13,7 @@ import dataclasses
 import os
 import tempfile
 import warnings
-from collections.abc import Iterator
+from collections.abc import Generator
 from pathlib import Path
 
 import numpy as np
@@ -221,7 +221,7 @@ def imatch_many(
     map_format: str = "txt",
     landmarks=None,
     **match_options,
-) -> Iterator[PairResult]:
+) -> Generator[PairResult, None, None]:
     """Like :func:`match_many`, but yields each :class:`PairResult` as soon as it is done
     (finished pairs first, in no particular order). Closing the generator early (or an
     exception, Ctrl-C) ends the workers at once; the maps already written stay."""

@@ -157,9 +157,10 @@ def run(plan: Plan, ex: Backend, report: Callable) -> Iterator[PairResult]:
     def forget(n: int) -> str | None:
         """The pair's map is about to be redone: its old entry goes first. The error, if the
         manifest cannot be updated (the map is then left as it is)."""
-        if manifest is not None and plan.paths[n] is not None:
+        path = plan.paths[n]
+        if manifest is not None and path is not None:
             try:
-                manifest.forget(plan.paths[n].name)
+                manifest.forget(path.name)
             except OSError as e:
                 return f"cannot update the batch manifest {str(manifest.path)!r}: {e.strerror or e}"
         return None
@@ -209,7 +210,7 @@ def run(plan: Plan, ex: Backend, report: Callable) -> Iterator[PairResult]:
                         ready[what] = value.get("token") or {
                             "digest": value["digest"], "config": specs[what]["config"],
                         }  # fmt: skip
-                still = []
+                still: list[tuple[int, bool]] = []
                 for n, check in waiting:
                     i, j = plan.pairs[n]
                     if i in failed or j in failed:
@@ -223,14 +224,16 @@ def run(plan: Plan, ex: Backend, report: Callable) -> Iterator[PairResult]:
                         if bad is not None:
                             yield result(n, error=bad)
                             continue
-                        m, why = existing_map(plan.paths[n], sizes[i], sizes[j])
+                        path = plan.paths[n]
+                        assert path is not None  # a pair to check has a map file
+                        m, why = existing_map(path, sizes[i], sizes[j])
                         if why is None and manifest is not None:
-                            why = manifest.why_redo(plan.paths[n].name, entry(n))
+                            why = manifest.why_redo(path.name, entry(n))
                         if why is None:
                             yield result(n, map=m, skipped=True)
                             continue
                         warnings.warn(
-                            f"{plan.paths[n].name}: {why}; computing it again",
+                            f"{path.name}: {why}; computing it again",
                             RuntimeWarning,
                             stacklevel=2,
                         )

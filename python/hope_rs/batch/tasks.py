@@ -102,13 +102,13 @@ def _shape(token: dict, cache_root: str | None, kinds: tuple, k_max: int, basis:
             Mesh(got["vertices"], got["faces"]), cache=cache, kinds=kinds, k_max=k_max,
             digest=digest, config=config,
         )  # fmt: skip
-        got = (
+        eig = (
             cache.spectral_basis(shape.mesh, digest, basis, compute=False, config=config)
             if basis
             else None
         )
-        if got is not None:
-            shape.set_spectral_basis(*got)
+        if eig is not None:
+            shape.set_spectral_basis(*eig)
     _SHAPES[key] = shape
     while sum(s.n_vertices for s in _SHAPES.values()) > SHAPE_BUDGET and len(_SHAPES) > 2:
         _SHAPES.popitem(last=False)

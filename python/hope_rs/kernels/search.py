@@ -106,10 +106,11 @@ def _projected(
         basis = vecs[:, ::-1][:, : config.pca_dims].astype(np.float32).astype(np.float64)
         # In float64, rounded to float32: the same bits whatever the BLAS kernel, short of
         # a value within 1e-16 of a rounding boundary.
-        return tuple(
+        pa, pb = (
             np.ascontiguousarray(((x - mu).astype(np.float64) @ basis).astype(np.float32))
             for x in (da, db)
         )
+        return pa, pb
 
 
 def _search(

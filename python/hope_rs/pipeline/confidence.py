@@ -84,6 +84,7 @@ def state_quality(state: MatchState) -> MatchQuality | None:
     ``counterpart``) have no right match to find, and the pair is judged on the others."""
     if state.confidence is None:
         return None
+    assert state.f is not None  # a confidence comes with a map
     counterpart = None if state.partial is None else state.partial.counterpart
     judged = state.confidence if counterpart is None else state.confidence[counterpart]
     flipped = flipped_share(state.a, state.b, state.f, among=counterpart)
@@ -161,7 +162,7 @@ def confidence_features(
     lb = np.linalg.norm(b.points[f[e[:, 0]]] - b.points[f[e[:, 1]]], axis=1) / b.scale
     ratio = lb / np.maximum(la, 1e-12)
     deg = np.bincount(e.ravel(), minlength=n).astype(np.float64)
-    stretch = np.bincount(e.ravel(), weights=np.repeat(ratio, 2), minlength=n)
+    stretch: np.ndarray = np.bincount(e.ravel(), weights=np.repeat(ratio, 2), minlength=n)
     stretch = stretch / np.maximum(deg, 1.0)
 
     ring = a.ring_average()
@@ -216,6 +217,7 @@ class ConfidenceStage(Stage):
         cfg = state.config.confidence
         t = state.log.start("confidence", detail="per-vertex confidence of the final map")
         counterpart = None if state.partial is None else state.partial.counterpart
+        assert state.f is not None  # the stages before it made the map
         x = confidence_features(
             state.a,
             state.b,

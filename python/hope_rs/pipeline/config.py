@@ -18,21 +18,25 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import hashlib
+import importlib
 import json
 import math
 import numbers
 from dataclasses import dataclass, field
-
-try:
-    import tomllib
-except ImportError:  # Python < 3.11: the tomli backport, when installed
-    try:
-        import tomli as tomllib
-    except ImportError:
-        tomllib = None
+from types import ModuleType
 
 from ..kernels.search import SearchConfig
 from ..shape import ShapeConfig
+
+# Imported by name: mypy's target (3.10) has no tomllib, and tomli may or may not be there.
+tomllib: ModuleType | None
+try:
+    tomllib = importlib.import_module("tomllib")
+except ImportError:  # Python < 3.11: the tomli backport, when installed
+    try:
+        tomllib = importlib.import_module("tomli")
+    except ImportError:
+        tomllib = None
 
 #: The descriptors an initial map can compare.
 INIT_KINDS = ("shot", "wks", "hks")

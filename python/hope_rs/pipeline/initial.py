@@ -82,6 +82,7 @@ class DescriptorStage(Stage):
 
     def run(self, state: MatchState) -> None:
         kind = state.init
+        assert isinstance(kind, str)  # skip_reason skips the stage for a given map
         t = state.log.start("descriptors", detail=kind.upper())
         # In the shapes' internal numbering, like everything up to the result.
         state.a.internal_descriptors(kind), state.b.internal_descriptors(kind)
@@ -99,6 +100,7 @@ class InitialStage(Stage):
 
     def run(self, state: MatchState) -> None:
         a, b, kind = state.a, state.b, state.init
+        assert isinstance(kind, str)  # skip_reason skips the stage for a given map
         detail = f"nearest {kind.upper()} descriptors"
         t = state.log.start("init", detail=detail)
         da, db = a.internal_descriptors(kind), b.internal_descriptors(kind)

@@ -53,7 +53,8 @@ def check_options(
         )
     if schedule is not None:
         _check_schedule(schedule, k_max)
-    _integer("max_passes", max_passes, *declared("max_passes")["range"], "an integer >= 1")
+    passes_lo, passes_hi = declared("max_passes")["range"]
+    _integer("max_passes", max_passes, passes_lo, passes_hi, "an integer >= 1")
     _unit_number("min_consistent", min_consistent)
     allowed = f"an integer in [1, {TOP_K_LIMIT}] (candidates kept per vertex)"
     _integer("top_k", top_k, 1, TOP_K_LIMIT, allowed)

@@ -111,7 +111,9 @@ def best_overlap(a: Shape, b: Shape, k: int, f, witnesses, *, top_k: int) -> np.
     return _core.best_overlap_graphs(*_step_args(a, b, k, f, witnesses), top_k)
 
 
-def _step_args(a: Shape, b: Shape, k: int, f, witnesses) -> tuple:
+def _step_args(
+    a: Shape, b: Shape, k: int, f, witnesses
+) -> tuple[_core.MeshGraph, _core.MeshGraph, int, np.ndarray, np.ndarray]:
     """The leading arguments of the Rust step functions: both graphs, k, the map, the voters."""
     return (
         a.graph,

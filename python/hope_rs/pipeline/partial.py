@@ -144,7 +144,8 @@ class PartialStage(Stage):
             halt = Halt("the map is the part's match at the whole's scale")
         elif reverse:
             # The nested match detects B as the part of its pair and scales it itself.
-            nested = {}
+            nested: dict = {}
+            assert state.run is not None  # the runner sets it
             back = state.run(
                 state.b,
                 state.a,
@@ -223,6 +224,7 @@ class PartialStage(Stage):
             merge = _merge_candidate(state, [first, *nearby.tried], nearby.kept, cfg.partial)
             kept = run_trials(state, "partial", [merge], mean_confidence, against=nearby.kept).kept
             top, margin = kept.score, cfg.partial.wide_margin
+            assert top is not None  # run_trials scores the trial it keeps
             # A confidence is at most 1: beyond that no wider map could win.
             if cfg.partial.wide_trials and top < cfg.partial.wide_below and top + margin <= 1.0:
                 # The wider scales' maps are not merged (where they went wrong they would pull
@@ -253,6 +255,12 @@ class PartialStage(Stage):
         return info
 
 
+def _confidence(t: Trial) -> np.ndarray:
+    conf = t.result.confidence
+    assert conf is not None  # the trials run with the confidence on
+    return conf
+
+
 def _merge_candidate(state: MatchState, runs: list[Trial], best: Trial, cfg) -> Candidate:
     """The part's match from the merge of the maps of ``runs`` (trials of one part at
     several scales): each vertex takes its image from the map whose confidence, averaged
@@ -260,7 +268,7 @@ def _merge_candidate(state: MatchState, runs: list[Trial], best: Trial, cfg) -> 
     scale of ``best``, the run of highest mean confidence."""
     a, b = state.a, state.b
     maps = np.stack([t.candidate.a.map_in(b, t.result.map) for t in runs])  # internal numbering
-    conf = np.stack([t.result.confidence[a.order] for t in runs], axis=1)
+    conf = np.stack([_confidence(t)[a.order] for t in runs], axis=1)
     p = a.ring_average()
     for _ in range(cfg.merge_rings):
         conf = p @ conf

@@ -10,6 +10,7 @@ steps' own parts (one HOPE step, the polish's best overlap, the global repair) a
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -184,12 +185,13 @@ class _RefineSteps(RefineEvents):
 
     def __init__(self, sa: Shape, sb: Shape, log: StageLog, cfg: RefineConfig, user, hooks):
         self.log, self.user, self.hooks = log, user, hooks
-        schedule = cfg.schedule
+        schedule: Sequence[int] | None = cfg.schedule
         if schedule is None:
             schedule = default_schedule(min(sa.k_max, sb.k_max))
         self.n_passes = cfg.max_passes
         self.per_pass = len(schedule) + (1 if cfg.global_step else 0)
         self.total = self.n_passes * self.per_pass
+        self.polish: Iteration | None
         self.done, self.passes, self.t0, self.polish = 0, 0, time.perf_counter(), None
 
     def last_pass(self, f: np.ndarray, n_pass: int) -> None:

@@ -98,6 +98,7 @@ class Landmarks:
         cfg = self.config
         # A new array: ``w`` may be the tracker's own.
         w = w & ~self.coords.off(f, cfg.max_gap) if cfg.refine_trust else w.copy()
+        assert self.pairs is not None  # coords come with landmarks
         w[self.pairs[:, 0]] = True
         return w
 
@@ -255,6 +256,8 @@ class KHop(PassStep):
     from pass ``stay_pass`` on, while some vertex is not a voter, a voter's current match is
     worth ``stay_counts`` more overlap counts."""
 
+    k: int
+
     def __init__(self, k: int):
         self.k = k
 
@@ -294,6 +297,7 @@ class Polish(PassStep):
         return self.k is not None
 
     def run(self, st: RefineState):
+        assert self.k is not None  # when() runs the polish only with a polish_k
         st.w = st.voters()
         return overlap.best_overlap(st.a, st.b, self.k, st.f, st.w, top_k=st.config.top_k)
 
@@ -367,6 +371,7 @@ def run_steps(st: RefineState, steps: list[PassStep]) -> bool:
             continue
         t0, before, cost, assign = opened
         opened = None
+        assert st.w is not None  # set by every step that closes an entry (k not None)
         changed = int(np.count_nonzero(st.f != before))
         st.pass_changed += changed
         it = Iteration(

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import time
 from contextlib import ExitStack
-from typing import Callable
+from typing import Callable, cast
 
 import numpy as np
 
@@ -45,7 +45,8 @@ def run_stages(state: MatchState, stages: list[Stage]) -> MatchState:
             if reason is None:
                 halt = _run_one(state, stage, stages[i + 1 :]) or halt
             elif reason is not QUIET:
-                state.log.skipped(stage.name, reason)
+                # Any answer but None and QUIET is the reason, a str (Stage.skip_reason).
+                state.log.skipped(stage.name, cast(str, reason))
             state.hooks.emit("stage_end", state, stage.name)
     finally:
         for stage in reversed(stages):

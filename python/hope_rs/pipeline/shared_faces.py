@@ -164,7 +164,10 @@ class FinishStage(Stage):
             state.hooks.on("stop_refining", lambda f: qualifies(state.a, state.b, f, cfg))
 
     def final_after(self, state: MatchState, name: str) -> str | None:
-        if self.attached and name == "refine" and face_handles(state.a, state.b, state.f).all():
+        if not (self.attached and name == "refine"):
+            return None
+        assert state.f is not None  # the refinement, which just ran, set it
+        if face_handles(state.a, state.b, state.f).all():
             return "HOPE's map already sends every face of A onto a face of B, one to one"
         return None
 

@@ -362,6 +362,7 @@ def spectral_refine(
         return h, None
     # LMD of both maps once: the region choice reads the means, the guard's anchors the
     # consistent fractions.
+    assert z is not None  # zoomout without a stop event returns a map
     mh, ch = local_map_distortion(a, b, h)
     mz, cz = local_map_distortion(a, b, z)
     f = _choose(a, h, z, mh.astype(np.float64) - mz, config.smoothing_steps, config.margin)
@@ -460,6 +461,7 @@ class SpectralBackground(Background):
         try:
             if prefetch is None:
                 return
+            assert early is not None  # made with the prefetch, in start
             history = self.state.history
             if keep and history and history[-1].polish:
                 self.waited_from = self.state.log.start(
@@ -516,6 +518,7 @@ class SpectralStage(Stage):
         if work is not None and work.waited_from is not None:
             t = work.waited_from  # the wait for the background work is the pass's too
         h = state.f
+        assert h is not None  # the refinement's map
         f, z = spectral_refine(
             a,
             b,

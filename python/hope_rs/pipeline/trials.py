@@ -95,6 +95,7 @@ def run_trial(state: MatchState, stage: str, candidate: Candidate) -> Trial:
     """The match of ``candidate`` (the runner's stages, fresh), recorded under ``stage``
     unscored; the trial is kept until a later round keeps another."""
     c = candidate
+    assert state.run is not None  # the runner sets it
     result = state.run(c.a, c.b, c.init, c.config, landmarks=c.landmarks)
     trial = Trial(c, result, None, Tried(c.label))
     state.log.tried(stage, trial.record)
@@ -122,16 +123,22 @@ def run_trials(
         t = run_trial(state, stage, c)
         t.score = t.record.score = float(score(t))
         tried.append(t)
-    best = max(tried, key=lambda t: t.score)
+    best = max(tried, key=_score_of)
     kept = best
     if against is not None:
         against.score = against.record.score = float(score(against))
+        best_score, against_score = _score_of(best), _score_of(against)
         beats = (
-            best.score > against.score if margin is None else best.score >= against.score + margin
+            best_score > against_score if margin is None else best_score >= against_score + margin
         )
         kept = best if beats else against
     _mark_kept(state, stage, kept)
     return Trials(kept, tried)
+
+
+def _score_of(trial: Trial) -> float:
+    assert trial.score is not None  # run_trials scores each trial before comparing it
+    return trial.score
 
 
 def _mark_kept(state: MatchState, stage: str, kept: Trial) -> None:
@@ -144,6 +151,7 @@ def adopt(state: MatchState, trial: Trial) -> None:
     the shapes' internal numbering) and history, and its stages' seconds within the state's
     timings."""
     c, r = trial.candidate, trial.result
+    assert r.hope_map is not None  # run_match always sets it
     state.a, state.b = c.a, c.b
     state.f0 = c.a.map_in(c.b, r.init_map)
     state.f = c.a.map_in(c.b, r.map)
@@ -154,4 +162,6 @@ def adopt(state: MatchState, trial: Trial) -> None:
 
 def mean_confidence(trial: Trial) -> float:
     """The mean confidence of a trial's match (its config must compute one)."""
-    return float(np.mean(trial.result.confidence))
+    confidence = trial.result.confidence
+    assert confidence is not None  # the trials' config turns the confidence on
+    return float(np.mean(confidence))
