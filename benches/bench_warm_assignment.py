@@ -23,6 +23,10 @@ Run from the repository root::
     python benches/bench_warm_assignment.py                 # faust_r 000-001 (5k) and the cat (28k)
     python benches/bench_warm_assignment.py --quick         # the 5k pair only
     python benches/bench_warm_assignment.py --large         # also a FAUST pair subdivided twice (110k)
+    python benches/bench_warm_assignment.py --pair "TOSCA cat0-cat6"
+
+Every step's cost is kept in memory for the replay: about 1 GB for the cat, several GB and an
+hour on 2 cores with ``--large``.
 """
 
 from __future__ import annotations
@@ -217,10 +221,12 @@ def main(argv=None) -> None:
     p.add_argument("--data", type=Path, default=DEFAULT_DATA)
     p.add_argument("--quick", action="store_true", help="the 5k pair only")
     p.add_argument("--large", action="store_true", help="also the 110k subdivided pair")
+    p.add_argument("--pair", action="append", choices=list(PAIRS), help="only these pairs")
     p.add_argument("--repeats", type=int, default=5, help="alternated timings per step (median)")
     p.add_argument("--out", type=Path, default=None, help="also write the Markdown here")
     args = p.parse_args(argv)
     names = QUICK if args.quick else DEFAULT + (tuple(PAIRS)[2:] if args.large else ())
+    names = tuple(args.pair) if args.pair else names
     lines = []
     for name in names:
         part = bench_pair(name, args.data, args.repeats)

@@ -18,9 +18,12 @@ use super::{NONE, PAR_ROWS};
 use crate::csr::CsrView;
 use crate::error::{invalid, Result};
 
-/// Costs beyond this magnitude are left to the auction: path lengths (at most `n` times the
-/// value range) then stay far inside i64.
+/// Costs beyond this magnitude are left to the auction, and prices beyond `PRICE_LIMIT` are
+/// refused: path lengths (at most `n` times the value range plus the price span) then stay far
+/// inside i64. A solution whose prices would exceed the limit is not returned, so a chain of
+/// warm solves never feeds a solve prices it refuses.
 const VALUE_LIMIT: i64 = 1 << 30;
+const PRICE_LIMIT: i64 = 1 << 52;
 
 /// An exact optimum found from a warm start.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -63,14 +66,14 @@ pub fn warm_assignment<T: IntValue>(
             prices.len()
         ));
     }
-    if prices.iter().any(|&p| !(0..=VALUE_LIMIT).contains(&p)) {
-        return invalid("prices must lie in [0, 2^30]".to_string());
+    if prices.iter().any(|&p| !(0..=PRICE_LIMIT).contains(&p)) {
+        return invalid("prices must lie in [0, 2^52]".to_string());
     }
     if nr > nc
         || cost
             .data
             .par_iter()
-            .any(|&d| Into::<i64>::into(d).abs() > VALUE_LIMIT)
+            .any(|&d| Into::<i64>::into(d).unsigned_abs() > VALUE_LIMIT as u64)
     {
         return Ok(None);
     }
@@ -85,6 +88,14 @@ pub fn warm_assignment<T: IntValue>(
         }
     }
     let unique = s.unique();
+    if nr == nc {
+        // No column is free, so only price differences matter: the lowest becomes 0.
+        let low = s.v.iter().copied().min().unwrap_or(0);
+        s.v.iter_mut().for_each(|p| *p -= low);
+    }
+    if s.v.iter().any(|&p| p > PRICE_LIMIT) {
+        return Ok(None);
+    }
     Ok(Some(WarmSolution {
         assign: s.col.iter().map(|&c| c as i64).collect(),
         prices: s.v,
