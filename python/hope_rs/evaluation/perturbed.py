@@ -158,7 +158,7 @@ def clean_errors(
         if use.size:
             e2 = geodesic_errors(
                 clean_b,
-                alt,
+                np.where(alt >= 0, alt, m),
                 a_idx=np.asarray(a_idx)[use],
                 b_idx=np.asarray(b_idx)[use],
                 method=method,
@@ -184,7 +184,8 @@ def write_perturbed_sets(
     sources, out, *, conditions=tuple(PERTURBATIONS), max_pairs: int | None = None
 ) -> list[Path]:
     """Write the perturbed sets of each ``.vts`` data-set folder in ``sources`` to ``out``, one
-    subfolder ``SOURCE_CONDITION`` per set (see the module notes); returns the folders written.
+    subfolder ``SOURCE_CONDITION`` per set (see the module notes; a set without a pair is not
+    written); returns the folders written.
     ``max_pairs``: the first pairs of each ``pairs.txt`` only."""
     if isinstance(sources, (str, os.PathLike)):
         sources = [sources]
@@ -208,7 +209,8 @@ def write_perturbed_sets(
             # Written to a scratch folder, moved into place once complete.
             tmp = out / f".{name}.tmp"
             try:
-                _write_set(pairs, cond, tmp)
+                if not _write_set(pairs, cond, tmp):
+                    continue  # no pair kept (no shape with enough shortcuts): no set
                 if (out / name).exists():
                     shutil.rmtree(out / name)
                 tmp.rename(out / name)
@@ -218,7 +220,8 @@ def write_perturbed_sets(
     return written
 
 
-def _write_set(pairs, cond: str, d: Path) -> None:
+def _write_set(pairs, cond: str, d: Path) -> int:
+    """Writes the pairs of one condition into ``d``; returns how many were kept."""
     shutil.rmtree(d, ignore_errors=True)
     (d / "corres").mkdir(parents=True)
     if cond == "shortcuts":
@@ -247,6 +250,7 @@ def _write_set(pairs, cond: str, d: Path) -> None:
             )
         lines.append((na, nb))
     (d / "pairs.txt").write_text("".join(f"{x} {y}\n" for x, y in lines))
+    return len(lines)
 
 
 def read_clean(folder, name: str) -> tuple[Mesh, np.ndarray, np.ndarray] | None:

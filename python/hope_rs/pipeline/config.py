@@ -633,8 +633,10 @@ class OrientConfig:
         over (``MatchQuality.flipped_share``); a right map of remeshed shapes turns a few
         percent over where the triangulations disagree, more between different bodies.
     hypotheses : tuple of str
-        The alternative maps built ("mirror", "mirror_turned", "reseed"); the one turning
-        the least over is refined.
+        The alternative maps tried ("mirror", "mirror_turned", "reseed": derived from a
+        map, the one turning the least over refined; "wks": the pipeline from WKS; "reverse":
+        from the match of B to A inverted), in that order until one turns at most
+        ``min_turned`` over.
     seam_rings : int
         1-rings added around the turned-over vertices for the regional hypotheses.
     distortion_weight : float
@@ -646,13 +648,13 @@ class OrientConfig:
 
     enabled: bool = True
     min_turned: float = 0.2
-    hypotheses: tuple[str, ...] = ("mirror", "mirror_turned", "reseed")
+    hypotheses: tuple[str, ...] = ("mirror", "mirror_turned", "reseed", "wks", "reverse")
     seam_rings: int = 2
     distortion_weight: float = field(default=1.0, metadata={"finite": True})
     min_gain: float = field(default=0.02, metadata={"finite": True})
 
     def __post_init__(self):
-        known = ("mirror", "mirror_turned", "reseed")
+        known = ("mirror", "mirror_turned", "reseed", "wks", "reverse")
         bad = [h for h in self.hypotheses if h not in known]
         if isinstance(self.hypotheses, str) or bad:
             raise ValueError(

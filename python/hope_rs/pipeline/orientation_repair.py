@@ -5,16 +5,22 @@ triangles on B (:mod:`hope_rs.pipeline.turned`). A map that carries a region ont
 image (a left leg onto the right one, a whole body onto its mirror image) keeps every geodesic
 distance, so the refinement and LMD cannot see it, but it turns that region's triangles over.
 When the final map turns more than ``OrientConfig.min_turned`` of A's area over, this stage
-builds alternative maps (hypotheses), refines the most promising one through the rest of the
-pipeline and keeps whichever of it and the map it started from scores better
-(:func:`map_cost`: turned-over share plus LMD inconsistency).
+builds alternative maps (hypotheses), refines them through the rest of the pipeline and keeps
+whichever of them and the map it started from scores best (:func:`map_cost`: turned-over
+share plus LMD inconsistency).
 
 The hypotheses (``OrientConfig.hypotheses``):
 
 * ``"mirror"``: the map composed with B's intrinsic left/right symmetry, everywhere;
 * ``"mirror_turned"``: the same, on the turned-over regions only;
 * ``"reseed"``: the turned-over vertices placed by their geodesic distances to anchors in the
-  orientation-keeping rest (:func:`~hope_rs.pipeline.anchors.anchor_step`).
+  orientation-keeping rest (:func:`~hope_rs.pipeline.anchors.anchor_step`);
+* ``"wks"``: the pipeline from the WKS initial map instead (a swapped pair of limbs, which
+  the others keep), and the three above derived from its map when it turns much over too;
+* ``"reverse"``: the pipeline from the match of B to A, inverted.
+
+The derived hypotheses are unrefined maps; the one turning the least over is refined. The
+stage stops at the first refined map that turns at most ``min_turned`` over and costs less.
 
 B's symmetry is the match of B's mirror image (coordinates reflected in a plane through its
 centroid) to B itself: vertex ``i`` of the mirror image is vertex ``i`` of B reflected, so the
@@ -27,6 +33,7 @@ import dataclasses
 import time
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ..geometry.mesh import Mesh
 from ..shape import Shape
@@ -35,7 +42,14 @@ from .lmd import local_map_distortion
 from .state import QUIET, MatchState, Stage
 from .turned import TurnedFaces
 
-__all__ = ["OrientStage", "map_cost", "mirror_image", "symmetry_map", "turned_regions"]
+__all__ = [
+    "OrientStage",
+    "map_cost",
+    "mirror_image",
+    "reverse_map",
+    "symmetry_map",
+    "turned_regions",
+]
 
 
 def mirror_image(s: Shape) -> Shape:
@@ -48,11 +62,29 @@ def mirror_image(s: Shape) -> Shape:
 
 def symmetry_map(state: MatchState, b: Shape) -> np.ndarray:
     """B's intrinsic left/right symmetry, (n_b,) in B's internal numbering: the match of its
-    mirror image to B (:func:`mirror_image`) by the runner, without this stage."""
+    mirror image to B (:func:`mirror_image`) by the runner, without this stage, the spectral
+    pass and the finish."""
     mirror = mirror_image(b)
-    res = state.run(mirror, b, state.config.initial.descriptor, _nested_config(state))
+    # One triangulation on both sides: the refinement alone finds the map (as on FAUST
+    # registrations); the spectral pass and the shared-face finish are not needed.
+    cfg = _nested_config(state)
+    cfg = dataclasses.replace(
+        cfg,
+        spectral=dataclasses.replace(cfg.spectral, enabled=False),
+        finish=dataclasses.replace(cfg.finish, enabled=False),
+    )
+    res = state.run(mirror, b, state.config.initial.descriptor, cfg)
     # res.map is in input numbering: input vertex v of the mirror image is input vertex v of B.
     return b.rank[np.asarray(res.map)[b.order]]
+
+
+def reverse_map(state: MatchState) -> np.ndarray:
+    """The match of B to A by the runner (without this stage), inverted: each vertex of A
+    onto the vertex of B whose image lies nearest it in space (internal numbering)."""
+    a, b = state.a, state.b
+    res = state.run(b, a, state.config.initial.descriptor, _nested_config(state))
+    g = b.map_in(a, res.map)
+    return cKDTree(a.points[g]).query(a.points)[1].astype(np.int64)
 
 
 def turned_regions(a: Shape, turned: np.ndarray, rings: int) -> np.ndarray:
@@ -86,12 +118,12 @@ def _nested_config(state: MatchState):
     )
 
 
-def _hypotheses(state: MatchState, tf: TurnedFaces, sym: np.ndarray | None) -> dict:
-    """The candidate maps (internal numbering) of ``OrientConfig.hypotheses``, unrefined."""
+def _derived(state: MatchState, f: np.ndarray, tf: TurnedFaces, sym: np.ndarray | None) -> dict:
+    """The unrefined maps derived from ``f`` (internal numbering) by the derived hypotheses
+    of ``OrientConfig.hypotheses`` ("mirror", "mirror_turned", "reseed")."""
     cfg = state.config.orient
-    a, b, f = state.a, state.b, state.f
-    turned = tf.vertices(f, 0.5)
-    region = turned_regions(a, turned, cfg.seam_rings)
+    a, b = state.a, state.b
+    region = turned_regions(a, tf.vertices(f, 0.5), cfg.seam_rings)
     out = {}
     for name in cfg.hypotheses:
         if name == "mirror" and sym is not None:
@@ -105,6 +137,70 @@ def _hypotheses(state: MatchState, tf: TurnedFaces, sym: np.ndarray | None) -> d
                 core = label == int(np.argmax(sizes))
                 out[name] = anchor_step(a, b, f, core, config=state.config.refine.repair)
     return out
+
+
+class _Trials:
+    """The maps tried by the stage, refined through the rest of the pipeline and scored."""
+
+    def __init__(self, state: MatchState, tf: TurnedFaces):
+        self.state, self.tf = state, tf
+        self.cfg = state.config.orient
+        self.sym: np.ndarray | None = None
+        f = state.f
+        #: name -> (turned share, cost, nested state or None for the stage's own map)
+        self.scored: dict = {"kept": (tf.share(f), self.cost(f), None)}
+        self.notes: list[str] = []
+
+    def cost(self, f: np.ndarray) -> float:
+        return map_cost(self.state.a, self.state.b, f, self.tf, self.cfg.distortion_weight)
+
+    def run(self, name: str, init) -> np.ndarray:
+        """The pipeline from ``init`` (a descriptor kind or a map, internal numbering), scored
+        as ``name``; returns its map."""
+        state, a, b = self.state, self.state.a, self.state.b
+        nested: dict = {}
+
+        def grab(s, stage_name):
+            if stage_name == "faces":
+                nested["state"] = s
+
+        if not isinstance(init, str):
+            init = a.map_out(b, init)
+        state.run(a, b, init, _nested_config(state), on_stage=grab)
+        g = nested["state"]
+        self.scored[name] = (self.tf.share(g.f), self.cost(g.f), g)
+        return g.f
+
+    def derive(self, base: str, f: np.ndarray) -> None:
+        """Refines the least turned-over of the maps derived from ``f`` when it turns less
+        over than ``f`` does."""
+        if self.sym is None and any(h.startswith("mirror") for h in self.cfg.hypotheses):
+            self.sym = symmetry_map(self.state, self.state.b)
+        raw = _derived(self.state, f, self.tf, self.sym)
+        if not raw:
+            return
+        shares = {k: self.tf.share(g) for k, g in raw.items()}
+        self.notes.append(
+            f"from {base} unrefined " + ", ".join(f"{k} {v:.0%}" for k, v in shares.items())
+        )
+        best = min(shares, key=lambda k: shares[k])
+        if shares[best] < self.scored[base][0]:
+            self.run(best if base == "kept" else f"{base}+{best}", raw[best])
+
+    def good_enough(self) -> bool:
+        """Whether a tried map turns at most ``min_turned`` over and beats the stage's own."""
+        kept = self.scored["kept"][1]
+        return any(
+            v[0] <= self.cfg.min_turned and v[1] < kept - self.cfg.min_gain
+            for k, v in self.scored.items()
+            if k != "kept"
+        )
+
+    def best(self) -> str:
+        name = min(self.scored, key=lambda k: self.scored[k][1])
+        if name != "kept" and self.scored[name][1] >= self.scored["kept"][1] - self.cfg.min_gain:
+            return "kept"
+        return name
 
 
 class OrientStage(Stage):
@@ -136,34 +232,26 @@ class OrientStage(Stage):
             state.log.ran("orient", state.timings["orient"], f"{share:.0%} turned over: kept")
             return
         state.log.start("orient", detail=f"{share:.0%} of A turned over: trying other maps")
-        needs_sym = any(h.startswith("mirror") for h in cfg.hypotheses)
-        sym = symmetry_map(state, b) if needs_sym else None
-        raw = _hypotheses(state, tf, sym)
-        # The unrefined hypotheses are ranked by turned-over share alone (distortion is the
-        # refinement's to fix); the best is refined through the rest of the pipeline.
-        tried = {"kept": (share, map_cost(a, b, state.f, tf, cfg.distortion_weight))}
-        shares = {name: tf.share(g) for name, g in raw.items()}
-        chosen = "kept"
-        if shares:
-            best = min(shares, key=lambda k: shares[k])
-            nested: dict = {}
-
-            def grab(s, stage_name):
-                if stage_name == "faces":
-                    nested["state"] = s
-
-            state.run(a, b, a.map_out(b, raw[best]), _nested_config(state), on_stage=grab)
-            g = nested["state"]
-            cost = map_cost(a, b, g.f, tf, cfg.distortion_weight)
-            tried[best] = (tf.share(g.f), cost)
-            if cost < tried["kept"][1] - cfg.min_gain:
-                chosen = best
-                state.f, state.hope_map, state.zoomout = g.f, g.hope_map, g.zoomout
+        trials = _Trials(state, tf)
+        # The maps derived from the stage's own first; then another start (a swapped pair of
+        # limbs comes back neither mirrored nor re-seeded) and the maps derived from it.
+        trials.derive("kept", state.f)
+        if not trials.good_enough() and "wks" in cfg.hypotheses:
+            g = trials.run("wks", "wks")
+            if trials.scored["wks"][0] > cfg.min_turned:
+                trials.derive("wks", g)
+        if not trials.good_enough() and "reverse" in cfg.hypotheses:
+            trials.run("reverse", reverse_map(state))
+        chosen = trials.best()
+        if chosen != "kept":
+            g = trials.scored[chosen][2]
+            state.f, state.hope_map, state.zoomout = g.f, g.hope_map, g.zoomout
         state.timings["orient"] = time.perf_counter() - t
-        detail = "; ".join(f"{k}: {v[0]:.0%} turned, cost {v[1]:.3f}" for k, v in tried.items())
-        raw_detail = ", ".join(f"{k} {v:.0%}" for k, v in shares.items())
+        tried = "; ".join(
+            f"{k}: {v[0]:.0%} turned, cost {v[1]:.3f}" for k, v in trials.scored.items()
+        )
         state.log.ran(
             "orient",
             state.timings["orient"],
-            f"unrefined {raw_detail or 'none'}; {detail}; chose {chosen}",
+            f"{'; '.join(trials.notes)}; {tried}; chose {chosen}",
         )
