@@ -39,6 +39,7 @@ from ..geometry.mesh import Mesh
 from ..shape import Shape
 from .anchors import anchor_step, firm_regions
 from .lmd import local_map_distortion
+from .progress import ProgressEvent
 from .state import QUIET, MatchState, Stage
 from .turned import TurnedFaces
 
@@ -73,7 +74,7 @@ def symmetry_map(state: MatchState, b: Shape) -> np.ndarray:
         spectral=dataclasses.replace(cfg.spectral, enabled=False),
         finish=dataclasses.replace(cfg.finish, enabled=False),
     )
-    res = state.run(mirror, b, state.config.initial.descriptor, cfg)
+    res = state.run(mirror, b, state.config.initial.descriptor, cfg, progress=_Relay(state))
     # res.map is in input numbering: input vertex v of the mirror image is input vertex v of B.
     return b.rank[np.asarray(res.map)[b.order]]
 
@@ -82,7 +83,13 @@ def reverse_map(state: MatchState) -> np.ndarray:
     """The match of B to A by the runner (without this stage), inverted: each vertex of A
     onto the vertex of B whose image lies nearest it in space (internal numbering)."""
     a, b = state.a, state.b
-    res = state.run(b, a, state.config.initial.descriptor, _nested_config(state))
+    res = state.run(
+        b,
+        a,
+        state.config.initial.descriptor,
+        _nested_config(state),
+        progress=_Relay(state),
+    )
     g = b.map_in(a, res.map)
     return cKDTree(a.points[g]).query(a.points)[1].astype(np.int64)
 
@@ -106,6 +113,18 @@ def map_cost(a: Shape, b: Shape, f: np.ndarray, turned: TurnedFaces, weight: flo
     low; a mirror image keeps distances but turns over, a scrambled map does neither)."""
     _, consistent = local_map_distortion(a, b, f)
     return float(turned.share(f)) + weight * float(1.0 - np.mean(consistent))
+
+
+class _Relay:
+    """A nested match's progress as steps of the "orient" stage (logged under its prefix);
+    its refinement steps are not the outer match's, so their iterations are not passed on."""
+
+    def __init__(self, state: MatchState):
+        self._relay = state.log.relay("orient")
+        self.log_prefix = self._relay.log_prefix
+
+    def __call__(self, ev: ProgressEvent) -> None:
+        self._relay(dataclasses.replace(ev, iteration=None))
 
 
 def _nested_config(state: MatchState):
@@ -150,6 +169,8 @@ class _Trials:
         #: name -> (turned share, cost, nested state or None for the stage's own map)
         self.scored: dict = {"kept": (tf.share(f), self.cost(f), None)}
         self.notes: list[str] = []
+        #: Seconds per nested match (B's symmetry, each refined hypothesis).
+        self.seconds: dict[str, float] = {}
 
     def cost(self, f: np.ndarray) -> float:
         return map_cost(self.state.a, self.state.b, f, self.tf, self.cfg.distortion_weight)
@@ -164,18 +185,22 @@ class _Trials:
             if stage_name == "faces":
                 nested["state"] = s
 
+        t = time.perf_counter()
         if not isinstance(init, str):
             init = a.map_out(b, init)
-        state.run(a, b, init, _nested_config(state), on_stage=grab)
+        state.run(a, b, init, _nested_config(state), on_stage=grab, progress=_Relay(state))
         g = nested["state"]
         self.scored[name] = (self.tf.share(g.f), self.cost(g.f), g)
+        self.seconds[name] = time.perf_counter() - t
         return g.f
 
     def derive(self, base: str, f: np.ndarray) -> None:
         """Refines the least turned-over of the maps derived from ``f`` when it turns less
         over than ``f`` does."""
         if self.sym is None and any(h.startswith("mirror") for h in self.cfg.hypotheses):
+            t = time.perf_counter()
             self.sym = symmetry_map(self.state, self.state.b)
+            self.seconds["symmetry"] = time.perf_counter() - t
         raw = _derived(self.state, f, self.tf, self.sym)
         if not raw:
             return
@@ -241,7 +266,10 @@ class OrientStage(Stage):
             if trials.scored["wks"][0] > cfg.min_turned:
                 trials.derive("wks", g)
         if not trials.good_enough() and "reverse" in cfg.hypotheses:
-            trials.run("reverse", reverse_map(state))
+            t_rev = time.perf_counter()
+            g = reverse_map(state)
+            trials.seconds["reverse B to A"] = time.perf_counter() - t_rev
+            trials.run("reverse", g)
         chosen = trials.best()
         if chosen != "kept":
             g = trials.scored[chosen][2]
@@ -250,8 +278,9 @@ class OrientStage(Stage):
         tried = "; ".join(
             f"{k}: {v[0]:.0%} turned, cost {v[1]:.3f}" for k, v in trials.scored.items()
         )
+        spent = ", ".join(f"{k} {v:.1f} s" for k, v in trials.seconds.items())
         state.log.ran(
             "orient",
             state.timings["orient"],
-            f"{'; '.join(trials.notes)}; {tried}; chose {chosen}",
+            f"{'; '.join(trials.notes)}; {tried}; chose {chosen} ({spent})",
         )
