@@ -16,7 +16,7 @@ The hypotheses (``OrientConfig.hypotheses``):
 * ``"reseed"``: the turned-over vertices placed by their geodesic distances to anchors in the
   orientation-keeping rest (:func:`~hope_rs.pipeline.anchors.anchor_step`);
 * ``"wks"``: the pipeline from the WKS initial map instead (a swapped pair of limbs, which
-  the others keep), and the three above derived from its map when it turns much over too;
+  the others keep);
 * ``"reverse"``: the pipeline from the match of B to A, inverted.
 
 The derived hypotheses are unrefined maps; the one turning the least over is refined. The
@@ -258,13 +258,11 @@ class OrientStage(Stage):
             return
         state.log.start("orient", detail=f"{share:.0%} of A turned over: trying other maps")
         trials = _Trials(state, tf)
-        # The maps derived from the stage's own first; then another start (a swapped pair of
-        # limbs comes back neither mirrored nor re-seeded) and the maps derived from it.
+        # The maps derived from the stage's own first; then other starts (a swapped pair of
+        # limbs comes back neither mirrored nor re-seeded).
         trials.derive("kept", state.f)
         if not trials.good_enough() and "wks" in cfg.hypotheses:
-            g = trials.run("wks", "wks")
-            if trials.scored["wks"][0] > cfg.min_turned:
-                trials.derive("wks", g)
+            trials.run("wks", "wks")
         if not trials.good_enough() and "reverse" in cfg.hypotheses:
             t_rev = time.perf_counter()
             g = reverse_map(state)
