@@ -49,7 +49,9 @@ def test_confidence_is_lowered_where_the_map_turns_over():
     np.testing.assert_allclose(
         turned_factor(s, s, s.map_in(s, np.arange(400)), ConfidenceConfig()), 1.0
     )
-    assert turned_factor(m, s, ident, ConfidenceConfig()).max() < 0.05
+    assert turned_factor(m, s, ident, ConfidenceConfig(turned_weight=1.0)).max() < 0.05
+    w = ConfidenceConfig().turned_weight
+    np.testing.assert_allclose(turned_factor(m, s, ident, ConfidenceConfig()), 1.0 - w, atol=0.05)
     np.testing.assert_allclose(turned_factor(m, s, ident, ConfidenceConfig(turned_weight=0.0)), 1.0)
 
 

@@ -582,7 +582,7 @@ class ConfidenceConfig:
     failed_mean: float = 0.5
     failed_share: float = 0.5
     failed_flipped: float = 0.3
-    turned_weight: float = 1.0
+    turned_weight: float = 0.5
 
     def __post_init__(self):
         # Checked here, not when the confidence stage runs after the whole match.
