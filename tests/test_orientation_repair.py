@@ -107,3 +107,16 @@ def test_a_region_turned_over_on_a_remeshed_pair_is_repaired():
     assert res.stage("orient").ran and "chose kept" not in res.stage("orient").reason
     assert geodesic_errors(mb, res.map, a_idx=ai, b_idx=bi).mean() < 0.04
     assert res.quality.flipped_share < 0.2
+
+
+def test_open_surfaces_are_left_alone():
+    # A cap of a sphere onto its mirror image: every triangle's winding is a guess there.
+    v, f = bumpy_sphere(500, 4)
+    cap = f[(v[f][:, :, 2] > -0.3).all(axis=1)]
+    used = np.unique(cap)
+    renum = np.full(len(v), -1)
+    renum[used] = np.arange(used.size)
+    a = hope_rs.Mesh(v[used], renum[cap])
+    b = hope_rs.Mesh(v[used] * np.array([-1.0, 1.0, 1.0]), renum[cap])
+    info = hope_rs.match(a, b, max_passes=1).stage("orient")
+    assert not info.ran and "open surface" in info.reason

@@ -35,7 +35,7 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..geometry.mesh import Mesh
+from ..geometry.mesh import Mesh, boundary_edges
 from ..shape import Shape
 from .anchors import anchor_step, firm_regions
 from .lmd import local_map_distortion
@@ -230,7 +230,7 @@ class _Trials:
 
 class OrientStage(Stage):
     """The "orient" stage (see the module notes); runs when the map turns more than
-    ``OrientConfig.min_turned`` of A's area over, on whole shapes without landmarks."""
+    ``OrientConfig.min_turned`` of A's area over, on whole closed shapes without landmarks."""
 
     name = "orient"
 
@@ -244,6 +244,10 @@ class OrientStage(Stage):
             return "a part: its orientation is the partial stage's"
         if state.f is None or state.run is None:
             return "no map"
+        if any(boundary_edges(s.internal.faces).size for s in (state.a, state.b)):
+            # Which side of an open surface is outward is a guess (see turned.py), and the
+            # partial stage's nested matches of a part are open.
+            return "an open surface"
         return None
 
     def run(self, state: MatchState) -> None:
