@@ -234,6 +234,10 @@ class OrientStage(Stage):
 
     name = "orient"
 
+    def attach(self, state: MatchState) -> None:
+        #: The turned-over triangles of A on B, built when the stage decides whether to run.
+        self._turned: TurnedFaces | None = None
+
     def skip_reason(self, state: MatchState):
         cfg = state.config.orient
         if not cfg.enabled:
@@ -248,18 +252,19 @@ class OrientStage(Stage):
             # Which side of an open surface is outward is a guess (see turned.py), and the
             # partial stage's nested matches of a part are open.
             return "an open surface"
+        t = time.perf_counter()
+        self._turned = TurnedFaces(state.a, state.b)
+        share = self._turned.share(state.f)
+        state.timings["orient"] = time.perf_counter() - t
+        if share <= cfg.min_turned:
+            return f"{share:.0%} of A's area turned over (at most {cfg.min_turned:.0%})"
         return None
 
     def run(self, state: MatchState) -> None:
         cfg = state.config.orient
         t = time.perf_counter()
-        a, b = state.a, state.b
-        tf = TurnedFaces(a, b)
+        tf = self._turned
         share = tf.share(state.f)
-        if share <= cfg.min_turned:
-            state.timings["orient"] = time.perf_counter() - t
-            state.log.ran("orient", state.timings["orient"], f"{share:.0%} turned over: kept")
-            return
         state.log.start("orient", detail=f"{share:.0%} of A turned over: trying other maps")
         trials = _Trials(state, tf)
         # The maps derived from the stage's own first; then other starts (a swapped pair of
@@ -276,7 +281,7 @@ class OrientStage(Stage):
         if chosen != "kept":
             g = trials.scored[chosen][2]
             state.f, state.hope_map, state.zoomout = g.f, g.hope_map, g.zoomout
-        state.timings["orient"] = time.perf_counter() - t
+        state.timings["orient"] += time.perf_counter() - t
         tried = "; ".join(
             f"{k}: {v[0]:.0%} turned, cost {v[1]:.3f}" for k, v in trials.scored.items()
         )
