@@ -233,6 +233,8 @@ class OrientStage(Stage):
     ``OrientConfig.min_turned`` of A's area over, on whole closed shapes without landmarks."""
 
     name = "orient"
+    #: A map another stage found final can still be a mirror image (LMD trusts it everywhere).
+    runs_on_final_map = True
 
     def attach(self, state: MatchState) -> None:
         #: The turned-over triangles of A on B, built when the stage decides whether to run.
