@@ -18,7 +18,12 @@ from hope_rs.pipeline.confidence import (
     match_quality,
     predict_confidence,
 )
-from hope_rs.pipeline.config import CONFIDENCE_FEATURES, ConfidenceConfig, MatchConfig
+from hope_rs.pipeline.config import (
+    CONFIDENCE_FEATURES,
+    ConfidenceConfig,
+    MatchConfig,
+    OrientConfig,
+)
 from hope_rs.pipeline.progress import STAGES
 from hope_rs.pipeline.turned import TurnedFaces
 
@@ -29,7 +34,9 @@ def broken_and_good(faust_pair):
     pass (a broken map), and from the right map (a good one)."""
     a, b = faust_pair
     order = np.argsort(np.sin(np.arange(a.n_vertices) * 12.9898) * 43758.5453 % 1.0)
-    broken = hope_rs.match(a, b, init=order, max_passes=1, spectral=False)
+    # Without the orient stage, which repairs this map (it turns much of A over).
+    no_repair = MatchConfig(orient=OrientConfig(enabled=False))
+    broken = hope_rs.match(a, b, init=order, max_passes=1, spectral=False, config=no_repair)
     good = hope_rs.match(a, b, init=np.arange(a.n_vertices), max_passes=1, spectral=False)
     return a, b, broken, good
 

@@ -20,7 +20,8 @@ from hope_rs.pipeline.refine import Iteration
 from hope_rs.shape import ShapeConfig
 
 DEFAULT_STAGES = [
-    "shapes", "descriptors", "init", "refine", "polish", "spectral", "faces", "confidence",
+    "shapes", "descriptors", "init", "refine", "polish", "spectral", "faces", "orient",
+    "confidence",
 ]  # fmt: skip
 
 
@@ -32,11 +33,16 @@ def spheres():
 def test_a_default_match_logs_each_stage_once_in_order(spheres, caplog):
     caplog.set_level(logging.DEBUG, logger="hope_rs")
     res = hope_rs.match(*spheres, max_passes=2)
-    info = [r.getMessage() for r in caplog.records if r.levelno == logging.INFO]
+    # The orient stage's nested matches (this pair's map turns most of A over) log under its
+    # prefix, as the coarse match of a multiscale one does.
+    nested = [r for r in caplog.records if r.getMessage().startswith("orient ")]
+    assert nested and all(r.name == "hope_rs" for r in nested)
+    records = [r for r in caplog.records if r not in nested]
+    info = [r.getMessage() for r in records if r.levelno == logging.INFO]
     assert [m.split(":")[0] for m in info] == DEFAULT_STAGES == [s.name for s in res.stages]
-    assert all(r.name == "hope_rs" for r in caplog.records)
+    assert all(r.name == "hope_rs" for r in records)
     # One DEBUG line per refinement step, the polish labelled as such.
-    debug = [r.getMessage() for r in caplog.records if r.levelno == logging.DEBUG]
+    debug = [r.getMessage() for r in records if r.levelno == logging.DEBUG]
     assert len(debug) == len(res.history)
     assert debug[-1].startswith("polish: polish k=3") and "pass" not in debug[-1]
     assert debug[0].startswith("refine: pass 1/2 repair")
@@ -154,6 +160,8 @@ def test_stage_reasons_for_turned_off_stages_and_a_given_map(spheres):
         shared_faces=False, polish_k=None,
     )  # fmt: skip
     reasons = {s.name: s.reason for s in res.stages if not s.ran}
+    # The orient stage says how much of A the map turns over when that is too little to act.
+    assert reasons.pop("orient").endswith("of A's area turned over (at most 20%)")
     assert reasons == {
         "descriptors": "an initial map was given (init=...)",
         "init": "an initial map was given (init=...)",
@@ -201,6 +209,8 @@ def test_cli_verbose_logs_stages_and_restores_the_logger(tmp_path, capsys):
     assert main(["-v", *argv]) == 0
     # Two unrelated spheres: the match may also warn that it likely failed.
     err = [x for x in capsys.readouterr().err.splitlines() if "likely failed" not in x]
+    # The orient stage's nested matches log under its prefix ("orient refine: ...").
+    err = [x for x in err if not x.split(":")[1].strip().startswith("orient ")]
     assert [line.split(":")[1].strip() for line in err] == DEFAULT_STAGES
     assert all(line.startswith("hope-rs: ") for line in err)
     assert main([*argv, "-vv"]) == 0

@@ -14,7 +14,8 @@ about the final map ``f``, each in the shapes' internal numbering (see
 * the pair's mean consistent share (a pair that went wrong as a whole);
 
 averaged over a few rings so that regions, not single vertices, lose confidence, and combined
-by a logistic model (:class:`~hope_rs.pipeline.config.ConfidenceConfig`). The stage reads the
+by a logistic model (:class:`~hope_rs.pipeline.config.ConfidenceConfig`), then lowered where
+the map turns the surroundings over (:func:`turned_factor`). The stage reads the
 maps only: ``MatchResult.map`` is the same with or without it.
 
 The pair-level summary (:class:`MatchQuality`) also measures the share of A's area whose
@@ -52,6 +53,7 @@ __all__ = [
     "match_quality",
     "predict_confidence",
     "state_quality",
+    "turned_factor",
 ]
 
 
@@ -199,6 +201,21 @@ def predict_confidence(features: np.ndarray, config: ConfidenceConfig = Confiden
     return 1.0 / (1.0 + np.exp(-np.clip(z, -60.0, 60.0)))
 
 
+def turned_factor(a: Shape, b: Shape, f: np.ndarray, config: ConfidenceConfig) -> np.ndarray:
+    """Per vertex of A, the factor in [0, 1] its confidence is multiplied by for the map
+    ``f`` turning its surroundings over: ``1 - config.turned_weight * t``, ``t`` the turned-over
+    share of its triangles' area (:meth:`TurnedFaces.vertex_shares`) averaged over
+    ``config.rings`` 1-rings. A mirrored region keeps its distances, so the model's features
+    score it high; its triangles land on B wound the other way."""
+    if config.turned_weight == 0.0:
+        return np.ones(a.n_vertices)
+    t = TurnedFaces(a, b).vertex_shares(f)
+    ring = a.ring_average()
+    for _ in range(config.rings):
+        t = ring @ t
+    return np.clip(1.0 - config.turned_weight * t, 0.0, 1.0)
+
+
 class ConfidenceStage(Stage):
     """The "confidence" stage: ``state.confidence`` from :func:`confidence_features` of the
     final map, HOPE's and ZoomOut's (``state.zoomout``), by :func:`predict_confidence`; 0 on
@@ -229,7 +246,9 @@ class ConfidenceStage(Stage):
             repair=state.config.refine.repair,
             among=counterpart,
         )
-        state.confidence = predict_confidence(x, cfg)
+        state.confidence = predict_confidence(x, cfg) * turned_factor(
+            state.a, state.b, state.f, cfg
+        )
         if counterpart is not None:
             # A vertex of the whole without a counterpart on the part has no right match.
             state.confidence = np.where(counterpart, state.confidence, 0.0)

@@ -52,6 +52,7 @@ __all__ = [
     "LandmarkConfig",
     "MatchConfig",
     "MultiscaleConfig",
+    "OrientConfig",
     "PartialConfig",
     "RefineConfig",
     "RepairConfig",
@@ -633,6 +634,9 @@ class ConfidenceConfig:
     failed_flipped : float
         ... or when the map turns more than this share of A's area over
         (``MatchQuality.flipped_share``).
+    turned_weight : float
+        A vertex's confidence is multiplied by ``1 - turned_weight * t``, ``t`` the share of
+        the area around it (averaged over ``rings``) that the map turns over; 0 turns it off.
     """
 
     enabled: bool = True
@@ -655,6 +659,7 @@ class ConfidenceConfig:
     failed_mean: float = 0.5
     failed_share: float = 0.5
     failed_flipped: float = 0.3
+    turned_weight: float = 0.5
 
     def __post_init__(self):
         # Checked here, not when the confidence stage runs after the whole match.
@@ -681,7 +686,7 @@ class ConfidenceConfig:
                 f"ConfidenceConfig.weights must hold one finite number per feature, got {bad[0]}"
             )
         object.__setattr__(self, "weights", weights)
-        shares = ("threshold", "failed_mean", "failed_share", "failed_flipped")
+        shares = ("threshold", "failed_mean", "failed_share", "failed_flipped", "turned_weight")
         for name, fits, span in (
             ("floor", lambda x: x > 0.0, "a finite positive number"),
             ("intercept", lambda x: True, "a finite number"),
@@ -690,6 +695,57 @@ class ConfidenceConfig:
             x = getattr(self, name)
             if not (_is_number(x) and fits(x)):
                 raise ValueError(f"ConfidenceConfig.{name} must be {span}, got {x!r}")
+
+
+@dataclass(frozen=True)
+class OrientConfig:
+    """Repairing a map that turns A over on B (:mod:`hope_rs.pipeline.orientation_repair`).
+
+    Attributes
+    ----------
+    enabled : bool
+        Run the "orient" stage (whole shapes without landmarks only).
+    min_turned : float
+        The stage tries other maps when the final map turns more than this share of A's area
+        over (``MatchQuality.flipped_share``); a right map of remeshed shapes turns a few
+        percent over where the triangulations disagree, more between different bodies.
+    hypotheses : tuple of str
+        The alternative maps tried ("mirror", "mirror_turned", "reseed": derived from a
+        map, the one turning the least over refined; "wks": the pipeline from WKS; "reverse":
+        from the match of B to A inverted), in that order until one turns at most
+        ``min_turned`` over.
+    seam_rings : int
+        1-rings added around the turned-over vertices for the regional hypotheses.
+    distortion_weight : float
+        Weight of the LMD-inconsistent share of A's vertices against the turned-over share in
+        the cost the stage minimises.
+    min_gain : float
+        The refined hypothesis replaces the map when it lowers that cost by more than this.
+    """
+
+    enabled: bool = True
+    min_turned: float = 0.2
+    hypotheses: tuple[str, ...] = ("mirror", "mirror_turned", "reseed", "wks", "reverse")
+    seam_rings: int = 2
+    distortion_weight: float = field(default=1.0, metadata={"finite": True})
+    min_gain: float = field(default=0.02, metadata={"finite": True})
+
+    def __post_init__(self):
+        known = ("mirror", "mirror_turned", "reseed", "wks", "reverse")
+        bad = [h for h in self.hypotheses if h not in known]
+        if isinstance(self.hypotheses, str) or bad:
+            raise ValueError(
+                f"OrientConfig.hypotheses must be a tuple of {', '.join(known)}, "
+                f"got {self.hypotheses!r}"
+            )
+        if not (_is_number(self.min_turned) and 0.0 <= self.min_turned <= 1.0):
+            raise ValueError(
+                f"OrientConfig.min_turned must be a number in [0, 1], got {self.min_turned!r}"
+            )
+        r = self.seam_rings
+        if isinstance(r, bool) or not isinstance(r, numbers.Integral) or r < 0:
+            raise ValueError(f"OrientConfig.seam_rings must be an integer >= 0, got {r!r}")
+        object.__setattr__(self, "hypotheses", tuple(self.hypotheses))
 
 
 #: ``match``'s keyword options → (stage field of :class:`MatchConfig`, field of that stage).
@@ -723,6 +779,8 @@ class MatchConfig:
         The stages' settings.
     landmarks : LandmarkConfig
         What the caller's landmarks do, when there are any.
+    orient : OrientConfig
+        Repairing a map that turns A over.
 
     Examples
     --------
@@ -745,6 +803,7 @@ class MatchConfig:
     confidence: ConfidenceConfig = field(default_factory=ConfidenceConfig)
     landmarks: LandmarkConfig = field(default_factory=LandmarkConfig)
     partial: PartialConfig = field(default_factory=PartialConfig)
+    orient: OrientConfig = field(default_factory=OrientConfig)
 
     def with_options(self, **options) -> MatchConfig:
         """A copy with ``match``'s keyword options (see :data:`KEYWORDS`) set."""

@@ -40,6 +40,7 @@ STAGES = (
     "polish",
     "spectral",
     "faces",
+    "orient",
     "confidence",
 )
 

@@ -10,6 +10,7 @@ from .confidence import ConfidenceStage
 from .initial import DescriptorStage, InitialStage
 from .landmarks import LandmarkStage
 from .multiscale import MultiscaleStage
+from .orientation_repair import OrientStage
 from .partial import PartialStage
 from .refine import RefineStage
 from .shared_faces import FinishStage
@@ -31,5 +32,6 @@ def default_stages() -> list[Stage]:
         RefineStage(),  # "refine", "polish"
         SpectralStage(),  # "spectral"
         FinishStage(),  # "faces"
+        OrientStage(),  # "orient": when the map turns much of A over
         ConfidenceStage(),  # "confidence"
     ]

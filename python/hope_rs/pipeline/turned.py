@@ -116,6 +116,15 @@ class TurnedFaces:
         total = float((self.area * counted).sum())
         return float((self.area * over).sum() / total) if total > 0.0 else 0.0
 
+    def vertex_shares(self, f: np.ndarray) -> np.ndarray:
+        """Per vertex of A, the share of the area of its triangles that ``f`` turns over (0
+        for a vertex without counted triangles)."""
+        over, _ = self(f)
+        corners = self.faces.ravel()
+        total = np.bincount(corners, np.repeat(self.area, 3), minlength=self.n_a)
+        turned = np.bincount(corners, np.repeat(self.area * over, 3), minlength=self.n_a)
+        return turned / np.maximum(total, np.finfo(float).tiny)
+
     def vertices(self, f: np.ndarray, max_share: float) -> np.ndarray:
         """Bool per vertex of A: more than ``max_share`` of the area of its triangles is turned
         over by ``f``. In a group with an open component that is the smaller side: a map that

@@ -1,0 +1,122 @@
+"""The "orient" stage: a map that turns A over is replaced by an orientation-keeping one."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+from conftest import data_path
+from meshes import bumpy_sphere
+
+import hope_rs
+from hope_rs.evaluation.datasets import pairs_of
+from hope_rs.evaluation.evaluate import geodesic_errors
+from hope_rs.geometry.mesh import load_mesh
+from hope_rs.pipeline.confidence import turned_factor
+from hope_rs.pipeline.config import ConfidenceConfig, MatchConfig, OrientConfig
+from hope_rs.pipeline.orientation_repair import mirror_image, turned_regions
+from hope_rs.pipeline.turned import TurnedFaces
+
+OFF = dataclasses.replace(MatchConfig(), orient=OrientConfig(enabled=False))
+
+
+def test_mirror_image_keeps_the_numbering_and_turns_every_triangle_over():
+    s = hope_rs.Shape(hope_rs.Mesh(*bumpy_sphere(400, 1)))
+    m = mirror_image(s)
+    v, w = s.mesh.vertices, m.mesh.vertices
+    np.testing.assert_allclose(w[:, 1:], v[:, 1:])
+    np.testing.assert_allclose(w[:, 0] + v[:, 0], 2.0 * v[:, 0].mean())
+    # Vertex i of the mirror image onto vertex i of the shape: everything turned over.
+    same = m.map_in(s, np.arange(s.n_vertices))
+    assert TurnedFaces(m, s).share(same) > 0.99
+    assert TurnedFaces(s, s).share(s.map_in(s, np.arange(s.n_vertices))) < 0.01
+
+
+def test_turned_regions_grow_by_rings():
+    s = hope_rs.Shape(hope_rs.Mesh(*bumpy_sphere(400, 2)))
+    seed = np.zeros(s.n_vertices, dtype=bool)
+    seed[0] = True
+    one, two = turned_regions(s, seed, 1), turned_regions(s, seed, 2)
+    e = s.edges
+    assert one.sum() == 1 + np.count_nonzero((e == 0).any(axis=1))
+    assert (one <= two).all() and two.sum() > one.sum()
+    np.testing.assert_array_equal(turned_regions(s, seed, 0), seed)
+
+
+def test_confidence_is_lowered_where_the_map_turns_over():
+    s = hope_rs.Shape(hope_rs.Mesh(*bumpy_sphere(400, 3)))
+    m = mirror_image(s)
+    ident = m.map_in(s, np.arange(s.n_vertices))  # every triangle turned over
+    np.testing.assert_allclose(
+        turned_factor(s, s, s.map_in(s, np.arange(400)), ConfidenceConfig()), 1.0
+    )
+    assert turned_factor(m, s, ident, ConfidenceConfig(turned_weight=1.0)).max() < 0.05
+    w = ConfidenceConfig().turned_weight
+    np.testing.assert_allclose(turned_factor(m, s, ident, ConfidenceConfig()), 1.0 - w, atol=0.05)
+    np.testing.assert_allclose(turned_factor(m, s, ident, ConfidenceConfig(turned_weight=0.0)), 1.0)
+
+
+def test_config_checks_the_hypotheses():
+    with pytest.raises(ValueError, match="hypotheses"):
+        OrientConfig(hypotheses=("mirror", "spin"))
+    with pytest.raises(ValueError, match="min_turned"):
+        OrientConfig(min_turned=1.5)
+    with pytest.raises(ValueError, match="turned_weight"):
+        ConfidenceConfig(turned_weight=-1.0)
+
+
+@pytest.fixture(scope="module")
+def mirrored_start(faust_pair):
+    """FAUST 012 -> 018 (one triangulation) started from the right map composed with B's
+    left/right symmetry (a whole mirror image): ``(a, b, start)``."""
+    a, b = faust_pair
+    sb = hope_rs.Shape(b)
+    sym = hope_rs.match(mirror_image(sb), sb, config=OFF).map
+    return a, b, sym[np.arange(a.n_vertices)]
+
+
+@pytest.mark.slow
+def test_a_mirrored_start_is_repaired(mirrored_start):
+    a, b, start = mirrored_start
+    truth = np.arange(a.n_vertices)
+    assert geodesic_errors(b, start).mean() > 0.2  # the start is a mirror image
+    kept = hope_rs.match(a, b, init=start, config=OFF)
+    assert kept.quality.flipped_share > 0.5  # without the stage the mirror image stays
+    res = hope_rs.match(a, b, init=start)
+    info = res.stage("orient")
+    assert info.ran and "chose kept" not in info.reason
+    assert res.quality.flipped_share < 0.05
+    assert geodesic_errors(b, res.map).mean() < 0.01
+    assert np.mean(res.map == truth) > 0.9
+
+
+@pytest.mark.slow
+def test_a_region_turned_over_on_a_remeshed_pair_is_repaired():
+    # The first FAUST remeshed pair from its default map (right) with A's half at x above the
+    # median composed with B's symmetry: a swapped region, not a whole mirror image.
+    pair = pairs_of(data_path("faust_r"))[0]
+    ma, mb = load_mesh(pair.a), load_mesh(pair.b)
+    ai, bi = pair.ground_truth(ma.n_vertices, mb.n_vertices)
+    a, b = hope_rs.Shape(ma), hope_rs.Shape(mb)
+    truth = hope_rs.match(a, b, config=OFF).map  # the default map: right (error ~0.02)
+    assert geodesic_errors(mb, truth, a_idx=ai, b_idx=bi).mean() < 0.04
+    sym = hope_rs.match(mirror_image(b), b, config=OFF).map
+    side = ma.vertices[:, 0] > np.median(ma.vertices[:, 0])
+    start = np.where(side, sym[truth], truth)
+    assert geodesic_errors(mb, start, a_idx=ai, b_idx=bi).mean() > 0.1
+    res = hope_rs.match(a, b, init=start)
+    assert res.stage("orient").ran and "chose kept" not in res.stage("orient").reason
+    assert geodesic_errors(mb, res.map, a_idx=ai, b_idx=bi).mean() < 0.04
+    assert res.quality.flipped_share < 0.2
+
+
+def test_open_surfaces_are_left_alone():
+    # A cap of a sphere onto its mirror image: every triangle's winding is a guess there.
+    v, f = bumpy_sphere(500, 4)
+    cap = f[(v[f][:, :, 2] > -0.3).all(axis=1)]
+    used = np.unique(cap)
+    renum = np.full(len(v), -1)
+    renum[used] = np.arange(used.size)
+    a = hope_rs.Mesh(v[used], renum[cap])
+    b = hope_rs.Mesh(v[used] * np.array([-1.0, 1.0, 1.0]), renum[cap])
+    info = hope_rs.match(a, b, max_passes=1).stage("orient")
+    assert not info.ran and "open surface" in info.reason

@@ -1,0 +1,109 @@
+"""``hope-rs perturb-set``: noisy and welded targets with their ground truth carried over."""
+
+import numpy as np
+import pytest
+from meshes import bumpy_sphere, write_off
+from scipy.sparse.csgraph import dijkstra
+
+import hope_rs
+from hope_rs.cli import main
+from hope_rs.evaluation.datasets import pairs_of
+from hope_rs.evaluation.partial import edge_graph
+from hope_rs.evaluation.perturbed import (
+    WELD_SPACE,
+    WELD_SURFACE,
+    add_noise,
+    clean_errors,
+    read_clean,
+    weld_shortcuts,
+    write_perturbed_sets,
+)
+
+
+def bent_tube() -> hope_rs.Mesh:
+    """A thin ellipsoid bent almost into a ring: its two tips nearly touch in space and lie
+    far apart along the surface."""
+    v, f = bumpy_sphere(1500, 0)
+    x, y, z = v[:, 0] * 5.0, v[:, 1] * 0.3, v[:, 2] * 0.3
+    r = 10.0 / (1.95 * np.pi)
+    t = x / r
+    return hope_rs.Mesh(np.column_stack([(r + y) * np.cos(t), (r + y) * np.sin(t), z]), f)
+
+
+def test_welds_follow_the_rule_and_scoring_reads_the_clean_mesh():
+    mesh = bent_tube()
+    w = weld_shortcuts(mesh)
+    assert 1 <= len(w.welds) <= 10
+    s = mesh.scale
+    g = dijkstra(edge_graph(mesh), indices=w.welds[:, 0])
+    for row, (i, j) in enumerate(w.welds):
+        assert np.linalg.norm(mesh.vertices[i] - mesh.vertices[j]) < WELD_SPACE * s
+        assert g[row, j] > WELD_SURFACE * s
+    assert w.mesh.n_vertices == mesh.n_vertices - len(w.welds)
+    np.testing.assert_array_equal(w.inverse[w.welds[:, 1]], w.inverse[w.welds[:, 0]])
+    np.testing.assert_array_equal(w.origin[w.inverse[w.origin]], w.origin)
+    # The map through the welds is right everywhere, the second vertex of a weld included.
+    truth = np.arange(mesh.n_vertices)
+    e = clean_errors(mesh, w.inverse, w.origin, w.welds, truth, truth, method="graph")
+    assert np.all(e == 0)
+    wrong = np.roll(w.inverse, 7)
+    assert clean_errors(mesh, wrong, w.origin, w.welds, truth, truth, method="graph").mean() > 0
+
+
+def test_noise_is_seeded_and_scaled():
+    mesh = hope_rs.Mesh(*bumpy_sphere(800, 1))
+    a, b = add_noise(mesh, 0.005, 3), add_noise(mesh, 0.005, 3)
+    np.testing.assert_array_equal(a.vertices, b.vertices)
+    d = a.vertices - mesh.vertices
+    assert d.std() == pytest.approx(0.005 * mesh.scale, rel=0.1)
+    np.testing.assert_array_equal(a.faces, mesh.faces)
+
+
+def test_perturbed_sets_carry_the_ground_truth(tmp_path):
+    src = tmp_path / "src" / "tubes"
+    (src / "corres").mkdir(parents=True)
+    mesh = bent_tube()
+    for name in ("s", "t"):
+        write_off(src / f"{name}.off", mesh.vertices, mesh.faces)
+        (src / "corres" / f"{name}.vts").write_text(
+            "".join(f"{i + 1}\n" for i in range(0, mesh.n_vertices, 3))
+        )
+    (src / "pairs.txt").write_text("s t\n")
+    out = write_perturbed_sets(src, tmp_path / "out")
+    assert sorted(d.name for d in out) == ["tubes_noise02", "tubes_noise05", "tubes_shortcuts"]
+    for d in out:
+        (pair,) = pairs_of(d)
+        a, b = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
+        ai, bi = pair.ground_truth(a.n_vertices, b.n_vertices)
+        clean = read_clean(d, pair.b.stem)
+        if d.name.endswith("shortcuts"):
+            cb, origin, welds = clean
+            assert b.n_vertices == mesh.n_vertices - len(welds) and len(welds) >= 1
+            # The identity of the clean shapes, read on the welded B, scores 0 on the clean B.
+            m = np.full(a.n_vertices, -1)
+            m[ai] = bi
+            m[m < 0] = 0
+            e = clean_errors(cb, m, origin, welds, ai, origin[bi], method="graph")
+            assert np.all(e == 0)
+        else:
+            assert clean is None and b.n_vertices == mesh.n_vertices
+            np.testing.assert_array_equal(ai, bi)
+    # A shape with no shortcut (a convex sphere) leaves no shortcut set.
+    sphere = tmp_path / "src2" / "spheres"
+    (sphere / "corres").mkdir(parents=True)
+    v, f = bumpy_sphere(600, 2)
+    for name in ("s", "t"):
+        write_off(sphere / f"{name}.off", v, f)
+        (sphere / "corres" / f"{name}.vts").write_text("1\n2\n")
+    (sphere / "pairs.txt").write_text("s t\n")
+    assert write_perturbed_sets(sphere, tmp_path / "out2", conditions=["shortcuts"]) == []
+    assert not (tmp_path / "out2" / "spheres_shortcuts").exists()
+
+
+def test_perturb_set_cli(tmp_path, capsys):
+    assert main(["perturb-set", str(tmp_path / "bad"), "--from", str(tmp_path / "nowhere")]) == 2
+    err = capsys.readouterr().err
+    assert "is not a folder" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "bad").exists()
+    with pytest.raises(ValueError, match="unknown perturbation"):
+        write_perturbed_sets(tmp_path, tmp_path / "out", conditions=["blur"])
