@@ -110,12 +110,12 @@ def weld_shortcuts(mesh: Mesh) -> Welded:
     g = edge_graph(mesh)
     start = int(np.argmin(np.linalg.norm(mesh.vertices - mesh.vertices.mean(0), axis=1)))
     dist = dijkstra(g, indices=start)
-    samples = []
+    picked: list[int] = []
     for _ in range(min(CANDIDATES, mesh.n_vertices)):
         v = int(np.argmax(np.where(np.isfinite(dist), dist, -1.0)))
-        samples.append(v)
+        picked.append(v)
         dist = np.minimum(dist, dijkstra(g, indices=v))
-    samples = np.array(samples, dtype=np.int64)
+    samples = np.array(picked, dtype=np.int64)
     geo = dijkstra(g, indices=samples, limit=WELD_SURFACE * s)  # inf beyond the limit
     tree = cKDTree(mesh.vertices)
     cand = []

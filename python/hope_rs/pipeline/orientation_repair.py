@@ -74,6 +74,7 @@ def symmetry_map(state: MatchState, b: Shape) -> np.ndarray:
         spectral=dataclasses.replace(cfg.spectral, enabled=False),
         finish=dataclasses.replace(cfg.finish, enabled=False),
     )
+    assert state.run is not None  # the runner gives every state its nested runner
     res = state.run(mirror, b, state.config.initial.descriptor, cfg, progress=_Relay(state))
     # res.map is in input numbering: input vertex v of the mirror image is input vertex v of B.
     return b.rank[np.asarray(res.map)[b.order]]
@@ -83,6 +84,7 @@ def reverse_map(state: MatchState) -> np.ndarray:
     """The match of B to A by the runner (without this stage), inverted: each vertex of A
     onto the vertex of B whose image lies nearest it in space (internal numbering)."""
     a, b = state.a, state.b
+    assert state.run is not None  # the runner gives every state its nested runner
     res = state.run(
         b,
         a,
@@ -166,6 +168,7 @@ class _Trials:
         self.cfg = state.config.orient
         self.sym: np.ndarray | None = None
         f = state.f
+        assert f is not None  # the stage runs on a final map
         #: name -> (turned share, cost, nested state or None for the stage's own map)
         self.scored: dict = {"kept": (tf.share(f), self.cost(f), None)}
         self.notes: list[str] = []
@@ -188,6 +191,7 @@ class _Trials:
         t = time.perf_counter()
         if not isinstance(init, str):
             init = a.map_out(b, init)
+        assert state.run is not None  # the runner gives every state its nested runner
         state.run(a, b, init, _nested_config(state), on_stage=grab, progress=_Relay(state))
         g = nested["state"]
         self.scored[name] = (self.tf.share(g.f), self.cost(g.f), g)
@@ -265,13 +269,14 @@ class OrientStage(Stage):
     def run(self, state: MatchState) -> None:
         cfg = state.config.orient
         t = time.perf_counter()
-        tf = self._turned
-        share = tf.share(state.f)
+        tf, f = self._turned, state.f
+        assert tf is not None and f is not None  # skip_reason measured the final map
+        share = tf.share(f)
         state.log.start("orient", detail=f"{share:.0%} of A turned over: trying other maps")
         trials = _Trials(state, tf)
         # The maps derived from the stage's own first; then other starts (a swapped pair of
         # limbs comes back neither mirrored nor re-seeded).
-        trials.derive("kept", state.f)
+        trials.derive("kept", f)
         if not trials.good_enough() and "wks" in cfg.hypotheses:
             trials.run("wks", "wks")
         if not trials.good_enough() and "reverse" in cfg.hypotheses:
