@@ -6,7 +6,8 @@ faust_reg) gives one pair per condition, with the ground truth carried over by r
 * ``sub1``, ``sub2``: B subdivided once / twice (each face into four at its edge midpoints,
   about 4x / 16x the vertices); the original vertices come first, so B's ground truth holds;
 * ``dec1k``: A clustered to about 1,000 vertices (uniform-grid vertex clustering, each kept
-  vertex a vertex of A); a ground-truth point of A is carried to the kept vertex of its cell;
+  vertex a vertex of A; its largest connected component); a ground-truth point of A is
+  carried to the nearest kept vertex;
 
 and for each, the same pairs the other way round (``*_rev``: ``match(B', A)`` for
 ``sub*``, ``match(B, A')`` for ``dec1k``).
@@ -22,12 +23,13 @@ import shutil
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ..geometry.coarsen import coarse_to_count
 from ..geometry.mesh import Mesh, load_mesh
 from ..geometry.subdivide import subdivide
 from .datasets import pairs_of
-from .partial import _write_off, _write_vts
+from .partial import _largest_component, _write_off, _write_vts
 
 __all__ = ["RESOLUTION_CONDITIONS", "write_resolution_sets"]
 
@@ -50,7 +52,10 @@ def _condition(cond: str, ma: Mesh, mb: Mesh, ai: np.ndarray, bi: np.ndarray):
         c = coarse_to_count(ma, DECIMATED_VERTICES)
         if c is None:
             raise ValueError(f"a mesh of {ma.n_vertices} vertices cannot be clustered to fewer")
-        return c.mesh, mb, c.owner[ai], bi
+        # Clustering leaves isolated vertices and small islands: the largest component only.
+        part = _largest_component(c.mesh, np.ones(c.mesh.n_vertices, dtype=bool))
+        nearest = cKDTree(part.mesh.vertices).query(ma.vertices[ai])[1]
+        return part.mesh, mb, nearest.astype(np.int64), bi
     raise ValueError(
         f"unknown resolution condition {cond!r}; the conditions are "
         f"{', '.join(RESOLUTION_CONDITIONS)}"

@@ -12,10 +12,11 @@ vertices, the "resolution" stage
    dense mesh, and owns the dense vertices of its cell);
 2. matches the pair at that common resolution with the whole stage list (descriptors,
    refinement, spectral pass, finish);
-3. lifts the map: when B is the dense shape, each vertex of A keeps its image, a coarse vertex
-   being a vertex of B; when A is, each dense vertex of A is moved by the local linear map of
-   its cell's coarse edges onto their images and takes the vertex of B nearest that point
-   (:func:`hope_rs.pipeline.multiscale.lift_map`).
+3. lifts the map (:func:`hope_rs.pipeline.multiscale.lift_map`, ``centred``): each vertex
+   of A (when A is the dense shape, the coarse vertex of its cell) is carried by the local
+   linear map of its ring's edges onto their images, anchored at the ring's centroid and the
+   centroid of its images, and takes the vertex of B nearest that point: the coarse map's
+   offsets of up to a coarse edge average out over the ring.
 
 The map is final, and its confidence is the coarse match's (each dense vertex of A takes its
 coarse vertex's): the stages after it do not run (docs/decisions.md#resolution).
@@ -112,15 +113,15 @@ class ResolutionStage(Stage):
         )
         pa, pb = (cs, b) if self.side == "a" else (a, cs)
         res = state.run(pa, pb, state.init, nested, callback=state.callback, landmarks=lm)
+        ridge = cfg.multiscale.lift_ridge
         if self.side == "b":
-            # A's input vertex -> coarse vertex -> the dense vertex of B it is.
-            f = coarse.sites[res.map[a.order]]
+            # Each vertex of A is its own coarse vertex; its image a vertex of the coarse B.
+            g = res.map[a.order]
+            ident = np.arange(a.n_vertices)
+            f = lift_map(a.internal, coarse.mesh, g, a.points, ident, b.points, ridge, True)
         else:
             g = b.rank[res.map]  # coarse vertex (the copy's input numbering) -> B internal
-            f = lift_map(
-                coarse.mesh, b.internal, g, a.points, coarse.owner, b.points,
-                cfg.multiscale.lift_ridge,
-            )  # fmt: skip
+            f = lift_map(coarse.mesh, b.internal, g, a.points, coarse.owner, b.points, ridge, True)
         state.f0 = state.f = state.hope_map = f.astype(np.int64)
         if res.confidence is not None:
             # Measured where the map was made: a dense A's many-to-one map to a sparse B keeps
