@@ -11,8 +11,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import dijkstra
 
-from .mesh import Mesh
+from .mesh import Mesh, unique_edges
 from .sites import cell_sites, grid_cells
 
 __all__ = ["Coarse", "CoarsenConfig", "coarse_mesh", "coarse_to_count"]
@@ -68,7 +70,8 @@ def coarse_to_count(
     mesh: Mesh, n_target: int, *, tolerance: float = 0.05, max_tries: int = 8
 ) -> Coarse | None:
     """Vertex clustering of ``mesh`` on a uniform grid whose cube side is chosen so that
-    about ``n_target`` vertices remain (within ``tolerance`` of it, or the nearest of
+    about ``n_target`` vertices remain, each grid site then owning the vertices nearest it
+    along the surface (within ``tolerance`` of it, or the nearest of
     ``max_tries`` sides tried); ``None`` when ``mesh`` has no more than ``n_target`` vertices.
 
     On a surface the count of occupied cells goes as side^-2, so each try rescales the side
@@ -88,7 +91,26 @@ def coarse_to_count(
         if gap <= tolerance:
             break
         side *= np.sqrt(count / n_target)
-    return _clustered(mesh, best)
+    return _clustered(mesh, _surface_cells(mesh, best))
+
+
+def _surface_cells(mesh: Mesh, cells: np.ndarray) -> np.ndarray:
+    """Each vertex relabelled with the grid site nearest it along the edge graph (the sites
+    of ``cells``; a vertex no site reaches keeps its cell): a grid cell can hold two sheets
+    of the surface that touch in space (fingers, a thigh against the other), which
+    clustering would glue together."""
+    sites, _ = cell_sites(mesh.vertices, cells)
+    e = unique_edges(mesh.faces)
+    w = np.linalg.norm(mesh.vertices[e[:, 0]] - mesh.vertices[e[:, 1]], axis=1)
+    n = mesh.n_vertices
+    graph = sp.csr_matrix((np.maximum(w, 1e-300), (e[:, 0], e[:, 1])), shape=(n, n))
+    dist, _, source = dijkstra(
+        graph, directed=False, indices=sites, min_only=True, return_predecessors=True
+    )
+    reached = np.isfinite(dist)
+    out = cells.copy()
+    out[reached] = cells[source[reached]]
+    return out
 
 
 def coarse_mesh(mesh: Mesh, config: CoarsenConfig = CoarsenConfig()) -> Coarse | None:

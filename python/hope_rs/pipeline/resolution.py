@@ -128,7 +128,6 @@ class ResolutionStage(Stage):
             # few of its 2-rings' distances however right it is.
             c = res.confidence
             state.confidence = c[coarse.owner] if self.side == "a" else c[a.order]
-        state.coarse = res
         state.timings.update({f"resolution.{k}": v for k, v in res.timings.items()})
         state.done = f"the map is lifted from the match at {cs.n_vertices} vertices of {name}"
         state.timings["resolution"] = time.perf_counter() - t
