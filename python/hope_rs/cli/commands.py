@@ -17,7 +17,7 @@ import numpy as np
 
 from .._version import __version__
 from ..batch.driver import one_line_warning
-from ..evaluation import bench, partial, perturbed, show
+from ..evaluation import bench, partial, perturbed, resolution, show
 from ..evaluation.demo import run_demo
 from ..geometry.map_io import (
     atomic_write,
@@ -194,6 +194,7 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_parser(sub)
     partial.add_parser(sub)
     perturbed.add_parser(sub)
+    resolution.add_parser(sub)
     show.add_parser(sub)
     add_batch_parser(sub)
     return p

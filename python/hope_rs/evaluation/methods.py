@@ -24,6 +24,7 @@ Ablations
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 from typing import Callable
@@ -34,8 +35,10 @@ from ..features.descriptors import descriptors
 from ..geometry.mesh import Mesh
 from ..matching import match
 from ..pipeline.confidence import MatchQuality
+from ..pipeline.config import MatchConfig
 from ..pipeline.initial import initial_map
 from ..pipeline.partial import detect_part
+from ..pipeline.resolution import denser_side
 from ..shape import Shape
 
 #: ZoomOut settings: functional map size at the start, steps and increment per step.
@@ -113,9 +116,12 @@ def _hope(*, kind: str = "shot", k_max: int = 8, degrade: float = 0.0, **kw):
             (f0, t_init), key = ctx.initial(kind), kind
         sa, sb, t_shapes = ctx.shapes(k_max)
         t = time.perf_counter()
-        if not degrade and detect_part(sa, sb) is not None:
-            # A part is described at the whole's scale (hope_rs.pipeline.partial): the shared
-            # start, described at each shape's own scale, is not HOPE's start there.
+        resolution = kw.get("config", MatchConfig()).resolution
+        mixed = resolution.enabled and denser_side(sa, sb, resolution.max_ratio) is not None
+        if not degrade and (mixed or detect_part(sa, sb) is not None):
+            # A part is described at the whole's scale (hope_rs.pipeline.partial), and a much
+            # denser shape at the other's resolution (hope_rs.pipeline.resolution): the
+            # shared start, described at each shape's own, is not HOPE's start there.
             res = match(sa, sb, init=kind, k_max=k_max, **kw)
             t_init, key = 0.0, None
         else:
@@ -166,6 +172,14 @@ METHODS: dict[str, tuple[str, Callable[[PairContext], MethodResult]]] = {
     "hope-fixedk": ("HOPE with a single fixed k = 8", _hope(schedule=[8])),
     "hope-k4": ("HOPE with k_max = 4", _hope(k_max=4)),
     "hope-k12": ("HOPE with k_max = 12", _hope(k_max=12)),
+    "hope-fullres": (
+        "HOPE at each shape's own resolution (the resolution stage off)",
+        _hope(
+            config=MatchConfig(
+                resolution=dataclasses.replace(MatchConfig().resolution, enabled=False)
+            )
+        ),
+    ),
     "hope-rand25": ("HOPE from SHOT with 25% of it randomised", _hope(degrade=0.25)),
     "hope-rand50": ("HOPE from SHOT with 50% of it randomised", _hope(degrade=0.50)),
     "hope-rand75": ("HOPE from SHOT with 75% of it randomised", _hope(degrade=0.75)),

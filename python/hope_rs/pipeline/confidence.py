@@ -228,6 +228,9 @@ class ConfidenceStage(Stage):
     def skip_reason(self, state: MatchState):
         if not state.config.confidence.enabled:
             return "turned off (confidence=False)"
+        if state.confidence is not None:
+            # The "resolution" stage carries it over from the match at a common resolution.
+            return "carried over from the match at a common resolution"
         return None
 
     def run(self, state: MatchState) -> None:

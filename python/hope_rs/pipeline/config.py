@@ -56,6 +56,7 @@ __all__ = [
     "PartialConfig",
     "RefineConfig",
     "RepairConfig",
+    "ResolutionConfig",
     "SpectralConfig",
     "declared",
     "read_config",
@@ -410,6 +411,42 @@ class MultiscaleConfig:
     fine_passes_small: int = 2
     fine_passes_small_vertices: int = 60_000
     lift_ridge: float = 1e-3
+
+
+@dataclass(frozen=True)
+class ResolutionConfig:
+    """Matching at a common resolution (:mod:`hope_rs.pipeline.resolution`,
+    docs/decisions.md#resolution).
+
+    Each shape is measured in its own sqrt(area), so its vertex count is its vertex density:
+    when one shape has more than ``max_ratio`` times the other's vertices, the denser one is
+    clustered down to about the sparser one's count, the whole stage list matches the pair
+    there, and the map is lifted to the dense mesh.
+
+    Attributes
+    ----------
+    enabled : bool
+    max_ratio : float
+        Vertex-count ratio (denser / sparser) above which the denser shape is coarsened; at
+        least 1.
+    count_tolerance : float
+        The coarse copy's vertex count is within this share of the sparser shape's.
+    """
+
+    enabled: bool = True
+    max_ratio: float = field(default=2.0, metadata={"finite": True})
+    count_tolerance: float = 0.05
+
+    def __post_init__(self):
+        if not (_is_number(self.max_ratio) and self.max_ratio >= 1.0):
+            raise ValueError(
+                f"ResolutionConfig.max_ratio must be a finite number >= 1, got {self.max_ratio!r}"
+            )
+        if not (_is_number(self.count_tolerance) and 0.0 < self.count_tolerance < 1.0):
+            raise ValueError(
+                "ResolutionConfig.count_tolerance must be a number in (0, 1), "
+                f"got {self.count_tolerance!r}"
+            )
 
 
 def declared(option: str) -> dict:
@@ -775,7 +812,7 @@ class MatchConfig:
     shape : ShapeConfig
         Per-shape precomputation (descriptors, eigenbases, coarse copies) of shapes built
         from meshes; a :class:`~hope_rs.Shape` passed in keeps its own.
-    initial, refine, spectral, finish, multiscale, partial, confidence
+    initial, refine, spectral, finish, multiscale, resolution, partial, confidence
         The stages' settings.
     landmarks : LandmarkConfig
         What the caller's landmarks do, when there are any.
@@ -800,6 +837,7 @@ class MatchConfig:
     spectral: SpectralConfig = field(default_factory=SpectralConfig)
     finish: FinishConfig = field(default_factory=FinishConfig)
     multiscale: MultiscaleConfig = field(default_factory=MultiscaleConfig)
+    resolution: ResolutionConfig = field(default_factory=ResolutionConfig)
     confidence: ConfidenceConfig = field(default_factory=ConfidenceConfig)
     landmarks: LandmarkConfig = field(default_factory=LandmarkConfig)
     partial: PartialConfig = field(default_factory=PartialConfig)

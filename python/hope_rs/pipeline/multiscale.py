@@ -63,6 +63,7 @@ def lift_map(
     owner_a: np.ndarray,
     points_b: np.ndarray,
     ridge: float = MultiscaleConfig.lift_ridge,
+    centred: bool = False,
 ) -> np.ndarray:
     """A map of fine vertices from the coarse map ``g`` (coarse A → coarse B vertices).
 
@@ -72,19 +73,23 @@ def lift_map(
     squared edge) so that a degenerate
     neighbourhood shrinks towards zero instead of blowing up) moves ``i`` to
     ``coarse_b.vertices[g[c]] + T_c (points_a[i] - x_c)``, and ``i`` takes the fine vertex of
-    B (``points_b``) nearest that point."""
+    B (``points_b``) nearest that point. With ``centred`` the anchor ``(x_c, image of c)`` is
+    the mean of the closed 1-ring of ``c`` and of its images instead: a coarse map off by up
+    to a coarse edge here and there is averaged over the ring (the match at a common
+    resolution lifts a map onto a denser B this way, each vertex of A its own coarse vertex)."""
     xa, yb = coarse_a.vertices, coarse_b.vertices
     n = xa.shape[0]
     e = _edges(coarse_a.faces)
     da = xa[e[:, 1]] - xa[e[:, 0]]
     db = yb[g[e[:, 1]]] - yb[g[e[:, 0]]]
 
+    ring = sp.csr_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+
     def moments(u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Sum over each vertex's edges of u v^T, then over its 1-ring: the 2-ring's edges
         (a 1-ring's edges alone are often nearly coplanar, or two)."""
         outer = (u[:, :, None] * v[:, None, :]).reshape(-1, 9)
         own = np.stack([np.bincount(e[:, 0], outer[:, k], minlength=n) for k in range(9)], 1)
-        ring = sp.csr_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
         return (own + ring @ own).reshape(n, 3, 3)
 
     p, q = moments(da, da), moments(db, da)
@@ -92,7 +97,12 @@ def lift_map(
     # A vertex without edges gets a unit ridge only: its fine vertices go to its image.
     damp = np.where(damp > 0, damp, 1.0)
     t = q @ np.linalg.inv(p + damp[:, None, None] * np.eye(3))
-    target = yb[g][owner_a] + np.einsum("nij,nj->ni", t[owner_a], points_a - xa[owner_a])
+    anchor_a, anchor_b = xa, yb[g]
+    if centred:
+        degree = np.asarray(ring.sum(axis=1)).ravel() + 1.0
+        anchor_a = (xa + ring @ xa) / degree[:, None]
+        anchor_b = (yb[g] + ring @ yb[g]) / degree[:, None]
+    target = anchor_b[owner_a] + np.einsum("nij,nj->ni", t[owner_a], points_a - anchor_a[owner_a])
     return cKDTree(points_b).query(target)[1].astype(np.int64)
 
 

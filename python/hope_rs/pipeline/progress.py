@@ -26,11 +26,13 @@ logger = logging.getLogger("hope_rs")
 logger.addHandler(logging.NullHandler())
 
 #: Every stage name a match can report, in the order they run. "coarse" and "lift" appear
-#: only with ``multiscale=True``, "landmarks" only with landmarks; "polish" is the
-#: refinement's last, not one-to-one step.
+#: only with ``multiscale=True``, "resolution" only when one shape is much denser than the
+#: other, "landmarks" only with landmarks; "polish" is the refinement's last, not one-to-one
+#: step.
 STAGES = (
     "shapes",
     "partial",
+    "resolution",
     "descriptors",
     "init",
     "coarse",

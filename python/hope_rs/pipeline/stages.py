@@ -13,6 +13,7 @@ from .multiscale import MultiscaleStage
 from .orientation_repair import OrientStage
 from .partial import PartialStage
 from .refine import RefineStage
+from .resolution import ResolutionStage
 from .shared_faces import FinishStage
 from .spectral import SpectralStage
 from .state import Stage
@@ -25,6 +26,7 @@ def default_stages() -> list[Stage]:
     spectral pass's background threads)."""
     return [
         PartialStage(),  # "partial": only when one shape is a part of the other
+        ResolutionStage(),  # "resolution": only when one shape is much denser than the other
         MultiscaleStage(),  # "coarse", "lift": multiscale=True only
         DescriptorStage(),  # "descriptors"
         InitialStage(),  # "init"

@@ -1,0 +1,140 @@
+"""Matching at a common resolution: the denser shape clustered down to the sparser one's
+vertex density, the pair matched there, the map lifted to the dense mesh.
+
+A k-hop ball is a number of edges, so on a mesh with edges five times shorter the same k
+covers a patch twenty-five times smaller, and the overlap cost compares unlike
+neighbourhoods. Each shape is measured in its own sqrt(area), so its vertex count is its
+density: when one shape has more than ``ResolutionConfig.max_ratio`` times the other's
+vertices, the "resolution" stage
+
+1. clusters the denser shape's vertices on a uniform grid sized for the sparser one's count
+   (:func:`hope_rs.geometry.coarsen.coarse_to_count`; each coarse vertex is a vertex of the
+   dense mesh, and owns the dense vertices of its cell);
+2. matches the pair at that common resolution with the whole stage list (descriptors,
+   refinement, spectral pass, finish);
+3. lifts the map (:func:`hope_rs.pipeline.multiscale.lift_map`, ``centred``): each vertex
+   of A (when A is the dense shape, the coarse vertex of its cell) is carried by the local
+   linear map of its ring's edges onto their images, anchored at the ring's centroid and the
+   centroid of its images, and takes the vertex of B nearest that point: the coarse map's
+   offsets of up to a coarse edge average out over the ring.
+
+The map is final, and its confidence is the coarse match's (each dense vertex of A takes its
+coarse vertex's): the stages after it do not run (docs/decisions.md#resolution).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from ..geometry.coarsen import Coarse, coarse_to_count
+from ..shape import Shape
+from .landmarks import coarse_landmarks
+from .multiscale import lift_map
+from .state import QUIET, Halt, MatchState, Stage
+
+__all__ = ["ResolutionStage", "denser_side"]
+
+
+def denser_side(a: Shape, b: Shape, max_ratio: float) -> str | None:
+    """ "a" or "b" when that shape has more than ``max_ratio`` times the other's vertices,
+    else ``None``."""
+    if a.n_vertices > max_ratio * b.n_vertices:
+        return "a"
+    if b.n_vertices > max_ratio * a.n_vertices:
+        return "b"
+    return None
+
+
+def coarse_copy(shape: Shape, n_target: int, tolerance: float) -> tuple[Coarse, Shape] | None:
+    """(Coarse, its Shape) of ``shape``'s internal mesh with about ``n_target`` vertices, or
+    ``None`` when the clustering leaves no face. The copy keeps the oriented faces as they
+    come (a second orientation would flip clustering's non-manifold spots)."""
+    c = coarse_to_count(shape.internal, n_target, tolerance=tolerance)
+    if c is None:
+        return None
+    return c, Shape(c.mesh, k_max=shape.k_max, orient=False, config=shape.config)
+
+
+class ResolutionStage(Stage):
+    """The "resolution" stage (see the module notes): runs only when one shape is more than
+    ``ResolutionConfig.max_ratio`` times denser than the other, with a descriptor start (a
+    given initial map is refined at full resolution) and no part detected."""
+
+    name = "resolution"
+
+    def __init__(self):
+        self.side: str | None = None
+
+    def skip_reason(self, state: MatchState):
+        cfg = state.config.resolution
+        if not cfg.enabled or state.partial is not None:
+            return QUIET
+        self.side = denser_side(state.a, state.b, cfg.max_ratio)
+        if self.side is None:
+            return QUIET
+        if not isinstance(state.init, str):
+            return "an initial map was given (init=...): refined at full resolution"
+        return None
+
+    def run(self, state: MatchState) -> Halt | None:
+        a, b, cfg = state.a, state.b, state.config
+        assert self.side is not None  # skip_reason found the denser side
+        dense, sparse = (a, b) if self.side == "a" else (b, a)
+        name = self.side.upper()
+        detail = (
+            f"{name} ({dense.n_vertices} vertices) is more than {cfg.resolution.max_ratio:g} "
+            f"times denser than the other ({sparse.n_vertices})"
+        )
+        t = state.log.start("resolution", detail=detail)
+        level = coarse_copy(dense, sparse.n_vertices, cfg.resolution.count_tolerance)
+        if level is None:
+            state.timings["resolution"] = time.perf_counter() - t
+            why = f"{detail}, but clustering it leaves no face: matched at full resolution"
+            state.log.ran("resolution", state.timings["resolution"], why)
+            return None
+        coarse, cs = level
+        ident_a = np.arange(a.n_vertices)
+        ident_b = np.arange(b.n_vertices)
+        lm = None
+        if state.landmarks is not None:
+            owner_a = coarse.owner if self.side == "a" else ident_a
+            owner_b = coarse.owner if self.side == "b" else ident_b
+            lm = coarse_landmarks(state.landmarks, owner_a, owner_b)
+            if lm is not None and self.side != "a":
+                lm[:, 0] = a.order[lm[:, 0]]  # A keeps its own input numbering
+            if lm is not None and self.side != "b":
+                lm[:, 1] = b.order[lm[:, 1]]
+        nested = dataclasses.replace(
+            cfg,
+            resolution=dataclasses.replace(cfg.resolution, enabled=False),
+            multiscale=dataclasses.replace(cfg.multiscale, enabled=False),
+        )
+        pa, pb = (cs, b) if self.side == "a" else (a, cs)
+        assert state.run is not None  # the runner gives every state its nested runner
+        res = state.run(pa, pb, state.init, nested, callback=state.callback, landmarks=lm)
+        ridge = cfg.multiscale.lift_ridge
+        if self.side == "b":
+            # Each vertex of A is its own coarse vertex; its image a vertex of the coarse B.
+            g = res.map[a.order]
+            ident = np.arange(a.n_vertices)
+            f = lift_map(a.internal, coarse.mesh, g, a.points, ident, b.points, ridge, True)
+        else:
+            g = b.rank[res.map]  # coarse vertex (the copy's input numbering) -> B internal
+            f = lift_map(coarse.mesh, b.internal, g, a.points, coarse.owner, b.points, ridge, True)
+        state.f0 = state.f = state.hope_map = f.astype(np.int64)
+        if res.confidence is not None:
+            # Measured where the map was made: a dense A's many-to-one map to a sparse B keeps
+            # few of its 2-rings' distances however right it is.
+            c = res.confidence
+            state.confidence = c[coarse.owner] if self.side == "a" else c[a.order]
+        state.timings.update({f"resolution.{k}": v for k, v in res.timings.items()})
+        state.timings["resolution"] = time.perf_counter() - t
+        state.log.ran(
+            "resolution",
+            state.timings["resolution"],
+            f"{detail}: {name} clustered to {cs.n_vertices} vertices, matched there, lifted",
+        )
+        return Halt(f"the map is lifted from the match at {cs.n_vertices} vertices of {name}")

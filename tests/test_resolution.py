@@ -1,0 +1,119 @@
+"""Matching at a common resolution: the coarsening to a vertex count, the stage's trigger,
+the lifted map on subdivided copies, and the mixed-resolution benchmark sets."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from meshes import bumpy_sphere
+
+import hope_rs
+from hope_rs import MatchConfig
+from hope_rs.evaluation.datasets import pairs_of
+from hope_rs.evaluation.evaluate import geodesic_errors
+from hope_rs.evaluation.resolution import write_resolution_sets
+from hope_rs.geometry.coarsen import coarse_to_count
+from hope_rs.geometry.subdivide import subdivide
+from hope_rs.pipeline.config import ResolutionConfig
+
+
+def test_subdivision_keeps_the_original_vertices_first():
+    m = hope_rs.Mesh(*bumpy_sphere(300, 1))
+    s = subdivide(m, 2)
+    np.testing.assert_array_equal(s.vertices[: m.n_vertices], m.vertices)
+    assert s.n_faces == 16 * m.n_faces
+    # A closed mesh: V - E + F stays 2 (each edge adds a vertex).
+    assert s.n_vertices - 3 * s.n_faces // 2 + s.n_faces == 2
+
+
+@pytest.mark.parametrize("target", [200, 700])
+def test_coarsening_hits_the_vertex_count(target):
+    m = subdivide(hope_rs.Mesh(*bumpy_sphere(600, 2)), 1)
+    c = coarse_to_count(m, target)
+    assert c is not None
+    assert abs(c.sites.size / target - 1) <= 0.05
+    # Each coarse vertex is a vertex of the mesh and owns itself; every vertex has an owner.
+    np.testing.assert_array_equal(c.owner[c.sites], np.arange(c.sites.size))
+    np.testing.assert_array_equal(c.mesh.vertices, m.vertices[c.sites])
+    assert coarse_to_count(m, m.n_vertices) is None
+
+
+def test_the_setting_is_checked():
+    with pytest.raises(ValueError, match="max_ratio"):
+        ResolutionConfig(max_ratio=0.5)
+    with pytest.raises(ValueError, match="count_tolerance"):
+        ResolutionConfig(count_tolerance=0.0)
+
+
+def _errors(b, res, n):
+    idx = np.arange(n)
+    return geodesic_errors(b, res.map, a_idx=idx, b_idx=idx)
+
+
+def test_the_stage_runs_only_when_one_shape_is_much_denser():
+    m = hope_rs.Mesh(*bumpy_sphere(400, 3))
+    dense = subdivide(m, 1)
+    same = hope_rs.match(m, hope_rs.Mesh(*bumpy_sphere(420, 4)), max_passes=1)
+    assert "resolution" not in [s.name for s in same.stages]
+    res = hope_rs.match(m, dense, max_passes=1)
+    stage = res.stage("resolution")
+    assert stage.ran and "B clustered to" in stage.reason
+    assert res.map.shape == (m.n_vertices,) and res.map.max() < dense.n_vertices
+    assert res.confidence is not None and res.confidence.shape == (m.n_vertices,)
+    off = dataclasses.replace(MatchConfig().resolution, enabled=False)
+    full = hope_rs.match(m, dense, max_passes=1, config=MatchConfig(resolution=off))
+    assert "resolution" not in [s.name for s in full.stages]
+
+
+@pytest.mark.slow
+def test_the_lifted_map_of_a_subdivided_copy(faust_pair):
+    """The same body against its subdivided copy (4x the vertices), both ways: each original
+    vertex lands within about a coarse edge of itself (the match at the common resolution is
+    between two triangulations of the body; the lift does not make it exact)."""
+    a, _ = faust_pair
+    dense = subdivide(a, 1)
+    n = a.n_vertices
+    to_dense = hope_rs.match(a, dense)
+    assert to_dense.stage("resolution").ran
+    e = _errors(dense, to_dense, n)
+    assert e.mean() < 0.02 and np.quantile(e, 0.95) < 0.04
+    assert not to_dense.quality.likely_failed
+    from_dense = hope_rs.match(dense, a)
+    assert from_dense.stage("resolution").ran
+    e = _errors(a, from_dense, n)
+    assert np.mean(e == 0) > 0.4 and e.mean() < 0.015
+
+
+def test_the_benchmark_sets_carry_the_ground_truth(tmp_path):
+    src = tmp_path / "src"
+    src.mkdir()
+    for i in range(2):
+        v, f = bumpy_sphere(1500, 5 + i)
+        with open(src / f"s{i}.off", "w") as fh:
+            fh.write(f"OFF\n{len(v)} {len(f)} 0\n")
+            np.savetxt(fh, v)
+            np.savetxt(fh, np.column_stack([np.full(len(f), 3), f]), fmt="%d")
+    written = write_resolution_sets(src, tmp_path / "out", conditions=("sub1", "dec1k"))
+    assert sorted(p.name for p in written) == sorted(
+        ["src_sub1", "src_sub1_rev", "src_dec1k", "src_dec1k_rev"]
+    )
+    for folder in written:
+        (pair,) = pairs_of(folder)
+        ma, mb = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
+        ai, bi = pair.ground_truth(ma.n_vertices, mb.n_vertices)
+        assert ai.size == bi.size == 1500
+        if folder.name == "src_sub1":
+            assert mb.n_vertices > 3 * ma.n_vertices
+            np.testing.assert_allclose(
+                mb.vertices[bi], hope_rs.load_mesh(src / "s1.off").vertices[bi]
+            )
+        if folder.name == "src_dec1k":
+            assert 800 <= ma.n_vertices <= 1050
+            # One component, no isolated vertex: every vertex is reachable on the surface.
+            assert np.unique(ma.faces).size == ma.n_vertices
+            # Each ground-truth point goes to the nearest kept vertex.
+            orig = hope_rs.load_mesh(src / "s0.off")
+            gap = np.linalg.norm(ma.vertices[ai] - orig.vertices[np.arange(1500)], axis=1)
+            assert np.median(gap) < 0.1 * orig.scale
