@@ -76,6 +76,7 @@ class DescriptorStage(Stage):
     """The "descriptors" stage: both shapes' descriptors of the kind ``state.init`` names."""
 
     name = "descriptors"
+    runs_on_final_map = False
 
     def skip_reason(self, state: MatchState):
         return _given_start(state)
@@ -94,6 +95,7 @@ class InitialStage(Stage):
     """The "init" stage: ``state.f0``, each vertex's nearest descriptor."""
 
     name = "init"
+    runs_on_final_map = False
 
     def skip_reason(self, state: MatchState):
         return _given_start(state)

@@ -142,6 +142,7 @@ class MultiscaleStage(Stage):
     """
 
     name = "coarse"
+    runs_on_final_map = False
 
     def skip_reason(self, state: MatchState):
         if not state.config.multiscale.enabled:

@@ -115,6 +115,7 @@ class PartialStage(Stage):
     views) and ``state.partial`` says which is the part. Not recorded when neither is."""
 
     name = "partial"
+    runs_on_final_map = False
 
     def __init__(self):
         self.info: PartialInfo | None = None

@@ -149,6 +149,7 @@ class RefineStage(Stage):
     """
 
     name = "refine"
+    runs_on_final_map = False
 
     def run(self, state: MatchState) -> Halt | None:
         a, b, cfg, hooks = state.a, state.b, state.config.refine, state.hooks

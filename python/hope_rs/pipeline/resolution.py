@@ -64,6 +64,7 @@ class ResolutionStage(Stage):
     given initial map is refined at full resolution) and no part detected."""
 
     name = "resolution"
+    runs_on_final_map = False
 
     def __init__(self):
         self.side: str | None = None

@@ -153,6 +153,7 @@ class FinishStage(Stage):
     """
 
     name = "faces"
+    runs_on_final_map = False
 
     def __init__(self):
         self.attached = False

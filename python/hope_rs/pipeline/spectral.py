@@ -485,6 +485,7 @@ class SpectralStage(Stage):
     """
 
     name = "spectral"
+    runs_on_final_map = False
     alongside = "refine"
 
     def __init__(self):

@@ -58,7 +58,7 @@ QUIET = object()
 @dataclass(frozen=True)
 class Halt:
     """A stage's outcome: the map is final. The runner skips every later stage that would
-    change it (those without :attr:`Stage.runs_on_final_map`), recording ``reason``."""
+    remake it (those with :attr:`Stage.runs_on_final_map` False), recording ``reason``."""
 
     reason: str
 
@@ -187,9 +187,10 @@ class Stage:
     """
 
     name: str = ""
-    #: Whether the stage still runs once a stage made the map final (:class:`Halt`): those
-    #: that only read the map or its start (the confidence, the landmarks' re-pinning).
-    runs_on_final_map: bool = False
+    #: Whether the stage still runs once a stage made the map final (:class:`Halt`). The
+    #: stages that make a map set it False; a stage that reads or post-processes the final
+    #: map (the confidence, the landmarks' re-pinning, a caller's own stage) keeps True.
+    runs_on_final_map: bool = True
     #: The name of an earlier stage while which this stage's :meth:`background` work runs.
     alongside: str | None = None
 
