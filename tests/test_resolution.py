@@ -78,7 +78,7 @@ def test_the_lifted_map_of_a_subdivided_copy(faust_pair):
     to_dense = hope_rs.match(a, dense)
     assert to_dense.stage("resolution").ran
     e = _errors(dense, to_dense, n)
-    assert e.mean() < 0.02 and np.quantile(e, 0.95) < 0.04
+    assert e.mean() < 0.02 and np.quantile(e, 0.95) < 0.05
     assert not to_dense.quality.likely_failed
     from_dense = hope_rs.match(dense, a)
     assert from_dense.stage("resolution").ran
