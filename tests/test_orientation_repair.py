@@ -104,7 +104,10 @@ def test_a_region_turned_over_on_a_remeshed_pair_is_repaired():
     start = np.where(side, sym[truth], truth)
     assert geodesic_errors(mb, start, a_idx=ai, b_idx=bi).mean() > 0.1
     res = hope_rs.match(a, b, init=start)
-    assert res.stage("orient").ran and "chose kept" not in res.stage("orient").reason
+    # The refinement's region check may already set the swapped half right; else the orient
+    # stage must, with a map other than the one it was given.
+    orient = res.stage("orient")
+    assert not orient.ran or "chose kept" not in orient.reason
     assert geodesic_errors(mb, res.map, a_idx=ai, b_idx=bi).mean() < 0.04
     assert res.quality.flipped_share < 0.2
 

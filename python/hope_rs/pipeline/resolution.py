@@ -35,15 +35,22 @@ from .landmarks import coarse_landmarks
 from .multiscale import lift_map
 from .state import QUIET, Halt, MatchState, Stage
 
-__all__ = ["ResolutionStage", "denser_side"]
+__all__ = ["ResolutionStage", "denser_side", "density"]
+
+
+def density(s: Shape) -> float:
+    """Vertices per unit area, in the units the shape is matched in (its own sqrt(area) for a
+    whole shape; a part viewed at the whole's scale has less than unit area)."""
+    return s.n_vertices / (s.internal.scale / s.scale) ** 2
 
 
 def denser_side(a: Shape, b: Shape, max_ratio: float) -> str | None:
-    """ "a" or "b" when that shape has more than ``max_ratio`` times the other's vertices,
-    else ``None``."""
-    if a.n_vertices > max_ratio * b.n_vertices:
+    """ "a" or "b" when that shape has more than ``max_ratio`` times the other's vertex
+    density (:func:`density`), else ``None``."""
+    da, db = density(a), density(b)
+    if da > max_ratio * db:
         return "a"
-    if b.n_vertices > max_ratio * a.n_vertices:
+    if db > max_ratio * da:
         return "b"
     return None
 
