@@ -145,14 +145,29 @@ def _face_edges(faces: np.ndarray) -> np.ndarray:
     return np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), 1)
 
 
+def _edge_counts(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct ``(low, high)`` face edges, sorted, and how many faces hold each.
+
+    Each edge is one int64 key ``low * n + high`` (n above every index), whose sorted order is
+    the rows' lexicographic order: a 1-D sort, many times faster than ``np.unique(axis=0)``."""
+    e = _face_edges(faces)
+    if e.size == 0 or e.min() < 0:
+        u, count = np.unique(e, axis=0, return_counts=True)
+        return u, count
+    n = int(e.max()) + 1
+    e64 = e.astype(np.int64, copy=False)
+    keys, count = np.unique(e64[:, 0] * n + e64[:, 1], return_counts=True)
+    return np.stack([keys // n, keys % n], axis=1).astype(e.dtype, copy=False), count
+
+
 def unique_edges(faces: np.ndarray) -> np.ndarray:
     """The undirected edges of ``faces``, each once as ``(low, high)``, sorted."""
-    return np.unique(_face_edges(faces), axis=0)
+    return _edge_counts(faces)[0]
 
 
 def boundary_edges(faces: np.ndarray) -> np.ndarray:
     """The edges of one face only (a surface's boundary), each once as ``(low, high)``, sorted."""
-    u, count = np.unique(_face_edges(faces), axis=0, return_counts=True)
+    u, count = _edge_counts(faces)
     return u[count == 1]
 
 
