@@ -98,10 +98,12 @@ def _projected(
     # One cast, then ``x.T @ x`` on a single buffer, which NumPy runs as a symmetric
     # rank-k update (faster than the mixed float64 @ float32 product, same values).
     s64 = sample.astype(np.float64)
-    cov = s64.T @ s64
     # One BLAS thread: a product can give other bits on two threads than on one, so the map
-    # would depend on the process's thread count (a Ray worker runs with one).
+    # would depend on the process's thread count (a Ray worker runs with one). The covariance
+    # too: OpenBLAS's threads synchronise many times in it, and beside other busy processes
+    # waiting on each other made it several times slower than one thread.
     with single_threaded_blas():
+        cov = s64.T @ s64
         _, vecs = np.linalg.eigh(cov)
         basis = vecs[:, ::-1][:, : config.pca_dims].astype(np.float32).astype(np.float64)
         # In float64, rounded to float32: the same bits whatever the BLAS kernel, short of
