@@ -24,6 +24,9 @@ class Iteration:
     #: a repair step and for the polish, which is not one to one).
     cost_seconds: float = 0.0
     assign_seconds: float = 0.0
+    #: A k-hop step that took the result of an earlier step with the same inputs instead of
+    #: solving (see :class:`~hope_rs.pipeline.refine_steps.KHop`).
+    reused: bool = False
 
 
 @dataclass

@@ -137,6 +137,14 @@ class RefineState:
     trusted_share: float = -1.0
     #: The witnesses of the step running (recorded in its Iteration).
     w: np.ndarray | None = None
+    #: The k-hop steps' last inputs and results, by (k, from ``stay_pass`` on): (map in,
+    #: voters, map out). A step's result depends on nothing else (see :class:`KHop`).
+    seen: dict[tuple[int, bool], tuple[np.ndarray, np.ndarray, np.ndarray]] = field(
+        default_factory=dict
+    )
+    #: The step running took an earlier step's result instead of solving (recorded in its
+    #: Iteration).
+    reused: bool = False
     _trusted: tuple[np.ndarray, np.ndarray] | None = None
 
     def trusted_witnesses(self) -> np.ndarray:
@@ -254,7 +262,13 @@ class GlobalRepair(PassStep):
 class KHop(PassStep):
     """One HOPE step at hop radius ``k`` (:func:`~hope_rs.pipeline.overlap.assign_by_overlap`);
     from pass ``stay_pass`` on, while some vertex is not a voter, a voter's current match is
-    worth ``stay_counts`` more overlap counts."""
+    worth ``stay_counts`` more overlap counts.
+
+    The result is a function of k, the map and whether the pass is ``stay_pass`` or later (the
+    voters are a function of the map), so a step whose map is the one the last step at the same
+    k started from, on the same side of ``stay_pass``, takes that step's result without solving
+    (a map that earlier steps left unchanged comes back a pass later): the same map
+    bit for bit."""
 
     k: int
 
@@ -263,11 +277,20 @@ class KHop(PassStep):
 
     def run(self, st: RefineState):
         cfg = st.config
+        late = st.n_pass >= cfg.stay_pass
+        key = (self.k, late)
+        last = st.seen.get(key)
+        if last is not None and np.array_equal(last[0], st.f):
+            st.w, st.reused = last[1].copy(), True
+            return last[2].copy()
         st.w = st.voters()
-        stay = cfg.stay_counts if st.n_pass >= cfg.stay_pass and not st.w.all() else 0
-        return overlap.assign_by_overlap(
+        stay = cfg.stay_counts if late and not st.w.all() else 0
+        g = overlap.assign_by_overlap(
             st.a, st.b, self.k, st.f, st.w, config=cfg, stay=stay, clock=st.clock
         )
+        # Copies: a caller may keep and change the maps it is given.
+        st.seen[key] = (st.f.copy(), st.w.copy(), np.array(g, copy=True))
+        return g
 
 
 class AnnounceLastPass(PassStep):
@@ -383,7 +406,9 @@ def run_steps(st: RefineState, steps: list[PassStep]) -> bool:
             polish=step.polish,
             cost_seconds=st.clock.cost - cost,
             assign_seconds=st.clock.assign - assign,
+            reused=st.reused,
         )
+        st.reused = False
         st.history.append(it)
         st.events.step(it)
     return True
