@@ -16,7 +16,8 @@ the auction's map bit for bit), and the totals of cold and warm (must agree: bot
 The summary prints warm / cold per pair, and the cost of an exact-reproduction policy: warm,
 plus the auction whenever the warm optimum is not unique or the warm start does not apply.
 
-Also counts the HOPE steps whose map moved no vertex (``Iteration.changed == 0``).
+Also counts the HOPE steps whose map moved no vertex (``Iteration.changed == 0``) and those
+the refinement did not solve because their inputs repeated (``Iteration.reused``).
 
 Run from the repository root::
 
@@ -209,7 +210,9 @@ def bench_pair(name: str, data: Path, repeats: int) -> list[str]:
         (
             f"- assignment steps that moved no vertex: {len(still)} of {len(steps)} "
             f"(steps {still}); refinement k-hop steps (history): "
-            f"{sum(it.changed == 0 for it in refine)} of {len(refine)}"
+            f"{sum(it.changed == 0 for it in refine)} of {len(refine)}, of which "
+            f"{sum(it.reused for it in refine)} took an earlier step's result unsolved "
+            "(Iteration.reused: the same map at the same k)"
         ),
         "",
     ]
