@@ -40,7 +40,7 @@ from hope_rs.pipeline.confidence import (
     confidence_features,
     flipped_share,
     match_quality,
-    predict_confidence,
+    vertex_confidence,
 )
 from hope_rs.pipeline.config import ConfidenceConfig
 from hope_rs.pipeline.runner import run_match
@@ -96,7 +96,7 @@ def matched(pair: Pair, config: MatchConfig, init: str, cache: Path) -> dict:
 
 def features_of(pair: Pair, m: dict, config: MatchConfig) -> tuple[np.ndarray, float]:
     """:func:`confidence_features` of the cached maps, rows in A's input numbering, and the
-    final map's :func:`flipped_share`."""
+    final map's :func:`flipped_share` (the model's inputs, for ``scripts/confidence_fit.py``)."""
     a = Shape(hope_rs.load_mesh(pair.a), k_max=config.k_max, config=config.shape)
     b = Shape(hope_rs.load_mesh(pair.b), k_max=config.k_max, config=config.shape)
     z = None if (m["zoomout"] < 0).any() else a.map_in(b, m["zoomout"])
@@ -114,6 +114,26 @@ def features_of(pair: Pair, m: dict, config: MatchConfig) -> tuple[np.ndarray, f
     return x[a.rank], flipped_share(a, b, f)
 
 
+def confidence_of(pair: Pair, m: dict, config: MatchConfig) -> tuple[np.ndarray, float]:
+    """The confidence stage's :func:`vertex_confidence` of the cached maps, in A's input
+    numbering, and the final map's :func:`flipped_share`."""
+    a = Shape(hope_rs.load_mesh(pair.a), k_max=config.k_max, config=config.shape)
+    b = Shape(hope_rs.load_mesh(pair.b), k_max=config.k_max, config=config.shape)
+    z = None if (m["zoomout"] < 0).any() else a.map_in(b, m["zoomout"])
+    f = a.map_in(b, m["map"])
+    c = vertex_confidence(
+        a,
+        b,
+        f,
+        a.map_in(b, m["hope"]),
+        z,
+        config.confidence,
+        min_consistent=config.refine.min_consistent,
+        repair=config.refine.repair,
+    )
+    return c[a.rank], flipped_share(a, b, f)
+
+
 def auroc(score: np.ndarray, right: np.ndarray) -> float:
     """:func:`hope_rs.evaluation.evaluate.confidence_auroc` of ``score`` for right/wrong labels."""
     return confidence_auroc(score, np.where(right, 0.0, 1.0), wrong_above=0.5)
@@ -121,8 +141,7 @@ def auroc(score: np.ndarray, right: np.ndarray) -> float:
 
 def scored(pair: Pair, m: dict, config: MatchConfig) -> tuple[np.ndarray, np.ndarray, MatchQuality]:
     """(confidence at the scored vertices, right or not, the pair's :class:`MatchQuality`)."""
-    x, flipped = features_of(pair, m, config)
-    c = predict_confidence(x, config.confidence)
+    c, flipped = confidence_of(pair, m, config)
     quality = match_quality(c, config.confidence, flipped=flipped)
     return c[m["a_idx"]], m["errors"] <= WRONG_ABOVE, quality
 
