@@ -434,19 +434,8 @@ class ResolutionConfig:
     """
 
     enabled: bool = True
-    max_ratio: float = field(default=2.0, metadata={"finite": True})
-    count_tolerance: float = 0.05
-
-    def __post_init__(self):
-        if not (_is_number(self.max_ratio) and self.max_ratio >= 1.0):
-            raise ValueError(
-                f"ResolutionConfig.max_ratio must be a finite number >= 1, got {self.max_ratio!r}"
-            )
-        if not (_is_number(self.count_tolerance) and 0.0 < self.count_tolerance < 1.0):
-            raise ValueError(
-                "ResolutionConfig.count_tolerance must be a number in (0, 1), "
-                f"got {self.count_tolerance!r}"
-            )
+    max_ratio: float = field(default=2.0, metadata={"finite": True, "range": (1.0, None)})
+    count_tolerance: float = field(default=0.05, metadata={"range": (0.0, 1.0), "exclusive": True})
 
 
 def declared(option: str) -> dict:
