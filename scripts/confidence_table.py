@@ -94,9 +94,8 @@ def matched(pair: Pair, config: MatchConfig, init: str, cache: Path) -> dict:
     return {**out, "cached": False}
 
 
-def features_of(pair: Pair, m: dict, config: MatchConfig) -> tuple[np.ndarray, float]:
-    """:func:`confidence_features` of the cached maps, rows in A's input numbering, and the
-    final map's :func:`flipped_share` (the model's inputs, for ``scripts/confidence_fit.py``)."""
+def _internal(pair: Pair, m: dict, config: MatchConfig):
+    """``(a, b, f, features, flipped)`` of the cached maps, in the shapes' internal numbering."""
     a = Shape(hope_rs.load_mesh(pair.a), k_max=config.k_max, config=config.shape)
     b = Shape(hope_rs.load_mesh(pair.b), k_max=config.k_max, config=config.shape)
     z = None if (m["zoomout"] < 0).any() else a.map_in(b, m["zoomout"])
@@ -111,27 +110,21 @@ def features_of(pair: Pair, m: dict, config: MatchConfig) -> tuple[np.ndarray, f
         min_consistent=config.refine.min_consistent,
         repair=config.refine.repair,
     )
-    return x[a.rank], flipped_share(a, b, f)
+    return a, b, f, x, flipped_share(a, b, f)
+
+
+def features_of(pair: Pair, m: dict, config: MatchConfig) -> tuple[np.ndarray, float]:
+    """:func:`confidence_features` of the cached maps, rows in A's input numbering, and the
+    final map's :func:`flipped_share` (the model's inputs, for ``scripts/confidence_fit.py``)."""
+    a, _, _, x, flipped = _internal(pair, m, config)
+    return x[a.rank], flipped
 
 
 def confidence_of(pair: Pair, m: dict, config: MatchConfig) -> tuple[np.ndarray, float]:
     """The confidence stage's :func:`vertex_confidence` of the cached maps, in A's input
     numbering, and the final map's :func:`flipped_share`."""
-    a = Shape(hope_rs.load_mesh(pair.a), k_max=config.k_max, config=config.shape)
-    b = Shape(hope_rs.load_mesh(pair.b), k_max=config.k_max, config=config.shape)
-    z = None if (m["zoomout"] < 0).any() else a.map_in(b, m["zoomout"])
-    f = a.map_in(b, m["map"])
-    c = vertex_confidence(
-        a,
-        b,
-        f,
-        a.map_in(b, m["hope"]),
-        z,
-        config.confidence,
-        min_consistent=config.refine.min_consistent,
-        repair=config.refine.repair,
-    )
-    return c[a.rank], flipped_share(a, b, f)
+    a, b, f, x, flipped = _internal(pair, m, config)
+    return vertex_confidence(a, b, f, x, config.confidence)[a.rank], flipped
 
 
 def auroc(score: np.ndarray, right: np.ndarray) -> float:

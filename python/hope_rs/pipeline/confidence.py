@@ -204,35 +204,15 @@ def predict_confidence(features: np.ndarray, config: ConfidenceConfig = Confiden
 
 
 def vertex_confidence(
-    a: Shape,
-    b: Shape,
-    f: np.ndarray,
-    hope: np.ndarray | None = None,
-    zoomout: np.ndarray | None = None,
-    config: ConfidenceConfig = ConfidenceConfig(),
-    *,
-    min_consistent: float = RefineConfig.min_consistent,
-    repair: RepairConfig = RepairConfig(),
-    among: np.ndarray | None = None,
+    a: Shape, b: Shape, f: np.ndarray, features: np.ndarray, config: ConfidenceConfig
 ) -> np.ndarray:
-    """The confidence stage's per-vertex confidence of ``f`` (arguments as
-    :func:`confidence_features`), (n_a,) in [0, 1]: :func:`predict_confidence` times
+    """The confidence stage's per-vertex confidence of ``f`` from its
+    :func:`confidence_features`, (n_a,) in [0, 1]: :func:`predict_confidence` times
     :func:`turned_factor`; 0 everywhere when A or B has fewer than ``config.min_vertices``
     vertices (too small for any feature to tell a right map from a wrong one)."""
     if min(a.n_vertices, b.n_vertices) < config.min_vertices:
         return np.zeros(a.n_vertices)
-    x = confidence_features(
-        a,
-        b,
-        f,
-        hope,
-        zoomout,
-        config,
-        min_consistent=min_consistent,
-        repair=repair,
-        among=among,
-    )
-    return predict_confidence(x, config) * turned_factor(a, b, f, config)
+    return predict_confidence(features, config) * turned_factor(a, b, f, config)
 
 
 def turned_factor(a: Shape, b: Shape, f: np.ndarray, config: ConfidenceConfig) -> np.ndarray:
@@ -272,7 +252,7 @@ class ConfidenceStage(Stage):
         t = state.log.start("confidence", detail="per-vertex confidence of the final map")
         counterpart = None if state.partial is None else state.partial.counterpart
         assert state.f is not None  # the stages before it made the map
-        state.confidence = vertex_confidence(
+        x = confidence_features(
             state.a,
             state.b,
             state.f,
@@ -283,6 +263,7 @@ class ConfidenceStage(Stage):
             repair=state.config.refine.repair,
             among=counterpart,
         )
+        state.confidence = vertex_confidence(state.a, state.b, state.f, x, cfg)
         if counterpart is not None:
             # A vertex of the whole without a counterpart on the part has no right match.
             state.confidence = np.where(counterpart, state.confidence, 0.0)
