@@ -40,7 +40,7 @@ from hope_rs.pipeline.confidence import (
     confidence_features,
     flipped_share,
     match_quality,
-    predict_confidence,
+    vertex_confidence,
 )
 from hope_rs.pipeline.config import ConfidenceConfig
 from hope_rs.pipeline.runner import run_match
@@ -94,9 +94,8 @@ def matched(pair: Pair, config: MatchConfig, init: str, cache: Path) -> dict:
     return {**out, "cached": False}
 
 
-def features_of(pair: Pair, m: dict, config: MatchConfig) -> tuple[np.ndarray, float]:
-    """:func:`confidence_features` of the cached maps, rows in A's input numbering, and the
-    final map's :func:`flipped_share`."""
+def _internal(pair: Pair, m: dict, config: MatchConfig):
+    """``(a, b, f, features, flipped)`` of the cached maps, in the shapes' internal numbering."""
     a = Shape(hope_rs.load_mesh(pair.a), k_max=config.k_max, config=config.shape)
     b = Shape(hope_rs.load_mesh(pair.b), k_max=config.k_max, config=config.shape)
     z = None if (m["zoomout"] < 0).any() else a.map_in(b, m["zoomout"])
@@ -111,7 +110,21 @@ def features_of(pair: Pair, m: dict, config: MatchConfig) -> tuple[np.ndarray, f
         min_consistent=config.refine.min_consistent,
         repair=config.refine.repair,
     )
-    return x[a.rank], flipped_share(a, b, f)
+    return a, b, f, x, flipped_share(a, b, f)
+
+
+def features_of(pair: Pair, m: dict, config: MatchConfig) -> tuple[np.ndarray, float]:
+    """:func:`confidence_features` of the cached maps, rows in A's input numbering, and the
+    final map's :func:`flipped_share` (the model's inputs, for ``scripts/confidence_fit.py``)."""
+    a, _, _, x, flipped = _internal(pair, m, config)
+    return x[a.rank], flipped
+
+
+def confidence_of(pair: Pair, m: dict, config: MatchConfig) -> tuple[np.ndarray, float]:
+    """The confidence stage's :func:`vertex_confidence` of the cached maps, in A's input
+    numbering, and the final map's :func:`flipped_share`."""
+    a, b, f, x, flipped = _internal(pair, m, config)
+    return vertex_confidence(a, b, f, x, config.confidence)[a.rank], flipped
 
 
 def auroc(score: np.ndarray, right: np.ndarray) -> float:
@@ -121,8 +134,7 @@ def auroc(score: np.ndarray, right: np.ndarray) -> float:
 
 def scored(pair: Pair, m: dict, config: MatchConfig) -> tuple[np.ndarray, np.ndarray, MatchQuality]:
     """(confidence at the scored vertices, right or not, the pair's :class:`MatchQuality`)."""
-    x, flipped = features_of(pair, m, config)
-    c = predict_confidence(x, config.confidence)
+    c, flipped = confidence_of(pair, m, config)
     quality = match_quality(c, config.confidence, flipped=flipped)
     return c[m["a_idx"]], m["errors"] <= WRONG_ABOVE, quality
 

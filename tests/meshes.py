@@ -187,3 +187,19 @@ def legless(a: hope_rs.Mesh) -> tuple[hope_rs.Mesh, np.ndarray]:
     new = np.full(a.n_vertices, -1)
     new[idx] = np.arange(idx.size)
     return hope_rs.Mesh(a.vertices[idx], new[a.faces[keep[a.faces].all(axis=1)]]), idx
+
+
+def flat_grid(n: int, alternate: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """An n x n flat grid of unit spacing, vertex ``i * n + j`` at (i, j, 0); each square
+    split along the same diagonal, or (``alternate``) along alternating ones, which gives
+    the grid all 8 symmetries of the square when n is odd."""
+    ii, jj = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    v = np.column_stack([ii.ravel(), jj.ravel(), np.zeros(n * n)]).astype(np.float64)
+    i, j = (x.ravel() for x in np.meshgrid(np.arange(n - 1), np.arange(n - 1), indexing="ij"))
+    a, b, c, d = i * n + j, (i + 1) * n + j, (i + 1) * n + j + 1, i * n + j + 1
+    one = np.vstack([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+    other = np.vstack([np.column_stack([a, b, d]), np.column_stack([b, c, d])])
+    if not alternate:
+        return v, one
+    odd = np.tile((i + j) % 2 == 1, 2)
+    return v, np.where(odd[:, None], other, one)

@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from meshes import bumpy_sphere, echo_or_die, relabel, write_off
 
 import hope_rs
+import hope_rs.batch.driver
 import hope_rs.batch.tasks
 import hope_rs.cli.commands
 import hope_rs.evaluation.show
@@ -288,6 +289,59 @@ def test_9_a_killed_worker_fails_its_task_only_and_the_pool_goes_on():
         pool.close()
     assert got["die"]["error"] == DIED
     assert {x: got[x] for x in names if x != "die"} == {x: {"x": x} for x in names if x != "die"}
+
+
+class KillsOnePair:
+    """A pool whose ``nth`` pair task kills its worker, each time it runs (first among the
+    others, then alone): the others run in the pool restarted after it."""
+
+    ships_data = False
+
+    def __init__(self, nth: int):
+        self.pool, self.nth, self.pairs = PoolBackend(2, 1), nth, 0
+
+    @property
+    def threads(self):
+        return self.pool.threads
+
+    def submit(self, fn, *args):
+        if fn is hope_rs.batch.tasks.pair_task:
+            self.pairs += 1
+            if self.pairs == self.nth:
+                return self.pool.submit(echo_or_die, "die", 0.0)
+        return self.pool.submit(fn, *args)
+
+    def wait(self, handles):
+        return self.pool.wait(handles)
+
+    def close(self, abort=False):
+        self.pool.close(abort)
+
+
+@pytest.mark.slow
+def test_9_a_pair_whose_worker_dies_fails_alone_with_its_map_named(
+    files, tmp_path, monkeypatch, capsys
+):
+    (tmp_path / "pairs.txt").write_text("s0 s1\ns1 s2\ns2 s3\ns0 s3\n")
+    for s in range(4):
+        shutil.copy(files / f"s{s}.off", tmp_path)
+    monkeypatch.setattr(hope_rs.batch.driver, "make_backend", lambda *a: KillsOnePair(2))
+    out = tmp_path / "out"
+    args = ["batch", str(tmp_path / "pairs.txt"), "--ext", ".off", "--out", str(out), "-q",
+            "--no-cache", "--no-spectral", "--no-shared-faces", "-j", "2"]  # fmt: skip
+    assert main(args) == 1
+    cap = capsys.readouterr()
+    assert "4 pairs: 3 matched, 0 skipped, 1 failed, 0 not run" in cap.out
+    (line,) = [x for x in cap.err.splitlines() if "pair failed" in x]
+    assert DIED in line
+    (dead,) = [n for n in map_names_of(tmp_path / "pairs.txt") if f"'{out / n}'" in line]
+    assert sorted(p.name for p in out.glob("*.txt")) == sorted(
+        n for n in map_names_of(tmp_path / "pairs.txt") if n != dead
+    )
+
+
+def map_names_of(pairs_file):
+    return [f"{a}__{b}.txt" for a, b in (x.split() for x in pairs_file.read_text().splitlines())]
 
 
 def test_10_an_unusable_cache_gives_way_to_a_temporary_one(files, tmp_path, monkeypatch):

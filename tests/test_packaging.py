@@ -180,3 +180,17 @@ def test_wheel_check_wants_stub_marker_licence_and_manylinux_tag():
     assert check_dist.wheel_problems(_wheel(), _METADATA, not_abi3, manylinux=False) == [
         "wheel tags ['cp311-cp311-manylinux_2_17_x86_64'] are not all abi3 tags"
     ]
+
+
+def test_the_settings_file_reader_is_a_dependency_where_python_lacks_tomllib():
+    # `--config settings.toml` needs tomllib (3.11+) or the tomli backport: a package that
+    # claims older Pythons must install tomli there.
+    pyproject = (ROOT / "pyproject.toml").read_text()
+    floor = re.search(r'^requires-python\s*=\s*">=3\.(\d+)"', pyproject, re.MULTILINE)
+    assert floor is not None
+    deps = re.search(r"^dependencies\s*=\s*\[(.*?)\]", pyproject, re.MULTILINE | re.DOTALL)
+    assert deps is not None
+    if int(floor.group(1)) < 11:
+        assert re.search(
+            r"""['"]tomli>=[\d.]+;\s*python_version\s*<\s*"3\.11"['"]""", deps.group(1)
+        )

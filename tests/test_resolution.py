@@ -17,6 +17,7 @@ from hope_rs.evaluation.resolution import write_resolution_sets
 from hope_rs.geometry.coarsen import coarse_to_count
 from hope_rs.geometry.subdivide import subdivide
 from hope_rs.pipeline.config import ResolutionConfig
+from hope_rs.pipeline.options import check_config
 
 
 def test_subdivision_keeps_the_original_vertices_first():
@@ -40,11 +41,22 @@ def test_coarsening_hits_the_vertex_count(target):
     assert coarse_to_count(m, m.n_vertices) is None
 
 
-def test_the_setting_is_checked():
-    with pytest.raises(ValueError, match="max_ratio"):
-        ResolutionConfig(max_ratio=0.5)
-    with pytest.raises(ValueError, match="count_tolerance"):
-        ResolutionConfig(count_tolerance=0.0)
+@pytest.mark.parametrize(
+    "bad, why",
+    [
+        ({"max_ratio": 0.5}, r"max_ratio must be a number >= 1.0"),
+        ({"max_ratio": float("inf")}, "max_ratio must be a finite number"),
+        ({"count_tolerance": 0.0}, r"count_tolerance must be a number in \(0.0, 1.0\)"),
+        ({"count_tolerance": 1.0}, r"count_tolerance must be a number in \(0.0, 1.0\)"),
+    ],
+)
+def test_the_setting_is_checked_before_any_work(bad, why):
+    # Declared on the fields and checked by check_config, as every other setting.
+    config = MatchConfig(resolution=ResolutionConfig(**bad))
+    with pytest.raises(ValueError, match=why):
+        check_config(config)
+    with pytest.raises(ValueError, match=why):
+        hope_rs.match(bumpy_sphere(60, 1), bumpy_sphere(60, 2), config=config)
 
 
 def _errors(b, res, n):

@@ -25,7 +25,6 @@ line j is the 1-based vertex of the original mesh its vertex j came from.
 
 from __future__ import annotations
 
-import os
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,7 +34,14 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 
 from ..geometry.mesh import Mesh, boundary_edges, load_mesh
-from .datasets import pairs_of
+from .derived_sets import (
+    add_set_parser,
+    run_set_command,
+    set_jobs,
+    write_off,
+    write_sets,
+    write_vts,
+)
 
 __all__ = [
     "CONDITIONS",
@@ -164,17 +170,6 @@ def punch_holes(mesh: Mesh, n_holes: int, hole_area: float = 0.03) -> Part:
     return submesh(mesh, ~(d <= radius))
 
 
-def _write_off(path: Path, mesh: Mesh) -> None:
-    with open(path, "w") as fh:
-        fh.write(f"OFF\n{mesh.n_vertices} {mesh.n_faces} 0\n")
-        np.savetxt(fh, mesh.vertices, fmt="%.9g")
-        np.savetxt(fh, np.column_stack([np.full(mesh.n_faces, 3), mesh.faces]), fmt="%d")
-
-
-def _write_vts(path: Path, idx: np.ndarray) -> None:
-    path.write_text("".join(f"{int(i) + 1}\n" for i in idx))
-
-
 def _condition(name: str, mesh_a: Mesh, mesh_b: Mesh, i: int) -> tuple[Part | None, Part | None]:
     if name == "cut30":
         return cut_by_plane(mesh_a, plane_normal(i), 0.3), None
@@ -209,46 +204,20 @@ def write_partial_sets(
     reverse : bool
         Also write the whole → part sets (not for ``cut_both``, which is symmetric).
     """
-    if isinstance(sources, (str, os.PathLike)):
-        sources = [sources]
-    bad = [c for c in conditions if c not in CONDITIONS]
-    if bad:
-        raise ValueError(
-            f"unknown condition {', '.join(bad)}; the conditions are {', '.join(CONDITIONS)}"
-        )
-    jobs = []
-    for src in sources:
-        pairs = pairs_of(src)
-        if any(p.a_vts is None for p in pairs):
-            raise ValueError(
-                f"{str(src)!r} has identity ground truth; partial sets need .vts pairs"
-            )
-        jobs.append((Path(src), pairs[:max_pairs]))
-    out = Path(out)
-    written = []
-    for src, pairs in jobs:
-        for cond in conditions:
-            names = [f"{src.name}_{cond}"]
-            if reverse and cond != "cut_both":
-                names.append(f"{src.name}_{cond}_rev")
-            # Written to a scratch folder, moved into place once complete: an error or an
-            # interrupt leaves no half-written set behind.
-            scratch = [out / f".{n}.tmp" for n in names]
-            try:
-                _write_condition(src, pairs, cond, scratch)
-                for tmp, n in zip(scratch, names):
-                    if (out / n).exists():
-                        shutil.rmtree(out / n)
-                    tmp.rename(out / n)
-                    written.append(out / n)
-            finally:
-                for tmp in scratch:
-                    shutil.rmtree(tmp, ignore_errors=True)
-    return written
+    jobs = set_jobs(
+        sources, conditions, CONDITIONS, max_pairs, vts_needed="partial sets need .vts pairs"
+    )
+
+    def names(src: Path, cond: str) -> list[str]:
+        rev = [f"{src.name}_{cond}_rev"] if reverse and cond != "cut_both" else []
+        return [f"{src.name}_{cond}", *rev]
+
+    return write_sets(out, jobs, conditions, names, _write_condition)
 
 
-def _write_condition(src: Path, pairs, cond: str, folders: list[Path]) -> None:
-    """The pairs of one condition into ``folders`` (the forward set, then the reverse one)."""
+def _write_condition(pairs, cond: str, folders: list[Path]) -> bool:
+    """The pairs of one condition into ``folders`` (the forward set, then the reverse one);
+    True: every pair is kept."""
     for d in folders:
         shutil.rmtree(d, ignore_errors=True)
         (d / "corres").mkdir(parents=True)
@@ -269,45 +238,30 @@ def _write_condition(src: Path, pairs, cond: str, folders: list[Path]) -> None:
         }
         for d in folders:
             for name, (mesh, part, idx) in parts.items():
-                _write_off(d / f"{name}.off", mesh)
-                _write_vts(d / "corres" / f"{name}.vts", idx)
+                write_off(d / f"{name}.off", mesh)
+                write_vts(d / "corres" / f"{name}.vts", idx)
                 if part is not None:
-                    _write_vts(d / "origin" / f"{name}.vts", part.origin)
+                    write_vts(d / "origin" / f"{name}.vts", part.origin)
         lines.append((na, nb))
     (folders[0] / "pairs.txt").write_text("".join(f"{x} {y}\n" for x, y in lines))
     if len(folders) > 1:
         (folders[1] / "pairs.txt").write_text("".join(f"{y} {x}\n" for x, y in lines))
+    return True
 
 
 def add_parser(sub) -> None:
     """Register ``hope-rs partial-set``."""
-    p = sub.add_parser(
-        "partial-set",
+    p = add_set_parser(
+        sub, "partial-set",
         help="write partial-shape benchmark sets (cuts, holes) for hope-rs bench",
         description="Cuts and holes of the pairs of .vts data sets, with their ground truth, "
-        "in the layout hope-rs bench reads. "
-        + "; ".join(f"{k}: {v}" for k, v in CONDITIONS.items()),
-    )
-    p.add_argument("out", help="output folder (created)")
-    p.add_argument(
-        "--from", dest="sources", required=True,
-        help="comma-separated .vts data-set folders (e.g. DATA/faust_r,DATA/tosca_r)",
+        "in the layout hope-rs bench reads. ",
+        conditions=CONDITIONS,
+        sources_help=".vts data-set folders (e.g. DATA/faust_r,DATA/tosca_r)",
+        max_pairs=8, func=cmd_partial_set,
     )  # fmt: skip
-    p.add_argument("--conditions", default=",".join(CONDITIONS), help="comma-separated")
-    p.add_argument("--max-pairs", type=int, default=8, help="first N pairs of each set (default 8)")
     p.add_argument("--no-reverse", action="store_true", help="skip the whole -> part sets")
-    p.set_defaults(func=cmd_partial_set)
 
 
 def cmd_partial_set(args) -> int:
-    if args.max_pairs < 1:
-        raise ValueError(f"--max-pairs must be at least 1, got {args.max_pairs}")
-    written = write_partial_sets(
-        [s.strip() for s in args.sources.split(",") if s.strip()], args.out,
-        conditions=[c.strip() for c in args.conditions.split(",")], max_pairs=args.max_pairs,
-        reverse=not args.no_reverse,
-    )  # fmt: skip
-    print(
-        f"{len(written)} data sets written to {args.out}; run: hope-rs bench {args.out} --out RESULTS"
-    )
-    return 0
+    return run_set_command(args, write_partial_sets, reverse=not args.no_reverse)

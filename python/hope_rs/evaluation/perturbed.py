@@ -26,7 +26,6 @@ within ``WELD_SPACE`` sqrt(area) of an earlier weld's.
 
 from __future__ import annotations
 
-import os
 import shutil
 from pathlib import Path
 
@@ -35,9 +34,16 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from ..geometry.mesh import Mesh, load_mesh
-from .datasets import pairs_of
+from .derived_sets import (
+    add_set_parser,
+    run_set_command,
+    set_jobs,
+    write_off,
+    write_sets,
+    write_vts,
+)
 from .evaluate import geodesic_errors, load_vts
-from .partial import _write_off, _write_vts, edge_graph
+from .partial import edge_graph
 
 __all__ = [
     "PERTURBATIONS",
@@ -187,37 +193,14 @@ def write_perturbed_sets(
     subfolder ``SOURCE_CONDITION`` per set (see the module notes; a set without a pair is not
     written); returns the folders written.
     ``max_pairs``: the first pairs of each ``pairs.txt`` only."""
-    if isinstance(sources, (str, os.PathLike)):
-        sources = [sources]
-    bad = [c for c in conditions if c not in PERTURBATIONS]
-    if bad:
-        raise ValueError(
-            f"unknown perturbation {', '.join(bad)}; the perturbations are "
-            f"{', '.join(PERTURBATIONS)}"
-        )
-    jobs = []
-    for src in sources:
-        pairs = pairs_of(src)
-        if any(p.a_vts is None for p in pairs):
-            raise ValueError(f"{str(src)!r} has identity ground truth; use a set with .vts pairs")
-        jobs.append((Path(src), pairs[:max_pairs]))
-    out = Path(out)
-    written = []
-    for src, pairs in jobs:
-        for cond in conditions:
-            name = f"{src.name}_{cond}"
-            # Written to a scratch folder, moved into place once complete.
-            tmp = out / f".{name}.tmp"
-            try:
-                if not _write_set(pairs, cond, tmp):
-                    continue  # no pair kept (no shape with enough shortcuts): no set
-                if (out / name).exists():
-                    shutil.rmtree(out / name)
-                tmp.rename(out / name)
-                written.append(out / name)
-            finally:
-                shutil.rmtree(tmp, ignore_errors=True)
-    return written
+    jobs = set_jobs(
+        sources, conditions, PERTURBATIONS, max_pairs,
+        what="perturbation", vts_needed="use a set with .vts pairs",
+    )  # fmt: skip
+    return write_sets(
+        out, jobs, conditions, lambda src, c: [f"{src.name}_{c}"],
+        lambda pairs, c, folders: _write_set(pairs, c, folders[0]) > 0,
+    )  # fmt: skip
 
 
 def _write_set(pairs, cond: str, d: Path) -> int:
@@ -235,16 +218,16 @@ def _write_set(pairs, cond: str, d: Path) -> int:
         if welded is not None and len(welded.welds) < MIN_WELDS:
             continue
         na, nb = f"{i:02d}_{pair.a.stem}", f"{i:02d}_{pair.b.stem}_{cond}"
-        _write_off(d / f"{na}.off", ma)
-        _write_vts(d / "corres" / f"{na}.vts", ai)
-        _write_off(d / f"{nb}.off", pb)
+        write_off(d / f"{na}.off", ma)
+        write_vts(d / "corres" / f"{na}.vts", ai)
+        write_off(d / f"{nb}.off", pb)
         if welded is None:
-            _write_vts(d / "corres" / f"{nb}.vts", bi)
+            write_vts(d / "corres" / f"{nb}.vts", bi)
         else:
             # The true match on the welded mesh; scoring reads the clean B (clean_errors).
-            _write_vts(d / "corres" / f"{nb}.vts", welded.inverse[bi])
-            _write_vts(d / "origin" / f"{nb}.vts", welded.origin)
-            _write_off(d / "clean" / f"{nb}.off", mb)
+            write_vts(d / "corres" / f"{nb}.vts", welded.inverse[bi])
+            write_vts(d / "origin" / f"{nb}.vts", welded.origin)
+            write_off(d / "clean" / f"{nb}.off", mb)
             (d / "welds" / f"{nb}.txt").write_text(
                 "".join(f"{x + 1} {y + 1}\n" for x, y in welded.welds)
             )
@@ -268,33 +251,20 @@ def read_clean(folder, name: str) -> tuple[Mesh, np.ndarray, np.ndarray] | None:
 
 def add_parser(sub) -> None:
     """Register ``hope-rs perturb-set``."""
-    p = sub.add_parser(
-        "perturb-set",
+    add_set_parser(
+        sub, "perturb-set",
         help="write perturbed-target benchmark sets (noise, shortcuts) for hope-rs bench",
         description="The pairs of .vts data sets with B perturbed, ground truth carried over, "
-        "in the layout hope-rs bench reads. "
-        + "; ".join(f"{k}: {v}" for k, v in PERTURBATIONS.items()),
-    )
-    p.add_argument("out", help="output folder (created)")
-    p.add_argument(
-        "--from", dest="sources", required=True,
-        help="comma-separated .vts data-set folders (e.g. DATA/faust_r,DATA/tosca_r)",
+        "in the layout hope-rs bench reads. ",
+        conditions=PERTURBATIONS,
+        sources_help=".vts data-set folders (e.g. DATA/faust_r,DATA/tosca_r)",
+        max_pairs=None, func=cmd_perturb_set,
     )  # fmt: skip
-    p.add_argument("--conditions", default=",".join(PERTURBATIONS), help="comma-separated")
-    p.add_argument("--max-pairs", type=int, default=None, help="first N pairs of each set")
-    p.set_defaults(func=cmd_perturb_set)
 
 
 def cmd_perturb_set(args) -> int:
-    if args.max_pairs is not None and args.max_pairs < 1:
-        raise ValueError(f"--max-pairs must be at least 1, got {args.max_pairs}")
-    written = write_perturbed_sets(
-        [s.strip() for s in args.sources.split(",") if s.strip()], args.out,
-        conditions=[c.strip() for c in args.conditions.split(",")], max_pairs=args.max_pairs,
+    return run_set_command(
+        args, write_perturbed_sets,
+        note=" (a shortcuts set is scored on the clean B by "
+        "hope_rs.evaluation.perturbed.clean_errors)",
     )  # fmt: skip
-    print(
-        f"{len(written)} data sets written to {args.out}; run: hope-rs bench {args.out} --out "
-        "RESULTS (a shortcuts set is scored on the clean B by "
-        "hope_rs.evaluation.perturbed.clean_errors)"
-    )
-    return 0

@@ -18,7 +18,6 @@ The output folder holds one data-set folder per (source, condition) in the ``pai
 
 from __future__ import annotations
 
-import os
 import shutil
 from pathlib import Path
 
@@ -28,8 +27,15 @@ from scipy.spatial import cKDTree
 from ..geometry.coarsen import coarse_to_count
 from ..geometry.mesh import Mesh, load_mesh
 from ..geometry.subdivide import subdivide
-from .datasets import pairs_of
-from .partial import _largest_component, _write_off, _write_vts
+from .derived_sets import (
+    add_set_parser,
+    run_set_command,
+    set_jobs,
+    write_off,
+    write_sets,
+    write_vts,
+)
+from .partial import _largest_component
 
 __all__ = ["RESOLUTION_CONDITIONS", "write_resolution_sets"]
 
@@ -68,37 +74,16 @@ def write_resolution_sets(
     """Write the mixed-resolution sets of each data-set folder in ``sources`` to ``out`` (see
     the module notes); returns the data-set folders written (``SOURCE_CONDITION`` and
     ``SOURCE_CONDITION_rev`` each). ``max_pairs``: the first pairs of each source only."""
-    if isinstance(sources, (str, os.PathLike)):
-        sources = [sources]
-    bad = [c for c in conditions if c not in RESOLUTION_CONDITIONS]
-    if bad:
-        raise ValueError(
-            f"unknown condition {', '.join(bad)}; the conditions are "
-            f"{', '.join(RESOLUTION_CONDITIONS)}"
-        )
-    jobs = [(Path(src), pairs_of(src)[:max_pairs]) for src in sources]
-    out = Path(out)
-    written = []
-    for src, pairs in jobs:
-        for cond in conditions:
-            names = [f"{src.name}_{cond}", f"{src.name}_{cond}_rev"]
-            # Written to scratch folders, moved into place once complete.
-            scratch = [out / f".{n}.tmp" for n in names]
-            try:
-                _write_condition(pairs, cond, scratch)
-                for tmp, n in zip(scratch, names):
-                    if (out / n).exists():
-                        shutil.rmtree(out / n)
-                    tmp.rename(out / n)
-                    written.append(out / n)
-            finally:
-                for tmp in scratch:
-                    shutil.rmtree(tmp, ignore_errors=True)
-    return written
+    jobs = set_jobs(sources, conditions, RESOLUTION_CONDITIONS, max_pairs)
+    return write_sets(
+        out, jobs, conditions, lambda src, c: [f"{src.name}_{c}", f"{src.name}_{c}_rev"],
+        _write_condition,
+    )  # fmt: skip
 
 
-def _write_condition(pairs, cond: str, folders: list[Path]) -> None:
-    """The pairs of one condition into ``folders`` (forward, then reverse)."""
+def _write_condition(pairs, cond: str, folders: list[Path]) -> bool:
+    """The pairs of one condition into ``folders`` (forward, then reverse); True: every pair
+    is kept."""
     for d in folders:
         shutil.rmtree(d, ignore_errors=True)
         (d / "corres").mkdir(parents=True)
@@ -112,40 +97,26 @@ def _write_condition(pairs, cond: str, folders: list[Path]) -> None:
         nb = f"{i:02d}_{pair.b.stem}" + ("" if cond == "dec1k" else f"_{cond}")
         for d in folders:
             for name, mesh, idx in ((na, pa, ia), (nb, pb, ib)):
-                _write_off(d / f"{name}.off", mesh)
-                _write_vts(d / "corres" / f"{name}.vts", idx)
+                write_off(d / f"{name}.off", mesh)
+                write_vts(d / "corres" / f"{name}.vts", idx)
         lines.append((na, nb))
     (folders[0] / "pairs.txt").write_text("".join(f"{x} {y}\n" for x, y in lines))
     (folders[1] / "pairs.txt").write_text("".join(f"{y} {x}\n" for x, y in lines))
+    return True
 
 
 def add_parser(sub) -> None:
     """Register ``hope-rs resolution-set``."""
-    p = sub.add_parser(
-        "resolution-set",
+    add_set_parser(
+        sub, "resolution-set",
         help="write mixed-resolution benchmark sets (subdivided, decimated) for hope-rs bench",
         description="Subdivided and decimated copies of the pairs of data sets, with their "
-        "ground truth, in the layout hope-rs bench reads. "
-        + "; ".join(f"{k}: {v}" for k, v in RESOLUTION_CONDITIONS.items()),
-    )
-    p.add_argument("out", help="output folder (created)")
-    p.add_argument(
-        "--from", dest="sources", required=True,
-        help="comma-separated data-set folders (e.g. DATA/faust_r,DATA/faust_reg)",
+        "ground truth, in the layout hope-rs bench reads. ",
+        conditions=RESOLUTION_CONDITIONS,
+        sources_help="data-set folders (e.g. DATA/faust_r,DATA/faust_reg)",
+        max_pairs=3, func=cmd_resolution_set,
     )  # fmt: skip
-    p.add_argument("--conditions", default=",".join(RESOLUTION_CONDITIONS), help="comma-separated")
-    p.add_argument("--max-pairs", type=int, default=3, help="first N pairs of each set (default 3)")
-    p.set_defaults(func=cmd_resolution_set)
 
 
 def cmd_resolution_set(args) -> int:
-    if args.max_pairs < 1:
-        raise ValueError(f"--max-pairs must be at least 1, got {args.max_pairs}")
-    written = write_resolution_sets(
-        [s.strip() for s in args.sources.split(",") if s.strip()], args.out,
-        conditions=[c.strip() for c in args.conditions.split(",")], max_pairs=args.max_pairs,
-    )  # fmt: skip
-    print(
-        f"{len(written)} data sets written to {args.out}; run: hope-rs bench {args.out} --out RESULTS"
-    )
-    return 0
+    return run_set_command(args, write_resolution_sets)

@@ -15,7 +15,8 @@ about the final map ``f``, each in the shapes' internal numbering (see
 
 averaged over a few rings so that regions, not single vertices, lose confidence, and combined
 by a logistic model (:class:`~hope_rs.pipeline.config.ConfidenceConfig`), then lowered where
-the map turns the surroundings over (:func:`turned_factor`). The stage reads the
+the map turns the surroundings over (:func:`turned_factor`); a shape too small to judge
+(``ConfidenceConfig.min_vertices``) gets 0 (:func:`vertex_confidence`). The stage reads the
 maps only: ``MatchResult.map`` is the same with or without it.
 
 The pair-level summary (:class:`MatchQuality`) also measures the share of A's area whose
@@ -54,6 +55,7 @@ __all__ = [
     "predict_confidence",
     "state_quality",
     "turned_factor",
+    "vertex_confidence",
 ]
 
 
@@ -201,6 +203,18 @@ def predict_confidence(features: np.ndarray, config: ConfidenceConfig = Confiden
     return 1.0 / (1.0 + np.exp(-np.clip(z, -60.0, 60.0)))
 
 
+def vertex_confidence(
+    a: Shape, b: Shape, f: np.ndarray, features: np.ndarray, config: ConfidenceConfig
+) -> np.ndarray:
+    """The confidence stage's per-vertex confidence of ``f`` from its
+    :func:`confidence_features`, (n_a,) in [0, 1]: :func:`predict_confidence` times
+    :func:`turned_factor`; 0 everywhere when A or B has fewer than ``config.min_vertices``
+    vertices (too small for any feature to tell a right map from a wrong one)."""
+    if min(a.n_vertices, b.n_vertices) < config.min_vertices:
+        return np.zeros(a.n_vertices)
+    return predict_confidence(features, config) * turned_factor(a, b, f, config)
+
+
 def turned_factor(a: Shape, b: Shape, f: np.ndarray, config: ConfidenceConfig) -> np.ndarray:
     """Per vertex of A, the factor in [0, 1] its confidence is multiplied by for the map
     ``f`` turning its surroundings over: ``1 - config.turned_weight * t``, ``t`` the turned-over
@@ -249,9 +263,7 @@ class ConfidenceStage(Stage):
             repair=state.config.refine.repair,
             among=counterpart,
         )
-        state.confidence = predict_confidence(x, cfg) * turned_factor(
-            state.a, state.b, state.f, cfg
-        )
+        state.confidence = vertex_confidence(state.a, state.b, state.f, x, cfg)
         if counterpart is not None:
             # A vertex of the whole without a counterpart on the part has no right match.
             state.confidence = np.where(counterpart, state.confidence, 0.0)

@@ -434,19 +434,8 @@ class ResolutionConfig:
     """
 
     enabled: bool = True
-    max_ratio: float = field(default=2.0, metadata={"finite": True})
-    count_tolerance: float = 0.05
-
-    def __post_init__(self):
-        if not (_is_number(self.max_ratio) and self.max_ratio >= 1.0):
-            raise ValueError(
-                f"ResolutionConfig.max_ratio must be a finite number >= 1, got {self.max_ratio!r}"
-            )
-        if not (_is_number(self.count_tolerance) and 0.0 < self.count_tolerance < 1.0):
-            raise ValueError(
-                "ResolutionConfig.count_tolerance must be a number in (0, 1), "
-                f"got {self.count_tolerance!r}"
-            )
+    max_ratio: float = field(default=2.0, metadata={"finite": True, "range": (1.0, None)})
+    count_tolerance: float = field(default=0.05, metadata={"range": (0.0, 1.0), "exclusive": True})
 
 
 def declared(option: str) -> dict:
@@ -674,6 +663,11 @@ class ConfidenceConfig:
     turned_weight : float
         A vertex's confidence is multiplied by ``1 - turned_weight * t``, ``t`` the share of
         the area around it (averaged over ``rings``) that the map turns over; 0 turns it off.
+    min_vertices : int
+        A pair where A or B has fewer vertices than this has confidence 0 everywhere: the
+        2-rings span the whole shape and the long-range features have no far anchors, so
+        nothing the model reads can tell a right map from a wrong one (a lone triangle
+        matched to itself rotated).
     """
 
     enabled: bool = True
@@ -697,10 +691,11 @@ class ConfidenceConfig:
     failed_share: float = 0.5
     failed_flipped: float = 0.3
     turned_weight: float = 0.5
+    min_vertices: int = 32
 
     def __post_init__(self):
         # Checked here, not when the confidence stage runs after the whole match.
-        for name, low in (("n_anchors", 1), ("rings", 0)):
+        for name, low in (("n_anchors", 1), ("rings", 0), ("min_vertices", 0)):
             x = getattr(self, name)
             if isinstance(x, bool) or not isinstance(x, numbers.Integral) or x < low:
                 raise ValueError(f"ConfidenceConfig.{name} must be an integer >= {low}, got {x!r}")

@@ -124,7 +124,8 @@ def check_config(config, path: str = "MatchConfig") -> None:
     config dataclass that cannot be right: a number of another kind than its default, not
     NaN, or negative where the default is not (pass indices, counts, sizes, tolerances), nor
     infinite where the field's metadata says ``finite``, nor outside its declared ``range``
-    or ``choices``: the constraints are declared once, on the field.
+    (bounds included, or excluded with ``exclusive``) or ``choices``: the constraints are
+    declared once, on the field.
     Nested configs are checked too; fields whose default is ``None``, a string or a tuple are
     left to their own checks."""
     default = type(config)()
@@ -160,7 +161,10 @@ def check_config(config, path: str = "MatchConfig") -> None:
                 raise ValueError(f"{name} must be a finite number (default {ref}), got {value}")
             if "range" in f.metadata:
                 lo, hi = f.metadata["range"]
-                if value < lo or (hi is not None and value > hi):
+                if f.metadata.get("exclusive"):  # the bounds themselves excluded
+                    if value <= lo or (hi is not None and value >= hi):
+                        raise ValueError(f"{name} must be a number in ({lo}, {hi}), got {value}")
+                elif value < lo or (hi is not None and value > hi):
                     raise ValueError(f"{name} must be {_span(lo, hi, 'a number')}, got {value}")
 
 
