@@ -84,6 +84,12 @@ def test_a_mirrored_start_is_repaired(mirrored_start):
     res = hope_rs.match(a, b, init=start)
     info = res.stage("orient")
     assert info.ran and "chose kept" not in info.reason
+    # The trials record the stage's own map and what it tried, one kept: the best scored.
+    (kept,) = [t for t in info.trials if t.kept]
+    assert info.trials[0].label == "kept" and kept.label != "kept"
+    scored = [t for t in info.trials if t.score is not None]
+    assert kept.score == max(t.score for t in scored)
+    assert kept.score > info.trials[0].score + OrientConfig().min_gain
     assert res.quality.flipped_share < 0.05
     assert geodesic_errors(b, res.map).mean() < 0.01
     assert np.mean(res.map == truth) > 0.9
