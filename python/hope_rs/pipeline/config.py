@@ -758,6 +758,10 @@ class OrientConfig:
         the cost the stage minimises.
     min_gain : float
         The refined hypothesis replaces the map when it lowers that cost by more than this.
+    again : bool
+        When no refined hypothesis turns at most ``min_turned`` over, derive the maps once
+        more from the best one (when it beats the map the stage started from) and refine the
+        least turned-over.
     """
 
     enabled: bool = True
@@ -766,6 +770,7 @@ class OrientConfig:
     seam_rings: int = 2
     distortion_weight: float = field(default=1.0, metadata={"finite": True})
     min_gain: float = field(default=0.02, metadata={"finite": True})
+    again: bool = True
 
     def __post_init__(self):
         known = ("mirror", "mirror_turned", "reseed", "wks", "reverse")

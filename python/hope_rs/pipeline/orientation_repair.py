@@ -22,7 +22,9 @@ The hypotheses (``OrientConfig.hypotheses``):
 * ``"reverse"``: the pipeline from the match of B to A, inverted.
 
 The derived hypotheses are unrefined maps; the one turning the least over is refined. The
-stage stops at the first refined map that turns at most ``min_turned`` over and costs less.
+stage stops at the first refined map that turns at most ``min_turned`` over and costs less;
+when none does, the maps derived from the best refined one (if it beats the stage's own) are
+tried once more (``OrientConfig.again``).
 
 B's symmetry is the match of B's mirror image (coordinates reflected in a plane through its
 centroid) to B itself: vertex ``i`` of the mirror image is vertex ``i`` of B reflected, so the
@@ -183,18 +185,22 @@ class _Hypotheses:
                     out[name] = anchor_step(a, b, f, core, config=self.state.config.refine.repair)
         return out
 
-    def from_derived(self, f: np.ndarray, share: float) -> list[Trial]:
+    def from_derived(self, f: np.ndarray, share: float, base: str = "") -> list[Trial]:
         """The least turned-over map derived from ``f`` refined, when it turns less over
-        than ``f`` (``share``)."""
+        than ``f`` (``share``); labelled ``base + "+" + hypothesis`` when derived from a
+        trial ``base``."""
         raw = self.derived(f)
         if not raw:
             return []
         shares = {k: self.tf.share(g) for k, g in raw.items()}
-        self.notes.append("unrefined " + ", ".join(f"{k} {v:.0%}" for k, v in shares.items()))
+        prefix = f"{base}+" if base else ""
+        self.notes.append(
+            f"{prefix}unrefined " + ", ".join(f"{k} {v:.0%}" for k, v in shares.items())
+        )
         best = min(shares, key=lambda k: shares[k])
         if shares[best] >= share:
             return []
-        return self.refine([self.candidate(best, raw[best])])
+        return self.refine([self.candidate(prefix + best, raw[best])])
 
     def reverse(self) -> list[Trial]:
         """The pipeline from the match of B to A (unscored trial) inverted: each vertex of
@@ -271,6 +277,13 @@ class OrientStage(Stage):
             tried += hyp.refine([hyp.candidate("wks", "wks")])
         if not good_enough(tried) and "reverse" in cfg.hypotheses:
             tried += hyp.reverse()
+        if cfg.again and tried and not good_enough(tried):
+            # The best refined map can still turn a region over that the derived maps set
+            # right (a start that came back nearer, with a limb swapped).
+            best = max(tried, key=lambda x: x.score or -np.inf)
+            if best.score is not None and best.score > own.score:
+                label = best.candidate.label
+                tried += hyp.from_derived(hyp.internal(best), hyp.turned[label], label)
         kept = choose(state, "orient", tried, against=own, margin=cfg.min_gain)
         if kept is not own:
             # The refinement the caller's callback saw stays the state's history.
