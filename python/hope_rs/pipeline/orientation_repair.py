@@ -280,7 +280,7 @@ class OrientStage(Stage):
         if cfg.again and tried and not good_enough(tried):
             # The best refined map can still turn a region over that the derived maps set
             # right (a start that came back nearer, with a limb swapped).
-            best = max(tried, key=lambda x: x.score or -np.inf)
+            best = max(tried, key=lambda x: -np.inf if x.score is None else x.score)
             if best.score is not None and best.score > own.score:
                 label = best.candidate.label
                 tried += hyp.from_derived(hyp.internal(best), hyp.turned[label], label)
