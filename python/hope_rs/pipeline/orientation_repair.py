@@ -22,9 +22,10 @@ The hypotheses (``OrientConfig.hypotheses``):
 * ``"reverse"``: the pipeline from the match of B to A, inverted.
 
 The derived hypotheses are unrefined maps; the one turning the least over is refined. The
-stage stops at the first refined map that turns at most ``min_turned`` over and costs less;
-when none does, the maps derived from the best refined one (if it beats the stage's own) are
-tried once more (``OrientConfig.again``).
+other starts follow in the order of ``OrientConfig.hypotheses``; after each, while no refined
+map turns at most ``min_turned`` over, the maps derived from the best refined one (if it beats
+the stage's own and was not derived from yet) are tried too (``OrientConfig.again``). The
+stage stops at the first refined map that turns at most ``min_turned`` over and costs less.
 
 B's symmetry is the match of B's mirror image (coordinates reflected in a plane through its
 centroid) to B itself: vertex ``i`` of the mirror image is vertex ``i`` of B reflected, so the
@@ -271,18 +272,27 @@ class OrientStage(Stage):
             )
 
         # The maps derived from the stage's own first; then other starts (a swapped pair of
-        # limbs comes back neither mirrored nor re-seeded).
+        # limbs comes back neither mirrored nor re-seeded), in the order of the hypotheses.
         tried = hyp.from_derived(f, share)
-        if not good_enough(tried) and "wks" in cfg.hypotheses:
-            tried += hyp.refine([hyp.candidate("wks", "wks")])
-        if not good_enough(tried) and "reverse" in cfg.hypotheses:
-            tried += hyp.reverse()
-        if cfg.again and tried and not good_enough(tried):
-            # The best refined map can still turn a region over that the derived maps set
-            # right (a start that came back nearer, with a limb swapped).
+        derived_from: set[str] = set()
+        for start in (h for h in cfg.hypotheses if h in ("wks", "reverse")):
+            if good_enough(tried):
+                break
+            tried += (
+                hyp.reverse() if start == "reverse" else hyp.refine([hyp.candidate(start, start)])
+            )
             best = max(tried, key=lambda x: -np.inf if x.score is None else x.score)
-            if best.score is not None and best.score > own.score:
-                label = best.candidate.label
+            label = best.candidate.label
+            if (
+                cfg.again
+                and not good_enough(tried)
+                and best.score is not None
+                and best.score > own.score
+                and label not in derived_from
+            ):
+                # The best refined map can still turn a region over that the derived maps
+                # set right (a start that came back nearer, with a limb swapped).
+                derived_from.add(label)
                 tried += hyp.from_derived(hyp.internal(best), hyp.turned[label], label)
         kept = choose(state, "orient", tried, against=own, margin=cfg.min_gain)
         if kept is not own:
