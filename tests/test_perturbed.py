@@ -15,6 +15,7 @@ from hope_rs.evaluation.perturbed import (
     add_noise,
     clean_errors,
     read_clean,
+    shortcut_errors,
     weld_shortcuts,
     write_perturbed_sets,
 )
@@ -48,6 +49,19 @@ def test_welds_follow_the_rule_and_scoring_reads_the_clean_mesh():
     assert np.all(e == 0)
     wrong = np.roll(w.inverse, 7)
     assert clean_errors(mesh, wrong, w.origin, w.welds, truth, truth, method="graph").mean() > 0
+    # A true match on a weld's second vertex, as a welded ground truth reads it (the weld's
+    # first), counts as either: a neighbour of the second vertex is one edge off, not the
+    # surface distance between the two.
+    i, j = w.welds[0]
+    faces = mesh.faces[(mesh.faces == j).any(axis=1)]
+    k = int(next(x for x in faces.ravel() if x != j and x not in w.welds))
+    near = w.inverse.copy()
+    near[j] = w.inverse[k]
+    read = w.origin[w.inverse[truth]]
+    assert read[j] == i
+    got = clean_errors(mesh, near, w.origin, w.welds, truth, read, method="graph")
+    edge = np.linalg.norm(mesh.vertices[j] - mesh.vertices[k]) / s
+    assert got[j] == pytest.approx(edge, rel=1e-6) and got[j] < WELD_SURFACE
 
 
 def test_noise_is_seeded_and_scaled():
@@ -85,8 +99,14 @@ def test_perturbed_sets_carry_the_ground_truth(tmp_path):
             m[m < 0] = 0
             e = clean_errors(cb, m, origin, welds, ai, origin[bi], method="graph")
             assert np.all(e == 0)
+            # What hope-rs bench scores a welded B with: the same, from the set's files.
+            e = shortcut_errors(d, pair.b.stem, m, ai, bi, method="graph")
+            assert e is not None and np.all(e == 0)
+            off = shortcut_errors(d, pair.b.stem, np.roll(m, 5), ai, bi, method="graph")
+            assert off is not None and off.mean() > 0
         else:
             assert clean is None and b.n_vertices == mesh.n_vertices
+            assert shortcut_errors(d, pair.b.stem, np.arange(a.n_vertices), ai, bi) is None
             np.testing.assert_array_equal(ai, bi)
     # A shape with no shortcut (a convex sphere) leaves no shortcut set.
     sphere = tmp_path / "src2" / "spheres"

@@ -10,7 +10,7 @@ from hope_rs.pipeline.progress import StageLog
 from hope_rs.pipeline.result import MatchResult
 from hope_rs.pipeline.runner import run_stages
 from hope_rs.pipeline.state import Background, Halt, MatchState, Stage
-from hope_rs.pipeline.trials import Candidate, adopt, run_trial, run_trials
+from hope_rs.pipeline.trials import Candidate, adopt, choose, current, run_trial, run_trials
 
 
 def bare_state(run=None) -> MatchState:
@@ -119,6 +119,9 @@ class _Same:
     def map_in(self, other, m):
         return np.asarray(m)
 
+    def map_out(self, other, m):
+        return np.asarray(m)
+
 
 def score(t):
     return float(t.result.map[0])
@@ -160,3 +163,36 @@ def test_adopt_makes_the_kept_match_the_state_s():
     adopt(state, run_trial(state, "partial", cands("x1")[0]))
     assert state.f.tolist() == state.f0.tolist() == state.hope_map.tolist() == [4]
     assert state.timings == {"partial": 0.5, "refine": 1.0}
+
+
+def test_the_state_s_own_map_is_kept_unless_a_round_s_best_beats_it_by_the_margin():
+    state = bare_state(fake_run({"mirror": 6, "reverse": 8, "again": 9}))
+    state.a = state.b = _Same()
+    state.f = state.f0 = state.hope_map = np.array([5])
+    own = current(state, "orient", "kept")
+    own.score = own.record.score = score(own)
+    first = run_trials(state, "orient", cands("mirror"), score).tried
+    # Trials of several rounds compared at once; the own map stays unless beaten by 2.
+    assert choose(state, "orient", first, against=own, margin=2) is own
+    later = first + run_trials(state, "orient", cands("reverse", "again"), score).tried
+    kept = choose(state, "orient", later, against=own, margin=2)
+    assert kept.candidate.label == "again"
+    records = state.log.trials["orient"]
+    assert [(r.label, r.kept) for r in records] == [
+        ("kept", False),
+        ("mirror", False),
+        ("reverse", False),
+        ("again", True),
+    ]
+    assert choose(state, "orient", [], against=own) is own and records[0].kept
+    with pytest.raises(ValueError, match="at least one trial"):
+        choose(state, "orient", [])
+
+
+def test_adopt_maps_only_keeps_the_start_history_and_timings():
+    state = bare_state(fake_run({"x1": 4}))
+    state.f0, state.history, state.timings = np.array([1]), ["outer"], {"refine": 3.0}
+    adopt(state, run_trial(state, "orient", cands("x1")[0]), maps_only=True)
+    assert state.f.tolist() == state.hope_map.tolist() == [4]
+    assert state.f0.tolist() == [1] and state.history == ["outer"]
+    assert state.timings == {"refine": 3.0}

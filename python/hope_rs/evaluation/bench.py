@@ -26,6 +26,7 @@ from ..geometry.mesh import load_mesh
 from .datasets import Pair, datasets_in, pairs_of
 from .evaluate import confidence_auroc, error_curve, geodesic_errors, score, smoothness
 from .methods import ABLATIONS, DEFAULT_METHODS, METHODS, PairContext, check_methods, run_method
+from .perturbed import shortcut_errors
 from .show import render_pair
 
 FIELDS = [
@@ -61,8 +62,18 @@ class BenchProgress:
             sys.stderr.write("\n")
 
 
+def _errors(pair: Pair, ctx, mapping, ai, bi) -> np.ndarray:
+    """Surface geodesic errors of ``mapping``; onto a welded B of a ``shortcuts`` set
+    (:mod:`hope_rs.evaluation.perturbed`) on the clean B, a weld counting as either of its
+    two vertices."""
+    e = shortcut_errors(pair.b.parent, pair.b.stem, mapping, ai, bi)
+    if e is None:
+        e = geodesic_errors(ctx.b, mapping, a_idx=ai, b_idx=bi, method="surface")
+    return e
+
+
 def _score_row(pair: Pair, name: str, res, ctx, ai, bi, starts: dict) -> tuple[dict, np.ndarray]:
-    e = geodesic_errors(ctx.b, res.map, a_idx=ai, b_idx=bi, method="surface")
+    e = _errors(pair, ctx, res.map, ai, bi)
     s, sm = score(e), smoothness(ctx.a, ctx.b, res.map)
     row = {
         "dataset": pair.dataset, "pair": pair.name, "method": name, "n_a": ctx.a.n_vertices,
@@ -76,10 +87,7 @@ def _score_row(pair: Pair, name: str, res, ctx, ai, bi, starts: dict) -> tuple[d
     }  # fmt: skip
     if res.start and name.startswith("hope"):
         if res.start not in starts:
-            se = geodesic_errors(
-                ctx.b, ctx.start_map(res.start), a_idx=ai, b_idx=bi, method="surface"
-            )
-            starts[res.start] = score(se)
+            starts[res.start] = score(_errors(pair, ctx, ctx.start_map(res.start), ai, bi))
         row["start_exact"], row["start_mean"] = starts[res.start].exact, starts[res.start].mean
     if res.confidence is not None:
         # How well MatchResult.confidence tells right (error <= 0.05) from wrong matches.

@@ -50,6 +50,8 @@ __all__ = [
     "Welded",
     "add_noise",
     "clean_errors",
+    "read_clean",
+    "shortcut_errors",
     "weld_shortcuts",
     "write_perturbed_sets",
 ]
@@ -152,25 +154,42 @@ def clean_errors(
 ) -> np.ndarray:
     """Errors (÷ sqrt(area) of the clean B) of a map onto a welded B, on the clean B: each
     matched vertex read through ``origin`` (0-based), a weld's vertex counting as whichever
-    of its two clean vertices is nearer the true match; ``b_idx`` on the clean B."""
+    of its two clean vertices is nearer the true match. ``b_idx``: the true matches on the
+    clean B; one on a weld (as ``origin`` reads a welded ground truth: the weld's first
+    vertex) counts as either of its two as well."""
     m = np.asarray(origin, dtype=np.int64)[np.asarray(welded_map, dtype=np.int64)]
+    a_idx, b_idx = np.asarray(a_idx, dtype=np.int64), np.asarray(b_idx, dtype=np.int64)
     e = geodesic_errors(clean_b, m, a_idx=a_idx, b_idx=b_idx, method=method)
     welds = np.asarray(welds, dtype=np.int64).reshape(-1, 2)
-    if welds.size:
-        other = np.full(clean_b.n_vertices, -1, dtype=np.int64)
-        other[welds[:, 0]] = welds[:, 1]
-        alt = other[m]
-        use = np.flatnonzero(alt[np.asarray(a_idx)] >= 0)
+    if not welds.size:
+        return e
+    # Each clean vertex's weld partner (itself when not welded), both ways.
+    other = np.arange(clean_b.n_vertices)
+    other[welds[:, 0]], other[welds[:, 1]] = welds[:, 1], welds[:, 0]
+    src = m[a_idx]
+    for swap_src, swap_dst in ((True, False), (False, True), (True, True)):
+        s2 = other[src] if swap_src else src
+        d2 = other[b_idx] if swap_dst else b_idx
+        use = np.flatnonzero((s2 != src) | (d2 != b_idx))
         if use.size:
-            e2 = geodesic_errors(
-                clean_b,
-                np.where(alt >= 0, alt, m),
-                a_idx=np.asarray(a_idx)[use],
-                b_idx=np.asarray(b_idx)[use],
-                method=method,
-            )
+            # s2 is indexed by the scored pair, so the pairs in ``use`` are its own indices.
+            e2 = geodesic_errors(clean_b, s2, a_idx=use, b_idx=d2[use], method=method)
             e[use] = np.minimum(e[use], e2)
     return e
+
+
+def shortcut_errors(
+    folder, name: str, welded_map, a_idx, b_idx, *, method: str = "surface"
+) -> np.ndarray | None:
+    """:func:`clean_errors` of a map onto the shape ``name`` of a ``shortcuts`` set in
+    ``folder`` (``b_idx``: the ground truth on the welded shape, as its ``.vts`` gives it), or
+    ``None`` when that shape is not welded."""
+    clean = read_clean(folder, name)
+    if clean is None:
+        return None
+    mesh, origin, welds = clean
+    bi = origin[np.asarray(b_idx, dtype=np.int64)]
+    return clean_errors(mesh, welded_map, origin, welds, a_idx, bi, method=method)
 
 
 def _perturb(cond: str, mesh_b: Mesh, i: int) -> tuple[Mesh, Welded | None]:

@@ -743,9 +743,9 @@ class OrientConfig:
         percent over where the triangulations disagree, more between different bodies.
     hypotheses : tuple of str
         The alternative maps tried ("mirror", "mirror_turned", "reseed": derived from a
-        map, the one turning the least over refined; "wks": the pipeline from WKS; "reverse":
-        from the match of B to A inverted), in that order until one turns at most
-        ``min_turned`` over.
+        map, the one turning the least over refined; "reverse": from the match of B to A
+        inverted; "wks": the pipeline from WKS), the derived ones first, then the others in
+        the order given, until one turns at most ``min_turned`` over.
     seam_rings : int
         1-rings added around the turned-over vertices for the regional hypotheses.
     distortion_weight : float
@@ -753,14 +753,19 @@ class OrientConfig:
         the cost the stage minimises.
     min_gain : float
         The refined hypothesis replaces the map when it lowers that cost by more than this.
+    again : bool
+        After each other start, while no refined hypothesis turns at most ``min_turned``
+        over, derive the maps from the best one too (when it beats the map the stage started
+        from and was not derived from yet) and refine the least turned-over.
     """
 
     enabled: bool = True
     min_turned: float = 0.2
-    hypotheses: tuple[str, ...] = ("mirror", "mirror_turned", "reseed", "wks", "reverse")
+    hypotheses: tuple[str, ...] = ("mirror", "mirror_turned", "reseed", "reverse", "wks")
     seam_rings: int = 2
     distortion_weight: float = field(default=1.0, metadata={"finite": True})
     min_gain: float = field(default=0.02, metadata={"finite": True})
+    again: bool = True
 
     def __post_init__(self):
         known = ("mirror", "mirror_turned", "reseed", "wks", "reverse")

@@ -7,7 +7,9 @@ distance, so the refinement and LMD cannot see it, but it turns that region's tr
 When the final map turns more than ``OrientConfig.min_turned`` of A's area over, this stage
 builds alternative maps (hypotheses), refines them through the rest of the pipeline and keeps
 whichever of them and the map it started from scores best (:func:`map_cost`: turned-over
-share plus LMD inconsistency).
+share plus LMD inconsistency). Each refined hypothesis is a trial of
+:mod:`hope_rs.pipeline.trials` (recorded in ``res.stage("orient").trials`` with minus its
+cost as score, the kept one marked); the kept one becomes the state's map.
 
 The hypotheses (``OrientConfig.hypotheses``):
 
@@ -20,6 +22,9 @@ The hypotheses (``OrientConfig.hypotheses``):
 * ``"reverse"``: the pipeline from the match of B to A, inverted.
 
 The derived hypotheses are unrefined maps; the one turning the least over is refined. The
+other starts follow in the order of ``OrientConfig.hypotheses``; after each, while no refined
+map turns at most ``min_turned`` over, the maps derived from the best refined one (if it beats
+the stage's own and was not derived from yet) are tried too (``OrientConfig.again``). The
 stage stops at the first refined map that turns at most ``min_turned`` over and costs less.
 
 B's symmetry is the match of B's mirror image (coordinates reflected in a plane through its
@@ -31,6 +36,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Callable
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -41,14 +47,13 @@ from .anchors import anchor_step, firm_regions
 from .lmd import local_map_distortion
 from .progress import ProgressEvent
 from .state import QUIET, MatchState, Stage
+from .trials import Candidate, Trial, adopt, choose, current, run_trial, run_trials
 from .turned import TurnedFaces
 
 __all__ = [
     "OrientStage",
     "map_cost",
     "mirror_image",
-    "reverse_map",
-    "symmetry_map",
     "turned_regions",
 ]
 
@@ -59,41 +64,6 @@ def mirror_image(s: Shape) -> Shape:
     v = s.mesh.vertices.copy()
     v[:, 0] = 2.0 * v[:, 0].mean() - v[:, 0]
     return Shape(Mesh(v, s.mesh.faces[:, ::-1]), k_max=s.k_max, config=s.config)
-
-
-def symmetry_map(state: MatchState, b: Shape) -> np.ndarray:
-    """B's intrinsic left/right symmetry, (n_b,) in B's internal numbering: the match of its
-    mirror image to B (:func:`mirror_image`) by the runner, without this stage, the spectral
-    pass and the finish."""
-    mirror = mirror_image(b)
-    # One triangulation on both sides: the refinement alone finds the map (as on FAUST
-    # registrations); the spectral pass and the shared-face finish are not needed.
-    cfg = _nested_config(state)
-    cfg = dataclasses.replace(
-        cfg,
-        spectral=dataclasses.replace(cfg.spectral, enabled=False),
-        finish=dataclasses.replace(cfg.finish, enabled=False),
-    )
-    assert state.run is not None  # the runner gives every state its nested runner
-    res = state.run(mirror, b, state.config.initial.descriptor, cfg, progress=_Relay(state))
-    # res.map is in input numbering: input vertex v of the mirror image is input vertex v of B.
-    return b.rank[np.asarray(res.map)[b.order]]
-
-
-def reverse_map(state: MatchState) -> np.ndarray:
-    """The match of B to A by the runner (without this stage), inverted: each vertex of A
-    onto the vertex of B whose image lies nearest it in space (internal numbering)."""
-    a, b = state.a, state.b
-    assert state.run is not None  # the runner gives every state its nested runner
-    res = state.run(
-        b,
-        a,
-        state.config.initial.descriptor,
-        _nested_config(state),
-        progress=_Relay(state),
-    )
-    g = b.map_in(a, res.map)
-    return cKDTree(a.points[g]).query(a.points)[1].astype(np.int64)
 
 
 def turned_regions(a: Shape, turned: np.ndarray, rings: int) -> np.ndarray:
@@ -139,97 +109,111 @@ def _nested_config(state: MatchState):
     )
 
 
-def _derived(state: MatchState, f: np.ndarray, tf: TurnedFaces, sym: np.ndarray | None) -> dict:
-    """The unrefined maps derived from ``f`` (internal numbering) by the derived hypotheses
-    of ``OrientConfig.hypotheses`` ("mirror", "mirror_turned", "reseed")."""
-    cfg = state.config.orient
-    a, b = state.a, state.b
-    region = turned_regions(a, tf.vertices(f, 0.5), cfg.seam_rings)
-    out = {}
-    for name in cfg.hypotheses:
-        if name == "mirror" and sym is not None:
-            out[name] = sym[f]
-        elif name == "mirror_turned" and sym is not None:
-            out[name] = np.where(region, sym[f], f)
-        elif name == "reseed":
-            # The largest orientation-keeping region holds the anchors.
-            label, sizes = firm_regions(a, ~region)
-            if sizes.size and sizes.max() >= 4:
-                core = label == int(np.argmax(sizes))
-                out[name] = anchor_step(a, b, f, core, config=state.config.refine.repair)
-    return out
+def _symmetry_config(state: MatchState):
+    """The settings of B's symmetry match: one triangulation on both sides, so the
+    refinement alone finds the map (as on FAUST registrations); without the spectral pass
+    and the shared-face finish."""
+    cfg = _nested_config(state)
+    return dataclasses.replace(
+        cfg,
+        spectral=dataclasses.replace(cfg.spectral, enabled=False),
+        finish=dataclasses.replace(cfg.finish, enabled=False),
+    )
 
 
-class _Trials:
-    """The maps tried by the stage, refined through the rest of the pipeline and scored."""
+class _Hypotheses:
+    """The stage's candidates: the maps derived from the state's map and the other starts,
+    each refined as a trial; scored by minus :func:`map_cost`."""
 
     def __init__(self, state: MatchState, tf: TurnedFaces):
         self.state, self.tf = state, tf
         self.cfg = state.config.orient
-        self.sym: np.ndarray | None = None
-        f = state.f
-        assert f is not None  # the stage runs on a final map
-        #: name -> (turned share, cost, nested state or None for the stage's own map)
-        self.scored: dict = {"kept": (tf.share(f), self.cost(f), None)}
+        self.nested = _nested_config(state)
+        self.progress: Callable = _Relay(state)
+        #: Turned-over share per trial label (the notes of the stage's reason).
+        self.turned: dict[str, float] = {}
         self.notes: list[str] = []
-        #: Seconds per nested match (B's symmetry, each refined hypothesis).
-        self.seconds: dict[str, float] = {}
+        self.sym: np.ndarray | None = None
 
-    def cost(self, f: np.ndarray) -> float:
-        return map_cost(self.state.a, self.state.b, f, self.tf, self.cfg.distortion_weight)
+    def internal(self, t: Trial) -> np.ndarray:
+        c = t.candidate
+        return c.a.map_in(c.b, t.result.map)
 
-    def run(self, name: str, init) -> np.ndarray:
-        """The pipeline from ``init`` (a descriptor kind or a map, internal numbering), scored
-        as ``name``; returns its map."""
-        state, a, b = self.state, self.state.a, self.state.b
-        nested: dict = {}
+    def score(self, t: Trial) -> float:
+        a, b = self.state.a, self.state.b
+        f = self.internal(t)
+        self.turned[t.candidate.label] = self.tf.share(f)
+        return -map_cost(a, b, f, self.tf, self.cfg.distortion_weight)
 
-        def grab(s, stage_name):
-            if stage_name == "faces":
-                nested["state"] = s
-
-        t = time.perf_counter()
+    def candidate(self, label: str, init) -> Candidate:
+        """The pipeline from ``init`` (a descriptor kind or a map in internal numbering)."""
+        a, b = self.state.a, self.state.b
         if not isinstance(init, str):
             init = a.map_out(b, init)
-        assert state.run is not None  # the runner gives every state its nested runner
-        state.run(a, b, init, _nested_config(state), on_stage=grab, progress=_Relay(state))
-        g = nested["state"]
-        self.scored[name] = (self.tf.share(g.f), self.cost(g.f), g)
-        self.seconds[name] = time.perf_counter() - t
-        return g.f
+        return Candidate(label, a, b, init, self.nested)
 
-    def derive(self, base: str, f: np.ndarray) -> None:
-        """Refines the least turned-over of the maps derived from ``f`` when it turns less
-        over than ``f`` does."""
-        if self.sym is None and any(h.startswith("mirror") for h in self.cfg.hypotheses):
-            t = time.perf_counter()
-            self.sym = symmetry_map(self.state, self.state.b)
-            self.seconds["symmetry"] = time.perf_counter() - t
-        raw = _derived(self.state, f, self.tf, self.sym)
+    def refine(self, cands: list[Candidate]) -> list[Trial]:
+        return run_trials(self.state, "orient", cands, self.score, progress=self.progress).tried
+
+    def symmetry(self) -> np.ndarray:
+        """B's intrinsic left/right symmetry, (n_b,) in B's internal numbering: the match
+        of its mirror image to B (unscored trial)."""
+        if self.sym is None:
+            b = self.state.b
+            mirror = mirror_image(b)
+            init = self.state.config.initial.descriptor
+            c = Candidate("B's symmetry", mirror, b, init, _symmetry_config(self.state))
+            t = run_trial(self.state, "orient", c, self.progress)
+            # Input vertex v of the mirror image is input vertex v of B.
+            self.sym = b.rank[np.asarray(t.result.map)[b.order]]
+        return self.sym
+
+    def derived(self, f: np.ndarray) -> dict[str, np.ndarray]:
+        """The unrefined maps derived from ``f`` (internal numbering) by the derived
+        hypotheses of ``OrientConfig.hypotheses`` ("mirror", "mirror_turned", "reseed")."""
+        cfg, a, b = self.cfg, self.state.a, self.state.b
+        region = turned_regions(a, self.tf.vertices(f, 0.5), cfg.seam_rings)
+        out = {}
+        for name in cfg.hypotheses:
+            if name in ("mirror", "mirror_turned"):
+                sym = self.symmetry()
+                out[name] = sym[f] if name == "mirror" else np.where(region, sym[f], f)
+            elif name == "reseed":
+                # The largest orientation-keeping region holds the anchors.
+                label, sizes = firm_regions(a, ~region)
+                if sizes.size and sizes.max() >= 4:
+                    core = label == int(np.argmax(sizes))
+                    out[name] = anchor_step(a, b, f, core, config=self.state.config.refine.repair)
+        return out
+
+    def from_derived(self, f: np.ndarray, share: float, base: str = "") -> list[Trial]:
+        """The least turned-over map derived from ``f`` refined, when it turns less over
+        than ``f`` (``share``); labelled ``base + "+" + hypothesis`` when derived from a
+        trial ``base``."""
+        raw = self.derived(f)
         if not raw:
-            return
+            return []
         shares = {k: self.tf.share(g) for k, g in raw.items()}
+        prefix = f"{base}+" if base else ""
         self.notes.append(
-            f"from {base} unrefined " + ", ".join(f"{k} {v:.0%}" for k, v in shares.items())
+            f"{prefix}unrefined " + ", ".join(f"{k} {v:.0%}" for k, v in shares.items())
         )
         best = min(shares, key=lambda k: shares[k])
-        if shares[best] < self.scored[base][0]:
-            self.run(best if base == "kept" else f"{base}+{best}", raw[best])
+        if shares[best] >= share:
+            return []
+        return self.refine([self.candidate(prefix + best, raw[best])])
 
-    def good_enough(self) -> bool:
-        """Whether a tried map turns at most ``min_turned`` over and beats the stage's own."""
-        kept = self.scored["kept"][1]
-        return any(
-            v[0] <= self.cfg.min_turned and v[1] < kept - self.cfg.min_gain
-            for k, v in self.scored.items()
-            if k != "kept"
+    def reverse(self) -> list[Trial]:
+        """The pipeline from the match of B to A (unscored trial) inverted: each vertex of
+        A onto the vertex of B whose image lies nearest it in space."""
+        a, b = self.state.a, self.state.b
+        init = self.state.config.initial.descriptor
+        t = run_trial(
+            self.state, "orient", Candidate("B to A", b, a, init, self.nested), self.progress
         )
-
-    def best(self) -> str:
-        name = min(self.scored, key=lambda k: self.scored[k][1])
-        if name != "kept" and self.scored[name][1] >= self.scored["kept"][1] - self.cfg.min_gain:
-            return "kept"
-        return name
+        g = b.map_in(a, t.result.map)
+        f = cKDTree(a.points[g]).query(a.points)[1].astype(np.int64)
+        return self.refine([self.candidate("reverse", f)])
 
 
 class OrientStage(Stage):
@@ -273,28 +257,57 @@ class OrientStage(Stage):
         assert tf is not None and f is not None  # skip_reason measured the final map
         share = tf.share(f)
         state.log.start("orient", detail=f"{share:.0%} of A turned over: trying other maps")
-        trials = _Trials(state, tf)
+        hyp = _Hypotheses(state, tf)
+        own = current(state, "orient", "kept")
+        own.score = own.record.score = hyp.score(own)
+        min_score = own.score + cfg.min_gain
+
+        def good_enough(tried: list[Trial]) -> bool:
+            """Whether a trial turns at most ``min_turned`` over and beats the own map."""
+            return any(
+                hyp.turned[x.candidate.label] <= cfg.min_turned
+                and x.score is not None
+                and x.score > min_score
+                for x in tried
+            )
+
         # The maps derived from the stage's own first; then other starts (a swapped pair of
-        # limbs comes back neither mirrored nor re-seeded).
-        trials.derive("kept", f)
-        if not trials.good_enough() and "wks" in cfg.hypotheses:
-            trials.run("wks", "wks")
-        if not trials.good_enough() and "reverse" in cfg.hypotheses:
-            t_rev = time.perf_counter()
-            g = reverse_map(state)
-            trials.seconds["reverse B to A"] = time.perf_counter() - t_rev
-            trials.run("reverse", g)
-        chosen = trials.best()
-        if chosen != "kept":
-            g = trials.scored[chosen][2]
-            state.f, state.hope_map, state.zoomout = g.f, g.hope_map, g.zoomout
+        # limbs comes back neither mirrored nor re-seeded), in the order of the hypotheses.
+        tried = hyp.from_derived(f, share)
+        derived_from: set[str] = set()
+        for start in (h for h in cfg.hypotheses if h in ("wks", "reverse")):
+            if good_enough(tried):
+                break
+            tried += (
+                hyp.reverse() if start == "reverse" else hyp.refine([hyp.candidate(start, start)])
+            )
+            best = max(tried, key=lambda x: -np.inf if x.score is None else x.score)
+            label = best.candidate.label
+            if (
+                cfg.again
+                and not good_enough(tried)
+                and best.score is not None
+                and best.score > own.score
+                and label not in derived_from
+            ):
+                # The best refined map can still turn a region over that the derived maps
+                # set right (a start that came back nearer, with a limb swapped).
+                derived_from.add(label)
+                tried += hyp.from_derived(hyp.internal(best), hyp.turned[label], label)
+        kept = choose(state, "orient", tried, against=own, margin=cfg.min_gain)
+        if kept is not own:
+            # The refinement the caller's callback saw stays the state's history.
+            adopt(state, kept, maps_only=True)
+            state.zoomout = kept.zoomout
         state.timings["orient"] += time.perf_counter() - t
-        tried = "; ".join(
-            f"{k}: {v[0]:.0%} turned, cost {v[1]:.3f}" for k, v in trials.scored.items()
+        scored = "; ".join(
+            f"{x.candidate.label}: {hyp.turned[x.candidate.label]:.0%} turned, "
+            f"cost {-(x.score or 0.0):.3f}"
+            for x in (own, *tried)
         )
-        spent = ", ".join(f"{k} {v:.1f} s" for k, v in trials.seconds.items())
+        notes = "; ".join(hyp.notes)
         state.log.ran(
             "orient",
             state.timings["orient"],
-            f"{'; '.join(trials.notes)}; {tried}; chose {chosen} ({spent})",
+            f"{notes}; {scored}; chose {kept.candidate.label}",
         )

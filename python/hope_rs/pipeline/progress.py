@@ -75,7 +75,8 @@ class StageInfo:
         while ``MatchResult.timings["refine"]`` counts it.
     trials : list of Tried
         The candidate matches the stage tried, in order, the kept one marked (the partial
-        stage's scales; empty for most stages).
+        stage's scales; the orient stage's own map, its hypotheses scored by minus their
+        cost, and unscored the matches they derive from; empty for most stages).
     """
 
     name: str

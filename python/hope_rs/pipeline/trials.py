@@ -25,7 +25,9 @@ Example: keep the best of a map and two alternative starts by a score of the res
 Several rounds refine a choice: a round given ``against`` (a trial kept before) keeps its
 own best only when that beats it (strictly, or by at least ``margin``), each scored by the
 round's function; :func:`run_trial` runs one candidate unscored (a first match whose result
-decides the next candidates).
+decides the next candidates). Trials of several rounds are compared at once with
+:func:`choose`, and :func:`current` stands for the state's own map (a trial not run) where
+a stage keeps it unless a candidate beats it.
 """
 
 from __future__ import annotations
@@ -42,7 +44,17 @@ from .progress import Tried
 from .result import MatchResult
 from .state import MatchState
 
-__all__ = ["Candidate", "Trial", "Trials", "adopt", "mean_confidence", "run_trial", "run_trials"]
+__all__ = [
+    "Candidate",
+    "Trial",
+    "Trials",
+    "adopt",
+    "choose",
+    "current",
+    "mean_confidence",
+    "run_trial",
+    "run_trials",
+]
 
 
 @dataclass(frozen=True)
@@ -75,12 +87,15 @@ class Candidate:
 
 @dataclass
 class Trial:
-    """A candidate's match and its score (``None`` until scored)."""
+    """A candidate's match and its score (``None`` until scored); ``zoomout``: the match's
+    ZoomOut map (internal numbering of the candidate's shapes), when its spectral pass made
+    one."""
 
     candidate: Candidate
     result: MatchResult
     score: float | None
     record: Tried
+    zoomout: np.ndarray | None = None
 
 
 @dataclass
@@ -91,15 +106,45 @@ class Trials:
     tried: list[Trial]
 
 
-def run_trial(state: MatchState, stage: str, candidate: Candidate) -> Trial:
+def run_trial(
+    state: MatchState, stage: str, candidate: Candidate, progress: Callable | None = None
+) -> Trial:
     """The match of ``candidate`` (the runner's stages, fresh), recorded under ``stage``
-    unscored; the trial is kept until a later round keeps another."""
+    unscored; the trial is kept until a later round keeps another. ``progress`` receives
+    the nested match's events (``state.log.relay(stage)`` logs them under the stage)."""
     c = candidate
     assert state.run is not None  # the runner sets it
-    result = state.run(c.a, c.b, c.init, c.config, landmarks=c.landmarks)
-    trial = Trial(c, result, None, Tried(c.label))
+    last: dict = {}
+
+    def grab(s: MatchState, name: str) -> None:
+        last["zoomout"] = s.zoomout
+
+    result = state.run(
+        c.a, c.b, c.init, c.config, landmarks=c.landmarks, progress=progress, on_stage=grab
+    )
+    trial = Trial(c, result, None, Tried(c.label), last.get("zoomout"))
     state.log.tried(stage, trial.record)
     _mark_kept(state, stage, trial)
+    return trial
+
+
+def current(state: MatchState, stage: str, label: str) -> Trial:
+    """The state's own map as a trial (not run again), recorded under ``stage``: pass it as
+    ``against`` so a round keeps it unless a candidate beats it."""
+    assert state.f is not None and state.f0 is not None and state.hope_map is not None
+    a, b = state.a, state.b
+    init = state.init if isinstance(state.init, str) else a.map_out(b, state.init)
+    result = MatchResult(
+        map=a.map_out(b, state.f).astype(np.int64),
+        init_map=a.map_out(b, state.f0).astype(np.int64),
+        history=state.history,
+        timings=dict(state.timings),
+        hope_map=a.map_out(b, state.hope_map).astype(np.int64),
+        config=state.config,
+    )
+    trial = Trial(Candidate(label, a, b, init, state.config), result, None, Tried(label))
+    trial.zoomout = state.zoomout
+    state.log.tried(stage, trial.record)
     return trial
 
 
@@ -111,6 +156,7 @@ def run_trials(
     *,
     against: Trial | None = None,
     margin: float | None = None,
+    progress: Callable | None = None,
 ) -> Trials:
     """Matches every candidate in order, scores each with ``score`` (higher is better) and
     keeps the first of the highest score. With ``against`` (a trial kept before, scored
@@ -120,20 +166,37 @@ def run_trials(
         raise ValueError("run_trials needs at least one candidate")
     tried = []
     for c in candidates:
-        t = run_trial(state, stage, c)
+        t = run_trial(state, stage, c, progress)
         t.score = t.record.score = float(score(t))
         tried.append(t)
-    best = max(tried, key=_score_of)
-    kept = best
     if against is not None:
         against.score = against.record.score = float(score(against))
-        best_score, against_score = _score_of(best), _score_of(against)
+    return Trials(choose(state, stage, tried, against=against, margin=margin), tried)
+
+
+def choose(
+    state: MatchState,
+    stage: str,
+    tried: Sequence[Trial],
+    *,
+    against: Trial | None = None,
+    margin: float | None = None,
+) -> Trial:
+    """The first of the highest score among ``tried`` (scored trials, of one round or
+    several), or ``against`` (scored) unless that best beats it (see :func:`run_trials`);
+    marked kept under ``stage``."""
+    if not tried and against is None:
+        raise ValueError("choose needs at least one trial")
+    kept = max(tried, key=_score_of) if tried else against
+    assert kept is not None
+    if against is not None and kept is not against:
+        best_score, against_score = _score_of(kept), _score_of(against)
         beats = (
             best_score > against_score if margin is None else best_score >= against_score + margin
         )
-        kept = best if beats else against
+        kept = kept if beats else against
     _mark_kept(state, stage, kept)
-    return Trials(kept, tried)
+    return kept
 
 
 def _score_of(trial: Trial) -> float:
@@ -146,16 +209,22 @@ def _mark_kept(state: MatchState, stage: str, kept: Trial) -> None:
         r.kept = r is kept.record
 
 
-def adopt(state: MatchState, trial: Trial) -> None:
+def adopt(state: MatchState, trial: Trial, *, maps_only: bool = False) -> None:
     """Makes ``trial``'s match the state's: its shapes, its maps (initial, final, HOPE's, in
     the shapes' internal numbering) and history, and its stages' seconds within the state's
-    timings."""
+    timings. With ``maps_only`` the state keeps its initial map, history and timings (a
+    stage after the refinement replacing the map: the caller's callback saw the state's
+    refinement, not the trial's). The ZoomOut map (``trial.zoomout``) is the caller's to
+    take: a part matched at another scale (the partial stage) leaves the whole's confidence
+    without it."""
     c, r = trial.candidate, trial.result
     assert r.hope_map is not None  # run_match always sets it
     state.a, state.b = c.a, c.b
-    state.f0 = c.a.map_in(c.b, r.init_map)
     state.f = c.a.map_in(c.b, r.map)
     state.hope_map = c.a.map_in(c.b, r.hope_map)
+    if maps_only:
+        return
+    state.f0 = c.a.map_in(c.b, r.init_map)
     state.history = r.history
     state.timings.update({k: v for k, v in r.timings.items() if k != "total"})
 
