@@ -361,8 +361,8 @@ class FinishConfig:
     Attributes
     ----------
     enabled : bool
-    max_vertices : int
-        Larger shapes are not finished.
+    max_vertices : int or None
+        Larger shapes are not finished; ``None``: any size.
     min_handles : float
         Rounds run only while this share of A's vertices are handles.
     rounds : int
@@ -378,7 +378,7 @@ class FinishConfig:
     """
 
     enabled: bool = True
-    max_vertices: int = 60_000
+    max_vertices: int | None = None
     min_handles: float = 0.2
     rounds: int = 10
     min_growth: float = 0.01
@@ -396,7 +396,14 @@ class MultiscaleConfig:
 
     Attributes
     ----------
-    enabled : bool
+    enabled : bool or None
+        ``None`` (``match``'s default): the path is chosen by size, coarse-to-fine when the
+        larger shape has more than ``auto_vertices`` vertices; ``True`` or ``False`` force it.
+    auto_vertices : int
+        See ``enabled``.
+    fine_schedule : tuple of int or None
+        Hop radii of the refinement's passes on the fine meshes after the lift; ``None``: the
+        refinement's own schedule (``RefineConfig.schedule``).
     fine_passes : int
         Refinement passes on the fine meshes after the lift ...
     fine_passes_small : int
@@ -406,11 +413,29 @@ class MultiscaleConfig:
         Ridge of the lift's local linear fits, relative to the mean squared edge.
     """
 
-    enabled: bool = False
+    enabled: bool | None = None
+    auto_vertices: int = 60_000
+    fine_schedule: tuple[int, ...] | None = None
     fine_passes: int = 1
     fine_passes_small: int = 2
     fine_passes_small_vertices: int = 60_000
     lift_ridge: float = 1e-3
+
+    def __post_init__(self):
+        if self.fine_schedule is not None and not isinstance(self.fine_schedule, tuple):
+            with contextlib.suppress(TypeError):
+                object.__setattr__(self, "fine_schedule", tuple(self.fine_schedule))
+        if self.fine_schedule is not None and not (
+            self.fine_schedule
+            and all(
+                isinstance(k, numbers.Integral) and not isinstance(k, bool) and k >= 1
+                for k in self.fine_schedule
+            )
+        ):
+            raise ValueError(
+                "MultiscaleConfig.fine_schedule must be None or a non-empty sequence of hop "
+                f"radii >= 1, got {self.fine_schedule!r}"
+            )
 
 
 @dataclass(frozen=True)
