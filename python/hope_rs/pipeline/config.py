@@ -456,11 +456,21 @@ class ResolutionConfig:
         least 1.
     count_tolerance : float
         The coarse copy's vertex count is within this share of the sparser shape's.
+    refine : bool
+        After the lift, refine at full resolution: the sparser shape is subdivided (each
+        face into four, as often as brings its vertex count nearest the denser one's), the
+        pair matched from the lifted map with one pass of ``refine_schedule`` and the
+        shared-face finish, and the map carried back to the sparser shape's own vertices.
+        Not with landmarks.
+    refine_schedule : tuple of int
+        Hop radii of that pass.
     """
 
     enabled: bool = True
     max_ratio: float = field(default=2.0, metadata={"finite": True})
     count_tolerance: float = 0.05
+    refine: bool = True
+    refine_schedule: tuple[int, ...] = (3, 2, 1)
 
     def __post_init__(self):
         if not (_is_number(self.max_ratio) and self.max_ratio >= 1.0):
