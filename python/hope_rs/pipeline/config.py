@@ -464,6 +464,10 @@ class ResolutionConfig:
         Not with landmarks.
     refine_schedule : tuple of int
         Hop radii of that pass.
+    refine_min_handles : float
+        The pass runs only when this share of the vertices are handles of the lifted map
+        (:func:`~hope_rs.pipeline.handles.face_handles`): shapes remeshed independently have
+        almost none, and there the pass would cost time for nothing.
     """
 
     enabled: bool = True
@@ -471,6 +475,7 @@ class ResolutionConfig:
     count_tolerance: float = 0.05
     refine: bool = True
     refine_schedule: tuple[int, ...] = (3, 2, 1)
+    refine_min_handles: float = 0.04
 
     def __post_init__(self):
         if not (_is_number(self.max_ratio) and self.max_ratio >= 1.0):

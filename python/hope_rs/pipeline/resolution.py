@@ -43,6 +43,7 @@ from scipy.spatial import cKDTree
 from ..geometry.coarsen import Coarse, coarse_to_count
 from ..geometry.subdivide import subdivide
 from ..shape import Shape
+from .handles import face_handles
 from .landmarks import coarse_landmarks
 from .multiscale import lift_map
 from .shared_faces import qualifies
@@ -101,6 +102,7 @@ class ResolutionStage(Stage):
 
     def __init__(self):
         self.side: str | None = None
+        self.start_handles = 0.0  # share of handles of the refinement's start
 
     def skip_reason(self, state: MatchState):
         cfg = state.config.resolution
@@ -168,10 +170,11 @@ class ResolutionStage(Stage):
         note = ""
         if cfg.resolution.refine and state.landmarks is None:
             fine = self.refined(state, f, dense, sparse, None if self.side == "b" else lift)
+            h = f"{self.start_handles:.1%} of the vertices handles at the start"
             if fine is None:
-                note = "; the full-resolution pass found no shared faces to finish: not kept"
+                note = f"; no shared faces to refine at full resolution ({h})"
             else:
-                f, note = fine, ", refined at full resolution (shared-face finish)"
+                f, note = fine, f", refined at full resolution ({h})"
         state.f0 = state.f = state.hope_map = f
         if res.confidence is not None:
             # Measured where the map was made: a dense A's many-to-one map to a sparse B keeps
@@ -223,6 +226,9 @@ class ResolutionStage(Stage):
             owner = cKDTree(a.points).query(points)[1]
             init = lift_map(a.internal, b.internal, f, points, owner, b.points, centred=True)
             init[: a.n_vertices] = f
+            self.start_handles = float(face_handles(up, b, init[up.order]).mean())
+            if self.start_handles < cfg.resolution.refine_min_handles:
+                return None
             res = state.run(up, b, b.order[init], nested, callback=state.callback)
             if not qualifies(up, b, b.rank[res.map[up.order]], cfg.finish):
                 return None
@@ -231,6 +237,9 @@ class ResolutionStage(Stage):
         # lift onto the subdivided B (the lift onto B itself maps many vertices to one).
         assert lift is not None
         f = lift(points)
+        self.start_handles = float(face_handles(a, up, up.rank[f]).mean())
+        if self.start_handles < cfg.resolution.refine_min_handles:
+            return None
         res = state.run(a, up, f[a.rank], nested, callback=state.callback)
         if not qualifies(a, up, up.rank[res.map[a.order]], cfg.finish):
             return None
