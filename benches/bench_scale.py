@@ -12,6 +12,12 @@ memory (sampled every 20 ms) during that stage, and the process's overall peak (
     python benches/bench_scale.py                          # 5k (faust_r), 28k (TOSCA), 100k, 250k
     python benches/bench_scale.py --cases faust100k --timeout 600
     python benches/bench_scale.py --cases faust100k,faust250k --multiscale
+    python benches/bench_scale.py --cases faust100k --compare   # default path against --full
+
+``match``'s default chooses the path by size (``MultiscaleConfig.auto_vertices``);
+``--multiscale`` forces the coarse-to-fine path and ``--full`` the full one. ``--compare``
+runs each case on the default path and on the full one (the path before the size rule), one
+after the other, and prints the ratios of time and error.
 """
 
 from __future__ import annotations
@@ -89,10 +95,11 @@ class PeakSampler(threading.Thread):
         self.peak = self.rss()
 
 
-def run_case(name: str, data: Path, multiscale: bool = False, spectral: bool = True) -> dict:
+def run_case(name: str, data: Path, multiscale: bool | None = None, spectral: bool = True) -> dict:
     """One case, in this process: build, match stage by stage, score on original vertices.
-    With ``multiscale``, the "descriptors" stage is the whole coarse match and its lift (as in
-    ``match(..., multiscale=True)``), and "init" is empty. ``spectral``: as in ``match``."""
+    ``multiscale``: as in ``match`` (None: chosen by size). On the coarse-to-fine path the
+    "descriptors" stage is the whole coarse match and its lift, and "init" is empty.
+    ``spectral``: as in ``match``."""
     import hope_rs
     from hope_rs.pipeline.runner import run_match
 
@@ -142,7 +149,8 @@ def run_case(name: str, data: Path, multiscale: bool = False, spectral: bool = T
     final = hope_rs.score(hope_rs.geodesic_errors(sb, f, a_idx=ai, b_idx=bi))
     return {
         "case": name
-        + (" (multiscale)" if multiscale else "")
+        + {None: "", True: " (multiscale)", False: " (full)"}[multiscale]
+        + (" (coarse-to-fine)" if res.coarse is not None and multiscale is None else "")
         + ("" if spectral else " (no spectral)"),
         "n": f"{ma.n_vertices}/{mb.n_vertices}",
         "steps": len(res.history),
@@ -208,6 +216,29 @@ def steps_table(rows: list[dict]) -> str:
     return head + "\n".join(lines) + "\n"
 
 
+def ratio_table(rows: list[dict]) -> str:
+    """Each default-path row against the full-path row after it (``--compare``): time, peak
+    memory and final mean error as ratios default / full, and both exact shares."""
+    head = (
+        "| case | time default / full | max RSS default / full | mean error default / full "
+        "| exact default, full |\n|---|---|---|---|---|\n"
+    )
+    lines = []
+    for new, old in zip(rows[::2], rows[1::2]):
+        if "error" in new or "error" in old:
+            lines.append(f"| {new['case']} | {new.get('error', old.get('error'))} | | | |")
+            continue
+        t = new["seconds"]["total"] / old["seconds"]["total"]
+        m = new["maxrss_gib"] / old["maxrss_gib"]
+        e = new["final"][1] / old["final"][1] if old["final"][1] > 0 else float("nan")
+        lines.append(
+            f"| {new['case']} | {t:.2f} ({new['seconds']['total']:.1f} / "
+            f"{old['seconds']['total']:.1f} s) | {m:.2f} | {e:.2f} | "
+            f"{100 * new['final'][0]:.1f}%, {100 * old['final'][0]:.1f}% |"
+        )
+    return head + "\n".join(lines) + "\n"
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--data", type=Path, default=Path(os.environ.get("HOPE_DATA", DEFAULT_DATA)))
@@ -220,18 +251,35 @@ def main() -> None:
         help="match(..., multiscale=True): the descr column is then the coarse match and lift",
     )
     p.add_argument(
+        "--full", action="store_true", help="match(..., multiscale=False): the full path"
+    )
+    p.add_argument(
+        "--compare",
+        action="store_true",
+        help="each case on the default path and with multiscale=False; prints the ratios",
+    )
+    p.add_argument(
         "--no-spectral", action="store_true", help="match(..., spectral=False): HOPE's map only"
     )
     p.add_argument("--child", help=argparse.SUPPRESS)
     args = p.parse_args()
+    path = True if args.multiscale else (False if args.full else None)
     if args.child:
-        print(json.dumps(run_case(args.child, args.data, args.multiscale, not args.no_spectral)))
+        print(json.dumps(run_case(args.child, args.data, path, not args.no_spectral)))
         return
     print(f"load average: {os.getloadavg()}", flush=True)
     rows = []
-    for name in args.cases.split(","):
-        cmd = [sys.executable, __file__, "--child", name, "--data", str(args.data)]
-        cmd += ["--multiscale"] if args.multiscale else []
+    runs = [
+        (name, flag)
+        for name in args.cases.split(",")
+        for flag in (
+            ([], ["--full"])
+            if args.compare
+            else (["--multiscale"] if args.multiscale else ["--full"] if args.full else [],)
+        )
+    ]
+    for name, flag in runs:
+        cmd = [sys.executable, __file__, "--child", name, "--data", str(args.data), *flag]
         cmd += ["--no-spectral"] if args.no_spectral else []
         try:
             # stdout carries the result; the child's stderr (stage progress, errors) passes through
@@ -247,6 +295,8 @@ def main() -> None:
         rows.append(row)
         print(json.dumps(row), flush=True)
     md = table(rows) + "\n" + steps_table(rows)
+    if args.compare:
+        md += "\n" + ratio_table(rows)
     print(md)
     if args.out:
         args.out.write_text(md)

@@ -192,3 +192,32 @@ def test_the_coarse_match_runs_with_the_callers_settings(faust_pair):
     assert res.coarse.config.refine.top_k == 24 and not res.coarse.config.multiscale.enabled
     assert not res.coarse.config.spectral.enabled  # the fine shapes take the spectral pass
     assert res.config.refine.max_passes == M.fine_passes(a.n_vertices, b.n_vertices)
+
+
+@pytest.mark.slow
+def test_the_default_path_is_chosen_by_size(faust_pair):
+    """``multiscale`` unset: coarse-to-fine above ``auto_vertices`` (lowered here so that the
+    6890-vertex bodies count as large), the full path at or below it; ``multiscale=False``
+    forces the full path and says so."""
+    a, b = faust_pair
+    auto = MatchConfig(shape=COARSER_SHAPES)
+    assert auto.multiscale.enabled is None
+    small = dataclasses.replace(
+        auto, multiscale=dataclasses.replace(auto.multiscale, auto_vertices=5000)
+    )
+    res = hope_rs.match(a, b, config=small, max_passes=1)
+    coarse = res.stage("coarse")
+    assert coarse.ran and "chosen by size: 6890 vertices > 5000" in coarse.reason
+    assert res.coarse is not None
+    forced = hope_rs.match(a, b, config=small, max_passes=1, multiscale=False)
+    assert res.coarse is not None and forced.coarse is None
+    assert "multiscale=False" in forced.stage("coarse").reason
+    plain = hope_rs.match(a, b, config=auto, max_passes=1)
+    assert plain.coarse is None and "coarse" not in [s.name for s in plain.stages]
+    np.testing.assert_array_equal(plain.map, forced.map)
+
+
+def test_the_fine_schedule_is_checked():
+    with pytest.raises(ValueError, match="fine_schedule must be None or a non-empty"):
+        M.MultiscaleConfig(fine_schedule=(3, 0))
+    assert M.MultiscaleConfig(fine_schedule=[2, 1]).fine_schedule == (2, 1)

@@ -91,9 +91,11 @@ def match(
           its best-overlapping candidate; ``None`` keeps the one-to-one map.
         - ``global_step`` (bool, True): start each pass by re-placing untrusted vertices by
           their geodesic distances to trusted ones; ``False`` is the paper's loop.
-        - ``multiscale`` (bool, False): match coarse copies first, lift that map and refine
-          it on the full meshes: faster on large meshes, with a larger error
-          (docs/decisions.md#multiscale).
+        - ``multiscale`` (bool or None, None): match coarse copies first, lift that map and
+          refine it on the full meshes (then the shared-face finish where the shapes share
+          their triangulation). ``None`` chooses by size: coarse-to-fine when a shape has more
+          than ``MultiscaleConfig.auto_vertices`` (60,000) vertices; ``False`` forces the
+          full path (docs/decisions.md#multiscale).
         - ``spectral`` (bool, True): after HOPE, run ZoomOut from its map and keep, region by
           region, whichever map distorts A's 2-rings less (docs/decisions.md#spectral).
         - ``shared_faces`` (bool, True): on shapes that share most of their triangulation,

@@ -59,6 +59,11 @@ def _summary(res) -> dict:
 HINT_VERTICES = 100_000
 
 
+def max_vertices(a, b) -> int:
+    """The larger vertex count of two meshes (what the path is chosen by)."""
+    return max(a.n_vertices, b.n_vertices)
+
+
 def cmd_match(args) -> int:
     config = config_from_args(args)  # before any work, like the outputs below
     if args.output:  # before any work: a known suffix, a folder we can write to
@@ -79,6 +84,10 @@ def cmd_match(args) -> int:
     a, b = load_mesh(args.a), load_mesh(args.b)
     if (
         not config.multiscale.enabled
+        and (
+            config.multiscale.enabled is False
+            or max_vertices(a, b) <= config.multiscale.auto_vertices
+        )
         and not args.quiet
         and min(a.n_vertices, b.n_vertices) >= HINT_VERTICES
     ):

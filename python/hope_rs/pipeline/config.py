@@ -361,8 +361,8 @@ class FinishConfig:
     Attributes
     ----------
     enabled : bool
-    max_vertices : int
-        Larger shapes are not finished.
+    max_vertices : int or None
+        Larger shapes are not finished; ``None``: any size.
     min_handles : float
         Rounds run only while this share of A's vertices are handles.
     rounds : int
@@ -378,7 +378,7 @@ class FinishConfig:
     """
 
     enabled: bool = True
-    max_vertices: int = 60_000
+    max_vertices: int | None = None
     min_handles: float = 0.2
     rounds: int = 10
     min_growth: float = 0.01
@@ -396,7 +396,14 @@ class MultiscaleConfig:
 
     Attributes
     ----------
-    enabled : bool
+    enabled : bool or None
+        ``None`` (``match``'s default): the path is chosen by size, coarse-to-fine when the
+        larger shape has more than ``auto_vertices`` vertices; ``True`` or ``False`` force it.
+    auto_vertices : int
+        See ``enabled``.
+    fine_schedule : tuple of int or None
+        Hop radii of the refinement's passes on the fine meshes after the lift; ``None``: the
+        refinement's own schedule (``RefineConfig.schedule``).
     fine_passes : int
         Refinement passes on the fine meshes after the lift ...
     fine_passes_small : int
@@ -406,11 +413,17 @@ class MultiscaleConfig:
         Ridge of the lift's local linear fits, relative to the mean squared edge.
     """
 
-    enabled: bool = False
+    enabled: bool | None = None
+    auto_vertices: int = 60_000
+    fine_schedule: tuple[int, ...] | None = None
     fine_passes: int = 1
     fine_passes_small: int = 2
     fine_passes_small_vertices: int = 60_000
     lift_ridge: float = 1e-3
+
+    def __post_init__(self):
+        if self.fine_schedule is not None:
+            _set_radii(self, "fine_schedule", "MultiscaleConfig.fine_schedule must be None or")
 
 
 @dataclass(frozen=True)
@@ -431,11 +444,48 @@ class ResolutionConfig:
         least 1.
     count_tolerance : float
         The coarse copy's vertex count is within this share of the sparser shape's.
+    refine : bool
+        After the lift, refine at full resolution: the sparser shape is subdivided (each
+        face into four, as often as brings its vertex count nearest the denser one's), the
+        pair matched from the lifted map with one pass of ``refine_schedule`` and the
+        shared-face finish, and the map carried back to the sparser shape's own vertices.
+        Not with landmarks.
+    refine_schedule : tuple of int
+        Hop radii of that pass.
+    refine_min_handles : float
+        The pass runs only when this share of the vertices are handles of the lifted map
+        (:func:`~hope_rs.pipeline.handles.face_handles`): shapes remeshed independently have
+        almost none, and there the pass would cost time for nothing.
     """
 
     enabled: bool = True
     max_ratio: float = field(default=2.0, metadata={"finite": True, "range": (1.0, None)})
     count_tolerance: float = field(default=0.05, metadata={"range": (0.0, 1.0), "exclusive": True})
+    refine: bool = True
+    refine_schedule: tuple[int, ...] = (3, 2, 1)
+    refine_min_handles: float = field(default=0.04, metadata={"range": (0.0, 1.0)})
+
+    def __post_init__(self):
+        _set_radii(self, "refine_schedule", "ResolutionConfig.refine_schedule must be")
+
+
+def _set_radii(config, name: str, must: str) -> None:
+    """Store ``config.<name>`` as a tuple (hashable whatever sequence was given) and refuse it
+    unless it is a non-empty sequence of hop radii >= 1 (check_config leaves tuples to their
+    class); ``must`` starts the error message."""
+    value = getattr(config, name)
+    if not isinstance(value, tuple):
+        with contextlib.suppress(TypeError):  # not a sequence: the check below says so
+            value = tuple(value)
+            object.__setattr__(config, name, value)
+    if not (
+        isinstance(value, tuple)
+        and value
+        and all(
+            isinstance(k, numbers.Integral) and not isinstance(k, bool) and k >= 1 for k in value
+        )
+    ):
+        raise ValueError(f"{must} a non-empty sequence of hop radii >= 1, got {value!r}")
 
 
 def declared(option: str) -> dict:

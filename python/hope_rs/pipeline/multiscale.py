@@ -145,10 +145,25 @@ class MultiscaleStage(Stage):
     runs_on_final_map = False
 
     def skip_reason(self, state: MatchState):
-        if not state.config.multiscale.enabled:
+        cfg = state.config.multiscale
+        n = max(state.a.n_vertices, state.b.n_vertices)
+        if cfg.enabled is False:
+            if n > cfg.auto_vertices:
+                return f"multiscale=False: the full path on {n} vertices"
+            return QUIET
+        if cfg.enabled is None and n <= cfg.auto_vertices:
             return QUIET
         sparse = too_sparse(state.a, state.b)
         return None if sparse is None else f"multiscale not applied: {sparse}"
+
+    @staticmethod
+    def why(state: MatchState) -> str:
+        """Why the path ran: asked for, or chosen by size."""
+        cfg = state.config.multiscale
+        if cfg.enabled:
+            return "multiscale=True"
+        n = max(state.a.n_vertices, state.b.n_vertices)
+        return f"chosen by size: {n} vertices > {cfg.auto_vertices}"
 
     def run(self, state: MatchState) -> None:
         a, b, cfg, log = state.a, state.b, state.config, state.log
@@ -183,10 +198,12 @@ class MultiscaleStage(Stage):
         log.ran(
             "coarse",
             relay.last - t,
-            f"coarse copies of {csa.n_vertices} and {csb.n_vertices} vertices matched",
+            f"coarse copies of {csa.n_vertices} and {csb.n_vertices} vertices matched "
+            f"({self.why(state)})",
         )
         log.ran("lift", time.perf_counter() - relay.last, "coarse map carried to every vertex")
         passes = min(cfg.refine.max_passes, fine_passes(a.n_vertices, b.n_vertices, cfg.multiscale))
+        schedule = cfg.multiscale.fine_schedule or cfg.refine.schedule
         state.config = dataclasses.replace(
-            cfg, refine=dataclasses.replace(cfg.refine, max_passes=passes)
+            cfg, refine=dataclasses.replace(cfg.refine, max_passes=passes, schedule=schedule)
         )

@@ -60,9 +60,12 @@ def check_options(
     _integer("top_k", top_k, 1, TOP_K_LIMIT, allowed)
     if polish_k is not None:
         _integer("polish_k", polish_k, 1, k_max, f"None or an integer in [1, k_max={k_max}]")
+    if not (multiscale is None or isinstance(multiscale, (bool, np.bool_))):
+        raise TypeError(
+            f"multiscale must be None (chosen by size), True or False, got {multiscale!r}"
+        )
     for name, value in [
         ("global_step", global_step),
-        ("multiscale", multiscale),
         ("spectral", spectral),
         ("shared_faces", shared_faces),
         ("confidence", confidence),

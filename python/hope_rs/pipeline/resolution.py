@@ -18,6 +18,15 @@ vertices, the "resolution" stage
    centroid of its images, and takes the vertex of B nearest that point: the coarse map's
    offsets of up to a coarse edge average out over the ring.
 
+4. refines the lifted map at full resolution (``ResolutionConfig.refine``): the sparser
+   shape is subdivided (:func:`hope_rs.geometry.subdivide.subdivide`, each face into four)
+   to about the denser one's count, so that k-hop balls on both cover like patches; the pair
+   is matched from the lifted map with one short pass of HOPE steps and the shared-face
+   finish (which makes a shape and its subdivided copy exact), and each vertex of the
+   subdivided shape is carried back to the nearest vertex of the sparser one (an original
+   vertex is itself). Kept only when the finish ran: shapes remeshed independently share no
+   faces, and there the HOPE steps alone did worse than the lift.
+
 The map is final, and its confidence is the coarse match's (each dense vertex of A takes its
 coarse vertex's): the stages after it do not run (docs/decisions.md#resolution).
 """
@@ -26,16 +35,21 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from typing import Callable
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ..geometry.coarsen import Coarse, coarse_to_count
+from ..geometry.subdivide import subdivide
 from ..shape import Shape
+from .handles import face_handles
 from .landmarks import coarse_landmarks
 from .multiscale import lift_map
+from .shared_faces import qualifies
 from .state import QUIET, Halt, MatchState, Stage
 
-__all__ = ["ResolutionStage", "denser_side", "density"]
+__all__ = ["ResolutionStage", "denser_side", "density", "subdivisions"]
 
 
 def density(s: Shape) -> float:
@@ -53,6 +67,19 @@ def denser_side(a: Shape, b: Shape, max_ratio: float) -> str | None:
     if db > max_ratio * da:
         return "b"
     return None
+
+
+def subdivisions(n_sparse: int, n_dense: int) -> int:
+    """How many times to subdivide a mesh of ``n_sparse`` vertices (each time about 4x) to
+    come nearest ``n_dense``: at least once."""
+    return max(1, round(np.log(n_dense / n_sparse) / np.log(4.0)))
+
+
+def subdivided_copy(shape: Shape, times: int) -> Shape:
+    """``shape``'s internal mesh subdivided ``times`` (its vertices first, in the internal
+    numbering), as a Shape of the same settings and orientation."""
+    mesh = subdivide(shape.internal, times)
+    return Shape(mesh, k_max=shape.k_max, orient=False, config=shape.config)
 
 
 def coarse_copy(shape: Shape, n_target: int, tolerance: float) -> tuple[Coarse, Shape] | None:
@@ -75,6 +102,7 @@ class ResolutionStage(Stage):
 
     def __init__(self):
         self.side: str | None = None
+        self.start_handles = 0.0  # share of handles of the refinement's start
 
     def skip_reason(self, state: MatchState):
         cfg = state.config.resolution
@@ -131,8 +159,23 @@ class ResolutionStage(Stage):
             f = lift_map(a.internal, coarse.mesh, g, a.points, ident, b.points, ridge, True)
         else:
             g = b.rank[res.map]  # coarse vertex (the copy's input numbering) -> B internal
-            f = lift_map(coarse.mesh, b.internal, g, a.points, coarse.owner, b.points, ridge, True)
-        state.f0 = state.f = state.hope_map = f.astype(np.int64)
+
+            def lift(points_b: np.ndarray) -> np.ndarray:
+                return lift_map(
+                    coarse.mesh, b.internal, g, a.points, coarse.owner, points_b, ridge, True
+                )
+
+            f = lift(b.points)
+        f = f.astype(np.int64)
+        note = ""
+        if cfg.resolution.refine and state.landmarks is None:
+            fine = self.refined(state, f, dense, sparse, None if self.side == "b" else lift)
+            h = f"{self.start_handles:.1%} of the vertices handles at the start"
+            if fine is None:
+                note = f"; no shared faces to refine at full resolution ({h})"
+            else:
+                f, note = fine, f", refined at full resolution ({h})"
+        state.f0 = state.f = state.hope_map = f
         if res.confidence is not None:
             # Measured where the map was made: a dense A's many-to-one map to a sparse B keeps
             # few of its 2-rings' distances however right it is.
@@ -143,6 +186,63 @@ class ResolutionStage(Stage):
         state.log.ran(
             "resolution",
             state.timings["resolution"],
-            f"{detail}: {name} clustered to {cs.n_vertices} vertices, matched there, lifted",
+            f"{detail}: {name} clustered to {cs.n_vertices} vertices, matched there, lifted{note}",
         )
         return Halt(f"the map is lifted from the match at {cs.n_vertices} vertices of {name}")
+
+    def refined(
+        self,
+        state: MatchState,
+        f: np.ndarray,
+        dense: Shape,
+        sparse: Shape,
+        lift: Callable[[np.ndarray], np.ndarray] | None = None,
+    ) -> np.ndarray | None:
+        """The lifted map ``f`` (internal numbering) refined at full resolution (see the
+        module notes, step 4), or ``None`` when the refined map does not share faces
+        (:func:`~hope_rs.pipeline.shared_faces.qualifies`; no shared triangulation): then the HOPE steps alone, on shapes remeshed
+        independently, moved the lifted map away from the truth (docs/decisions.md#resolution).
+        ``lift``: the lift of the coarse match onto given points of B (used when B is the
+        shape subdivided)."""
+        a, b, cfg = state.a, state.b, state.config
+        times = subdivisions(sparse.n_vertices, dense.n_vertices)
+        up = subdivided_copy(sparse, times)
+        nested = dataclasses.replace(
+            cfg,
+            partial=dataclasses.replace(cfg.partial, enabled=False),
+            resolution=dataclasses.replace(cfg.resolution, enabled=False),
+            multiscale=dataclasses.replace(cfg.multiscale, enabled=False),
+            refine=dataclasses.replace(
+                cfg.refine, schedule=cfg.resolution.refine_schedule, max_passes=1
+            ),
+            spectral=dataclasses.replace(cfg.spectral, enabled=False),
+            orient=dataclasses.replace(cfg.orient, enabled=False),
+            confidence=dataclasses.replace(cfg.confidence, enabled=False),
+        )
+        assert state.run is not None
+        points = up.points[up.rank]  # in the subdivided mesh's own numbering
+        if self.side == "b":
+            # A subdivided: its new vertices take the lift of the map by their ring's edges.
+            owner = cKDTree(a.points).query(points)[1]
+            init = lift_map(a.internal, b.internal, f, points, owner, b.points, centred=True)
+            init[: a.n_vertices] = f
+            self.start_handles = float(face_handles(up, b, init[up.order]).mean())
+            if self.start_handles < cfg.resolution.refine_min_handles:
+                return None
+            res = state.run(up, b, b.order[init], nested, callback=state.callback)
+            if not qualifies(up, b, b.rank[res.map[up.order]], cfg.finish):
+                return None
+            return b.rank[res.map[: a.n_vertices]].astype(np.int64)
+        # B subdivided: its first vertices are B's own (internal numbering). The start is the
+        # lift onto the subdivided B (the lift onto B itself maps many vertices to one).
+        assert lift is not None
+        f = lift(points)
+        self.start_handles = float(face_handles(a, up, up.rank[f]).mean())
+        if self.start_handles < cfg.resolution.refine_min_handles:
+            return None
+        res = state.run(a, up, f[a.rank], nested, callback=state.callback)
+        if not qualifies(a, up, up.rank[res.map[a.order]], cfg.finish):
+            return None
+        back = cKDTree(b.points).query(points)[1]
+        back[: b.n_vertices] = np.arange(b.n_vertices)
+        return back[res.map[a.order]].astype(np.int64)

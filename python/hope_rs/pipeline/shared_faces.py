@@ -39,8 +39,8 @@ from .state import MatchState, Stage, StepClock
 
 def applies(a: Shape, b: Shape, config: FinishConfig = FinishConfig()) -> bool:
     """Whether the finishing rounds may run on these shapes (both at most
-    ``config.max_vertices`` vertices)."""
-    return max(a.n_vertices, b.n_vertices) <= config.max_vertices
+    ``config.max_vertices`` vertices, when set)."""
+    return config.max_vertices is None or max(a.n_vertices, b.n_vertices) <= config.max_vertices
 
 
 def qualifies(a: Shape, b: Shape, f: np.ndarray, config: FinishConfig = FinishConfig()) -> bool:
