@@ -12,6 +12,8 @@ import hope_rs
 from hope_rs import MatchConfig
 from hope_rs.batch.manifest import MANIFEST
 from hope_rs.cli import main
+from hope_rs.cli.batch_cli import config_from_args
+from hope_rs.cli.commands import build_parser
 from hope_rs.geometry.coarsen import CoarsenConfig, coarse_mesh
 from hope_rs.pipeline import multiscale as M
 from hope_rs.pipeline.config import OrientConfig, ResolutionConfig
@@ -221,3 +223,21 @@ def test_the_fine_schedule_is_checked():
     with pytest.raises(ValueError, match="fine_schedule must be None or a non-empty"):
         M.MultiscaleConfig(fine_schedule=(3, 0))
     assert M.MultiscaleConfig(fine_schedule=[2, 1]).fine_schedule == (2, 1)
+
+
+@pytest.mark.parametrize(
+    "flags, enabled",
+    [([], None), (["--multiscale"], True), (["--no-multiscale"], False)],
+)
+def test_the_path_flags_set_the_config_match_and_batch_read(flags, enabled):
+    # Default: the path by size; --no-multiscale forces the full path at any size.
+    for cmd in (["match", "a.off", "b.off"], ["batch", "pairs.txt", "--out", "maps"]):
+        args = build_parser().parse_args([*cmd, *flags])
+        assert config_from_args(args).multiscale.enabled is enabled
+
+
+def test_the_path_flags_exclude_each_other(capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["match", "a.off", "b.off", "--multiscale", "--no-multiscale"])
+    assert e.value.code == 2
+    assert "not allowed with argument" in capsys.readouterr().err

@@ -71,6 +71,19 @@ def add_setting_arguments(p) -> None:
         "--init", choices=["shot", "wks", "hks"], help="descriptors (default: shot, or --config's)"
     )
     p.add_argument("--k-max", type=int, help="largest hop radius (default: 8, or --config's)")
+    path = p.add_mutually_exclusive_group()
+    path.add_argument(
+        "--multiscale",
+        action="store_true",
+        help="match coarse copies first, then fine passes (faster, less exact; the default above "
+        "60,000 vertices)",
+    )
+    path.add_argument(
+        "--no-multiscale",
+        action="store_true",
+        help="the full path at any size (slower on large meshes, more exact where the shapes "
+        "share a triangulation)",
+    )
 
 
 def config_from_args(args) -> MatchConfig:
@@ -81,8 +94,8 @@ def config_from_args(args) -> MatchConfig:
     options = {}
     if args.k_max is not None:
         options["k_max"] = args.k_max
-    if args.multiscale:
-        options["multiscale"] = True
+    if args.multiscale or args.no_multiscale:
+        options["multiscale"] = bool(args.multiscale)
     if args.no_spectral:
         options["spectral"] = False
     if args.no_shared_faces:
@@ -134,9 +147,6 @@ def add_batch_parser(sub) -> None:
     p.add_argument("--cache", help="per-shape cache folder (default: $HOPE_RS_CACHE)")
     p.add_argument("--no-cache", action="store_true", help="keep the cache for this run only")
     add_setting_arguments(p)
-    p.add_argument(
-        "--multiscale", action="store_true", help="match(..., multiscale=True) for every pair"
-    )
     p.add_argument(
         "--no-spectral", action="store_true", help="match(..., spectral=False) for every pair"
     )

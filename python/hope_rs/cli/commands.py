@@ -168,11 +168,6 @@ def build_parser() -> argparse.ArgumentParser:
         "mapped exactly, and the map around them follows",
     )  # fmt: skip
     m.add_argument(
-        "--multiscale",
-        action="store_true",
-        help="for large meshes: match coarse copies first, then one or two fine passes (faster, less exact)",
-    )
-    m.add_argument(
         "--no-spectral",
         action="store_true",
         help="return HOPE's own map, without the spectral (ZoomOut) pass after it",
