@@ -482,7 +482,8 @@ def _set_radii(config, name: str, must: str) -> None:
         isinstance(value, tuple)
         and value
         and all(
-            isinstance(k, numbers.Integral) and not isinstance(k, bool) and k >= 1 for k in value
+            isinstance(k, numbers.Integral) and not isinstance(k, bool) and int(k) >= 1
+            for k in value
         )
     ):
         raise ValueError(f"{must} a non-empty sequence of hop radii >= 1, got {value!r}")
