@@ -11,6 +11,10 @@ when its error is at most 0.05.
 
     python scripts/confidence_table.py                 # match (or reuse), write docs/confidence.md
     python scripts/confidence_table.py --max-pairs 4   # at most 4 pairs per set (faster)
+    python scripts/confidence_table.py --extra-sets DIR  # + the sets `hope-rs perturb-set` wrote
+
+A shortcuts set is scored on the clean B, a welded vertex counting as either of its two
+(:func:`hope_rs.evaluation.perturbed.shortcut_errors`).
 
 Needs ../shared/data (or HOPE_DATA). ``scripts/confidence_fit.py`` fits the coefficients on
 training pairs with the same helpers.
@@ -35,6 +39,7 @@ import hope_rs
 from hope_rs import MatchConfig, Shape
 from hope_rs.evaluation.datasets import Pair, pairs_of
 from hope_rs.evaluation.evaluate import confidence_auroc
+from hope_rs.evaluation.perturbed import shortcut_errors
 from hope_rs.pipeline.confidence import (
     MatchQuality,
     confidence_features,
@@ -55,6 +60,15 @@ LEVELS = (0.1, 0.3, 0.5, 0.7, 0.9)
 
 def default_cache() -> Path:
     return Path(tempfile.gettempdir()) / "hope_rs_confidence_cache"
+
+
+def errors_of(pair: Pair, mb, mapping, a_idx, b_idx) -> np.ndarray:
+    """Edge-graph geodesic errors of ``mapping``; on a welded B (a shortcuts set) measured on
+    the clean B, a weld counting as either of its two vertices."""
+    e = shortcut_errors(pair.b.parent, pair.b.stem, mapping, a_idx, b_idx, method="graph")
+    if e is None:
+        e = hope_rs.geodesic_errors(mb, mapping, a_idx=a_idx, b_idx=b_idx)
+    return e
 
 
 def matched(pair: Pair, config: MatchConfig, init: str, cache: Path) -> dict:
@@ -84,7 +98,7 @@ def matched(pair: Pair, config: MatchConfig, init: str, cache: Path) -> dict:
         "hope": res.hope_map,
         "zoomout": seen.get("zoomout", np.full(ma.n_vertices, -1, dtype=np.int64)),
         "a_idx": np.asarray(a_idx, dtype=np.int64),
-        "errors": hope_rs.geodesic_errors(mb, res.map, a_idx=a_idx, b_idx=b_idx),
+        "errors": errors_of(pair, mb, res.map, a_idx, b_idx),
         "seconds": np.float64(seconds),
     }
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -139,10 +153,11 @@ def scored(pair: Pair, m: dict, config: MatchConfig) -> tuple[np.ndarray, np.nda
     return c[m["a_idx"]], m["errors"] <= WRONG_ABOVE, quality
 
 
-def pairs(names: list[str], max_pairs: int | None) -> dict[str, list[Pair]]:
+def pairs(folders: list[Path], max_pairs: int | None) -> dict[str, list[Pair]]:
     out = {}
-    for name in names:
-        ps = pairs_of(DATA / name)
+    for folder in folders:
+        name = folder.name
+        ps = pairs_of(folder)
         if max_pairs is not None and len(ps) > max_pairs:
             # Evenly spaced, always the same ones.
             ps = [ps[i] for i in np.linspace(0, len(ps) - 1, max_pairs).round().astype(int)]
@@ -160,7 +175,13 @@ def _git(*args: str) -> str:
 
 
 def render(
-    rows: dict, per_pair: list, sampled: bool, seconds: float, matched_now: int, match_s: float
+    rows: dict,
+    per_pair: list,
+    sampled: bool,
+    seconds: float,
+    matched_now: int,
+    match_s: float,
+    extra: list[str],
 ) -> str:
     config = MatchConfig()
     lines = [
@@ -175,7 +196,14 @@ def render(
         f"- machine: {platform.machine()}, {os.cpu_count()} cores, {platform.platform()}",
         f"- data: the `pairs.txt` pairs of {', '.join(HELD_OUT)} "
         + ("(sampled: `--max-pairs`)" if sampled else "(all of them)")
-        + "; none of them is a training pair of `scripts/confidence_fit.py`",
+        + "; none of them is a training pair of `scripts/confidence_fit.py`"
+        + (
+            f"; and the sets {', '.join(extra)} that `hope-rs perturb-set` built from them "
+            "(B with vertex noise of 0.2% or 0.5% of sqrt(area), or welded by topological "
+            "shortcuts and scored on the clean B, a weld counting as either of its two)"
+            if extra
+            else ""
+        ),
         (
             f"- a match is right when its geodesic error is at most {WRONG_ABOVE} sqrt(area) "
             "(edge-graph geodesics, at the vertices with ground truth)"
@@ -259,6 +287,12 @@ def main(argv=None) -> int:
     p.add_argument("--cache", type=Path, default=default_cache())
     p.add_argument("--max-pairs", type=int, default=None, help="pairs per set at most")
     p.add_argument("--out", type=Path, default=ROOT / "docs" / "confidence.md")
+    p.add_argument(
+        "--extra-sets",
+        type=Path,
+        help="a folder of derived sets (each a folder with a pairs.txt, as `hope-rs perturb-set` "
+        "writes them) to score beside the held-out ones",
+    )
     args = p.parse_args(argv)
     if not DATA.is_dir():
         print(f"no data folder {DATA}; set HOPE_DATA", file=sys.stderr)
@@ -266,7 +300,12 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     config = MatchConfig()
     rows, per_pair, matched_now, match_s = {}, [], 0, 0.0
-    for name, ps in pairs(HELD_OUT, args.max_pairs).items():
+    folders = [DATA / name for name in HELD_OUT]
+    extra = []
+    if args.extra_sets is not None:
+        extra = sorted(d for d in args.extra_sets.iterdir() if (d / "pairs.txt").is_file())
+        folders += extra
+    for name, ps in pairs(folders, args.max_pairs).items():
         confs, rights = [], []
         for pair in ps:
             m = matched(pair, config, config.initial.descriptor, args.cache)
@@ -279,7 +318,15 @@ def main(argv=None) -> int:
             print(f"{name} {pair.name}: mean error {m['errors'].mean():.3f}", file=sys.stderr)
         rows[name] = (np.concatenate(confs), np.concatenate(rights), len(ps))
     seconds = time.perf_counter() - t0
-    text = render(rows, per_pair, args.max_pairs is not None, seconds, matched_now, match_s)
+    text = render(
+        rows,
+        per_pair,
+        args.max_pairs is not None,
+        seconds,
+        matched_now,
+        match_s,
+        [d.name for d in extra],
+    )
     args.out.write_text(text)
     print(text)
     return 0
