@@ -1,7 +1,7 @@
 """Regenerate docs/speed.md: where a match's time goes, from one run of the benches.
 
 Runs, each in its own processes, ``benches/bench_scale.py`` (per-stage seconds and peak memory
-at 5k, 28k, 110k and 250k vertices, the default path and ``multiscale=True``, and the split of
+at 5k, 28k, 110k and 250k vertices, the default path and ``multiscale=False``, and the split of
 the HOPE steps between building overlap costs and solving assignments),
 ``benches/bench_contention.py`` (a 5k match quiet and beside two busy processes) and
 ``benches/bench_batch.py --template 20`` (one template against 20 shapes) and
@@ -51,17 +51,19 @@ def _tables(text: str) -> str:
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--cases", default="faust_r5k,tosca28k,faust100k,faust250k")
-    p.add_argument("--multiscale-cases", default="tosca28k,faust100k,faust250k")
+    p.add_argument(
+        "--full-cases",
+        default="faust100k,faust250k",
+        help="cases also run with multiscale=False (the full path at any size)",
+    )
     p.add_argument("--no-batch", action="store_true", help="skip the two batch benches")
     p.add_argument("--out", type=Path, default=ROOT / "docs" / "speed.md")
     args = p.parse_args()
     start = header()
     scale = _bench("bench_scale.py", "--cases", args.cases, "--timeout", "1800")
-    multi = ""
-    if args.multiscale_cases:
-        multi = _bench(
-            "bench_scale.py", "--cases", args.multiscale_cases, "--multiscale", "--timeout", "1800"
-        )
+    full = ""
+    if args.full_cases:
+        full = _bench("bench_scale.py", "--cases", args.full_cases, "--full", "--timeout", "1800")
     contention = _bench("bench_contention.py", "--rounds", "3")
     batch = "" if args.no_batch else _bench("bench_batch.py", "--template", "20")
     every = "" if args.no_batch else _bench("bench_batch.py")
@@ -72,16 +74,18 @@ def main() -> int:
         + "".join(f"- {line}\n" for line in (start + f"{load()} at the end").splitlines())
         + "\n## Per stage, default path\n\n"
         "`benches/bench_scale.py`: seconds per stage and peak resident memory; sizes above "
-        "28k are FAUST registrations subdivided (scored on their original vertices). The "
+        "28k are FAUST registrations subdivided (scored on their original vertices). Above "
+        "`MultiscaleConfig.auto_vertices` the default path matches coarse copies first (the "
+        "descr column is then the coarse match and its lift). The "
         "second table splits the HOPE steps (the refinement's and the shared-face finish's) "
         "into building the overlap cost (parallel) and solving the assignment exactly (the "
         "auction, sequential); *rest* is the refinement's LMD, global repair, polish and "
         "bookkeeping, slowed by the spectral pass's eigensolve running beside them.\n\n"
         + _tables(scale)
         + (
-            "\n## Per stage, `multiscale=True`\n\nThe descr column is the coarse match and "
-            "its lift.\n\n" + _tables(multi)
-            if multi
+            "\n## Per stage, `multiscale=False`\n\nThe full path at any size: HOPE at full "
+            "resolution, then the shared-face finish.\n\n" + _tables(full)
+            if full
             else ""
         )
         + "\n## Beside busy processes\n\n`benches/bench_contention.py`: a 5k remeshed FAUST "
