@@ -47,7 +47,7 @@ def grow(a: Shape, b: Shape, f: np.ndarray, config: GrowthConfig = GrowthConfig(
     n_a, n_b = a.n_vertices, b.n_vertices
     cfg = config
     ab, ba = _Growth(a, b, cfg), _Growth(b, a, cfg)
-    seeds = np.where(seed_handles(a, b, f, cfg.seed_share), f, -1)
+    seeds = np.where(seed_handles(a, b, f, cfg.seed_share, cfg.seed_irregular), f, -1)
     g = ab.regrow(ab.grow(seeds, cfg.faces_first))
     h = _inverse(ba.regrow(ba.grow(_inverse(seeds, n_b), cfg.faces_first)), n_a)
     for _ in range(cfg.agreement_rounds):
@@ -95,7 +95,7 @@ class _Growth:
         affine first."""
         # Small handle patches go too: a region grown through a narrow neck one vertex off
         # is face-consistent in places, and those places would seed the same error again.
-        clear = ~seed_handles(self.a, self.b, g, self.config.seed_share)
+        clear = ~seed_handles(self.a, self.b, g, self.config.seed_share, self.config.seed_irregular)
         e = self.a.edges
         near = clear.copy()
         near[e[:, 0][clear[e[:, 1]]]] = True
