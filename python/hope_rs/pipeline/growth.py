@@ -4,9 +4,10 @@ The last step of the shared-face finish (:mod:`hope_rs.pipeline.shared_faces`). 
 of the map it can trust and rebuilds the rest outward from it, vertex by vertex:
 
 - **Seeds**: handles (vertices whose faces all map onto faces of B) in connected patches of at
-  least ``GrowthConfig.seed_share`` of A's vertices: wrong handles lie in small
-  patches (a region that HOPE shifted as a whole by a few edges), large patches are mostly
-  right.
+  least ``GrowthConfig.seed_share`` of A's vertices that hold an irregular handle
+  (``GrowthConfig.seed_irregular``): wrong handles lie in small patches (a region that HOPE
+  shifted as a whole by a few edges) or, on a regular lattice such as a subdivided mesh, in
+  patches without an irregular vertex (a shift by whole edges keeps faces there).
 - **Across shared faces**: a face of A with two mapped vertices names the image of its third
   vertex, if the two triangles have nearly the same shape (see ``_core.grow_across_faces``).
 - **By local affine fits**: where the triangulations differ (retriangulated regions, often

@@ -5,7 +5,7 @@ the same orientation and no other vertex shares its image. On shapes that are on
 triangulation in two poses, the true map makes almost every vertex a handle; on shapes
 remeshed independently few vertices are. The shared-face finish (:mod:`hope_rs.pipeline.shared_faces`)
 deforms towards them, and the growth (:mod:`hope_rs.pipeline.growth`) starts from those in large
-connected patches.
+connected patches pinned by an irregular vertex (:func:`irregular_vertices`).
 """
 
 from __future__ import annotations
