@@ -3,14 +3,14 @@
 import numpy as np
 import pytest
 from conftest import data_path
-from meshes import bumpy_sphere, drifted, moved_copy
+from meshes import bumpy_sphere, drifted, flat_grid, moved_copy, subdivided
 
 import hope_rs
 from hope_rs import _core
 from hope_rs.pipeline import growth
 from hope_rs.pipeline import shared_faces as SF
 from hope_rs.pipeline.config import GrowthConfig
-from hope_rs.pipeline.handles import seed_handles
+from hope_rs.pipeline.handles import irregular_vertices, seed_handles
 
 
 def flip_edges(faces: np.ndarray, inside: np.ndarray, rng) -> np.ndarray:
@@ -87,6 +87,31 @@ def test_only_handle_patches_above_the_seed_share_seed():
     assert handles[cap].sum() >= 5 and not seeds[cap].any()  # 8 handles in the cap
     np.testing.assert_array_equal(seeds, handles & ~in_cap)
     assert seeds.mean() > 0.8
+
+
+def test_midpoints_of_a_subdivided_mesh_are_regular_and_its_other_vertices_keep_their_degree():
+    v, f = bumpy_sphere(300, 1)
+    degree = np.bincount(f.ravel(), minlength=len(v))
+    s = hope_rs.Shape(hope_rs.Mesh(*subdivided(*subdivided(v, f))))
+    irregular = irregular_vertices(s)[s.rank]  # input numbering: the original vertices first
+    np.testing.assert_array_equal(irregular[: len(v)], degree != 6)
+    assert not irregular[len(v) :].any() and irregular.any()
+
+
+def test_a_shifted_lattice_patch_does_not_seed_but_the_pinned_map_does():
+    n = 30
+    s = hope_rs.Shape(hope_rs.Mesh(*flat_grid(n)))
+    i, j = np.divmod(np.arange(n * n), n)
+    inside = (i > 0) & (i < n - 1) & (j > 0) & (j < n - 1)
+    shift = np.where(inside, np.arange(n * n) + n, np.arange(n * n))  # inside: one row on
+    shifted = s.rank[shift[s.order]]  # internal numbering, like s.rank[identity[s.order]]
+    share = GrowthConfig().seed_share
+    lattice = seed_handles(s, s, shifted, share, 0)  # by size alone: the inside, shifted
+    assert lattice.mean() > 0.7 and not irregular_vertices(s)[lattice].any()
+    assert not seed_handles(s, s, shifted, share, GrowthConfig().seed_irregular).any()
+    # The true map's patch holds the grid's corners (fewer than six faces): it seeds.
+    same = np.arange(n * n)
+    assert seed_handles(s, s, same, share, GrowthConfig().seed_irregular).all()
 
 
 def test_partial_maps_invert_and_their_unknown_vertices_are_not_handles():

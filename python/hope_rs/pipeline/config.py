@@ -324,7 +324,10 @@ class GrowthConfig:
     Attributes
     ----------
     seed_share : float
-        Handle patches smaller than this share of A's vertices do not seed it.
+        Handle patches smaller than this share of A's vertices do not seed it ...
+    seed_irregular : int
+        ... nor those with fewer handles where the triangulation is not a regular lattice
+        (``hope_rs.pipeline.handles.irregular_vertices``): a lattice patch may be shifted.
     face_error : float
         Largest triangle shape difference for growing across a face (edge lengths).
     affine_stages : tuple of (accept, ratio)
@@ -342,6 +345,7 @@ class GrowthConfig:
     """
 
     seed_share: float = 0.02
+    seed_irregular: int = 1
     face_error: float = 0.5
     affine_stages: tuple[tuple[float, float], ...] = ((0.35, 2.0), (0.5, 1.5), (0.7, 1.2))
     weight_width: float = 0.7

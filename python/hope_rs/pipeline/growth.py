@@ -4,9 +4,10 @@ The last step of the shared-face finish (:mod:`hope_rs.pipeline.shared_faces`). 
 of the map it can trust and rebuilds the rest outward from it, vertex by vertex:
 
 - **Seeds**: handles (vertices whose faces all map onto faces of B) in connected patches of at
-  least ``GrowthConfig.seed_share`` of A's vertices: wrong handles lie in small
-  patches (a region that HOPE shifted as a whole by a few edges), large patches are mostly
-  right.
+  least ``GrowthConfig.seed_share`` of A's vertices that hold an irregular handle
+  (``GrowthConfig.seed_irregular``): wrong handles lie in small patches (a region that HOPE
+  shifted as a whole by a few edges) or, on a regular lattice such as a subdivided mesh, in
+  patches without an irregular vertex (a shift by whole edges keeps faces there).
 - **Across shared faces**: a face of A with two mapped vertices names the image of its third
   vertex, if the two triangles have nearly the same shape (see ``_core.grow_across_faces``).
 - **By local affine fits**: where the triangulations differ (retriangulated regions, often
@@ -47,7 +48,7 @@ def grow(a: Shape, b: Shape, f: np.ndarray, config: GrowthConfig = GrowthConfig(
     n_a, n_b = a.n_vertices, b.n_vertices
     cfg = config
     ab, ba = _Growth(a, b, cfg), _Growth(b, a, cfg)
-    seeds = np.where(seed_handles(a, b, f, cfg.seed_share), f, -1)
+    seeds = np.where(seed_handles(a, b, f, cfg.seed_share, cfg.seed_irregular), f, -1)
     g = ab.regrow(ab.grow(seeds, cfg.faces_first))
     h = _inverse(ba.regrow(ba.grow(_inverse(seeds, n_b), cfg.faces_first)), n_a)
     for _ in range(cfg.agreement_rounds):
@@ -95,7 +96,7 @@ class _Growth:
         affine first."""
         # Small handle patches go too: a region grown through a narrow neck one vertex off
         # is face-consistent in places, and those places would seed the same error again.
-        clear = ~seed_handles(self.a, self.b, g, self.config.seed_share)
+        clear = ~seed_handles(self.a, self.b, g, self.config.seed_share, self.config.seed_irregular)
         e = self.a.edges
         near = clear.copy()
         near[e[:, 0][clear[e[:, 1]]]] = True

@@ -5,7 +5,7 @@ the same orientation and no other vertex shares its image. On shapes that are on
 triangulation in two poses, the true map makes almost every vertex a handle; on shapes
 remeshed independently few vertices are. The shared-face finish (:mod:`hope_rs.pipeline.shared_faces`)
 deforms towards them, and the growth (:mod:`hope_rs.pipeline.growth`) starts from those in large
-connected patches.
+connected patches pinned by an irregular vertex (:func:`irregular_vertices`).
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from ..geometry.orientation import face_keys
 from ..shape import Shape
 from .anchors import firm_regions
 
-__all__ = ["face_handles", "face_keys", "large_patches", "seed_handles"]
+__all__ = ["face_handles", "face_keys", "irregular_vertices", "large_patches", "seed_handles"]
 
 
 def face_handles(a: Shape, b: Shape, f: np.ndarray) -> np.ndarray:
@@ -36,18 +36,41 @@ def face_handles(a: Shape, b: Shape, f: np.ndarray) -> np.ndarray:
     return known & ~bad & ~shared
 
 
-def seed_handles(a: Shape, b: Shape, f: np.ndarray, min_share: float) -> np.ndarray:
+def seed_handles(
+    a: Shape, b: Shape, f: np.ndarray, min_share: float, min_irregular: int = 0
+) -> np.ndarray:
     """The handles of ``f`` (see :func:`face_handles`) in connected patches of at least
-    ``min_share`` of A's vertices (``GrowthConfig.seed_share``)."""
-    return large_patches(a, face_handles(a, b, f), min_share)
+    ``min_share`` of A's vertices (``GrowthConfig.seed_share``) holding at least
+    ``min_irregular`` irregular vertices (``GrowthConfig.seed_irregular``, see
+    :func:`irregular_vertices`)."""
+    return large_patches(a, face_handles(a, b, f), min_share, min_irregular)
 
 
-def large_patches(a: Shape, mask: np.ndarray, min_share: float) -> np.ndarray:
+def irregular_vertices(a: Shape) -> np.ndarray:
+    """A's vertices where the triangulation is not a regular lattice: inside, not six faces;
+    on a boundary, not three. A patch of handles without one is a piece of a regular lattice,
+    which a map shifted by whole edges also sends face onto face (subdivided meshes are such
+    lattices between their original vertices); a patch holding one is pinned."""
+    n = a.n_vertices
+    faces = np.bincount(a.internal.faces.ravel(), minlength=n)
+    neighbours = np.bincount(a.edges.ravel(), minlength=n)
+    inside = neighbours == faces
+    return np.where(inside, faces != 6, (faces != 3) | (neighbours != 4))
+
+
+def large_patches(
+    a: Shape, mask: np.ndarray, min_share: float, min_irregular: int = 0
+) -> np.ndarray:
     """``mask`` restricted to its connected patches (over A's edges) of at least
-    ``min_share`` of A's vertices: wrong handles lie in small patches (see
-    :mod:`hope_rs.pipeline.growth` and docs/decisions.md#growth)."""
+    ``min_share`` of A's vertices and at least ``min_irregular`` irregular vertices of
+    ``mask`` (:func:`irregular_vertices`): wrong handles lie in small patches or in patches
+    of a regular lattice (see :mod:`hope_rs.pipeline.growth` and docs/decisions.md#growth)."""
     if not mask.any():
         return mask
     label, sizes = firm_regions(a, mask)
-    # Vertices outside ``mask`` (label -1) are dropped by the ``&`` whatever size they read.
-    return mask & (sizes[label] >= min_share * a.n_vertices)
+    keep = sizes >= min_share * a.n_vertices
+    if min_irregular > 0:
+        pinned = np.bincount(label[mask & irregular_vertices(a)], minlength=len(sizes))
+        keep &= pinned >= min_irregular
+    # Vertices outside ``mask`` (label -1) are dropped by the ``&`` whatever they read.
+    return mask & keep[label]

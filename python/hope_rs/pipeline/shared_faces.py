@@ -123,7 +123,7 @@ def finish(
     done = 0
     for _ in range(cfg.rounds):
         handles = face_handles(a, b, f)
-        seeded = large_patches(a, handles, cfg.growth.seed_share).mean()
+        seeded = large_patches(a, handles, cfg.growth.seed_share, cfg.growth.seed_irregular).mean()
         if handles.mean() < cfg.min_handles or seeded < last + cfg.min_growth or handles.all():
             break
         last = seeded
