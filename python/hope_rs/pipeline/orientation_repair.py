@@ -23,8 +23,8 @@ The hypotheses (``OrientConfig.hypotheses``):
 
 The derived hypotheses are unrefined maps; the one turning the least over is refined. The
 other starts follow in the order of ``OrientConfig.hypotheses``; after each, while no refined
-map turns at most ``min_turned`` over, the maps derived from the best refined one (if it beats
-the stage's own and was not derived from yet) are tried too (``OrientConfig.again``). The
+map turns at most ``min_turned`` over, the maps derived from that start's refined map (if it
+beats the stage's own) are tried too (``OrientConfig.again``). The
 stage stops at the first refined map that turns at most ``min_turned`` over and costs less.
 
 B's symmetry is the match of B's mirror image (coordinates reflected in a plane through its
@@ -274,25 +274,23 @@ class OrientStage(Stage):
         # The maps derived from the stage's own first; then other starts (a swapped pair of
         # limbs comes back neither mirrored nor re-seeded), in the order of the hypotheses.
         tried = hyp.from_derived(f, share)
-        derived_from: set[str] = set()
         for start in (h for h in cfg.hypotheses if h in ("wks", "reverse")):
             if good_enough(tried):
                 break
-            tried += (
-                hyp.reverse() if start == "reverse" else hyp.refine([hyp.candidate(start, start)])
-            )
-            best = max(tried, key=lambda x: -np.inf if x.score is None else x.score)
+            new = hyp.reverse() if start == "reverse" else hyp.refine([hyp.candidate(start, start)])
+            tried += new
+            # Derived again from this start's own map, not from the best so far: a start that
+            # came back nearer may still carry a swapped limb the derived maps set right.
+            best = max(new, key=lambda x: -np.inf if x.score is None else x.score)
             label = best.candidate.label
             if (
                 cfg.again
                 and not good_enough(tried)
                 and best.score is not None
                 and best.score > own.score
-                and label not in derived_from
             ):
                 # The best refined map can still turn a region over that the derived maps
                 # set right (a start that came back nearer, with a limb swapped).
-                derived_from.add(label)
                 tried += hyp.from_derived(hyp.internal(best), hyp.turned[label], label)
         kept = choose(state, "orient", tried, against=own, margin=cfg.min_gain)
         if kept is not own:
