@@ -101,26 +101,36 @@ def run_shared() -> None:
     (RUN / "provenance.txt").write_text(start + f"{load()} at the end\n")
 
 
+def run_derived(
+    kind: str, command: str, sources, conditions: str, methods, names, max_pairs=None
+) -> None:
+    """Write the derived sets of ``hope-rs COMMAND`` afresh from ``sources`` into
+    ``RUN/KIND-data`` (the CSVs of ``names`` and the folder of an earlier run removed first),
+    run ``hope-rs bench`` with ``methods`` on them and record the provenance."""
+    _remove([RUN / f"{n}.{ext}" for n in names for ext in ("csv", "md")])
+    folder = RUN / f"{kind}-data"
+    _remove([folder])
+    start = header()
+    cmd = [sys.executable, "-m", "hope_rs.cli", command, str(folder), "--from",
+           ",".join(str(DATA / s) for s in sources), "--conditions", conditions]  # fmt: skip
+    if max_pairs is not None:
+        cmd += ["--max-pairs", str(max_pairs)]
+    subprocess.run(cmd, check=True)
+    subprocess.run(
+        [sys.executable, "-m", "hope_rs.cli", "bench", str(folder), "--methods",
+         ",".join(methods), "--sets", ",".join(names), "--no-render", "--out", str(RUN)],
+        check=True,
+    )  # fmt: skip
+    (RUN / f"provenance_{kind}.txt").write_text(start + f"{load()} at the end\n")
+
+
 def run_partial() -> None:
     """The partial-shape sets, written afresh from the source sets, with their provenance."""
     names = [f"{s}_{c}" for s in PARTIAL_SOURCES for c in PARTIAL]
-    _remove([RUN / f"{n}.{ext}" for n in names for ext in ("csv", "md")])
-    _remove([RUN / "partial-data"])
-    start = header()
-    parts = RUN / "partial-data"
-    sources = ",".join(str(DATA / s) for s in PARTIAL_SOURCES)
     conditions = ",".join(c for c in PARTIAL if not c.endswith("_rev"))
-    subprocess.run(
-        [sys.executable, "-m", "hope_rs.cli", "partial-set", str(parts), "--from", sources,
-         "--conditions", conditions, "--max-pairs", str(PARTIAL_PAIRS)],
-        check=True,
-    )  # fmt: skip
-    subprocess.run(
-        [sys.executable, "-m", "hope_rs.cli", "bench", str(parts), "--methods",
-         ",".join(PARTIAL_METHODS), "--sets", ",".join(names), "--no-render", "--out", str(RUN)],
-        check=True,
-    )  # fmt: skip
-    (RUN / "provenance_partial.txt").write_text(start + f"{load()} at the end\n")
+    run_derived(
+        "partial", "partial-set", PARTIAL_SOURCES, conditions, PARTIAL_METHODS, names, PARTIAL_PAIRS
+    )
 
 
 def _perturbed_sets() -> list[str]:
@@ -130,23 +140,14 @@ def _perturbed_sets() -> list[str]:
 def run_perturbed() -> None:
     """The noise and shortcut sets, written afresh from the source sets, with their
     provenance."""
-    names = _perturbed_sets()
-    _remove([RUN / f"{n}.{ext}" for n in names for ext in ("csv", "md")])
-    _remove([RUN / "perturbed-data"])
-    start = header()
-    sets = RUN / "perturbed-data"
-    sources = ",".join(str(DATA / s) for s in PERTURBED_SOURCES)
-    subprocess.run(
-        [sys.executable, "-m", "hope_rs.cli", "perturb-set", str(sets), "--from", sources,
-         "--conditions", ",".join(PERTURBED)],
-        check=True,
-    )  # fmt: skip
-    subprocess.run(
-        [sys.executable, "-m", "hope_rs.cli", "bench", str(sets), "--methods",
-         ",".join(PERTURBED_METHODS), "--sets", ",".join(names), "--no-render", "--out", str(RUN)],
-        check=True,
-    )  # fmt: skip
-    (RUN / "provenance_perturbed.txt").write_text(start + f"{load()} at the end\n")
+    run_derived(
+        "perturbed",
+        "perturb-set",
+        PERTURBED_SOURCES,
+        ",".join(PERTURBED),
+        PERTURBED_METHODS,
+        _perturbed_sets(),
+    )
 
 
 def perturbed() -> str:
@@ -181,23 +182,15 @@ def _resolution_sets() -> list[str]:
 
 def run_resolution() -> None:
     """The mixed-resolution sets, written afresh from the source sets, with their provenance."""
-    names = _resolution_sets()
-    _remove([RUN / f"{n}.{ext}" for n in names for ext in ("csv", "md")])
-    _remove([RUN / "resolution-data"])
-    start = header()
-    sets = RUN / "resolution-data"
-    sources = ",".join(str(DATA / s) for s in RESOLUTION_SOURCES)
-    subprocess.run(
-        [sys.executable, "-m", "hope_rs.cli", "resolution-set", str(sets), "--from", sources,
-         "--conditions", ",".join(RESOLUTION), "--max-pairs", str(RESOLUTION_PAIRS)],
-        check=True,
-    )  # fmt: skip
-    subprocess.run(
-        [sys.executable, "-m", "hope_rs.cli", "bench", str(sets), "--methods",
-         ",".join(RESOLUTION_METHODS), "--sets", ",".join(names), "--no-render", "--out", str(RUN)],
-        check=True,
-    )  # fmt: skip
-    (RUN / "provenance_resolution.txt").write_text(start + f"{load()} at the end\n")
+    run_derived(
+        "resolution",
+        "resolution-set",
+        RESOLUTION_SOURCES,
+        ",".join(RESOLUTION),
+        RESOLUTION_METHODS,
+        _resolution_sets(),
+        RESOLUTION_PAIRS,
+    )
 
 
 def resolution() -> str:
