@@ -219,6 +219,21 @@ def test_the_default_path_is_chosen_by_size(faust_pair):
     np.testing.assert_array_equal(plain.map, forced.map)
 
 
+def test_large_fine_levels_take_a_short_pass_and_smaller_seed_patches():
+    cfg = hope_rs.MatchConfig()
+    ms = cfg.multiscale
+    small = M.fine_config(cfg, 20_000, ms.fine_passes_small_vertices)
+    assert small.refine.schedule == cfg.refine.schedule
+    assert small.refine.max_passes == ms.fine_passes_small
+    assert small.finish == cfg.finish
+    large = M.fine_config(cfg, 20_000, ms.fine_passes_small_vertices + 1)
+    assert large.refine.schedule == ms.fine_schedule == (3, 2, 1)
+    assert large.refine.max_passes == ms.fine_passes
+    assert large.finish.growth.seed_share == ms.fine_seed_share < cfg.finish.growth.seed_share
+    full = dataclasses.replace(cfg, multiscale=dataclasses.replace(ms, fine_schedule=None))
+    assert M.fine_config(full, 1, 10**6).refine.schedule == cfg.refine.schedule
+
+
 def test_the_fine_schedule_is_checked():
     with pytest.raises(ValueError, match="fine_schedule must be None or a non-empty"):
         M.MultiscaleConfig(fine_schedule=(3, 0))

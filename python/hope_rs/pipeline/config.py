@@ -405,13 +405,19 @@ class MultiscaleConfig:
         larger shape has more than ``auto_vertices`` vertices; ``True`` or ``False`` force it.
     auto_vertices : int
         See ``enabled``.
-    fine_schedule : tuple of int or None
-        Hop radii of the refinement's passes on the fine meshes after the lift; ``None``: the
-        refinement's own schedule (``RefineConfig.schedule``).
     fine_passes : int
-        Refinement passes on the fine meshes after the lift ...
+        Refinement passes on the fine meshes after the lift when a mesh has more than
+        ``fine_passes_small_vertices`` ...
+    fine_schedule : tuple of int or None
+        ... with these hop radii (``None``: the refinement's own schedule,
+        ``RefineConfig.schedule``) ...
+    fine_seed_share : float
+        ... and the shared-face finish's growth seeded from handle patches of this share of
+        the vertices (``GrowthConfig.seed_share``): after a short pass the right patches
+        are many and smaller, and a patch that disagrees with larger ones does not seed.
     fine_passes_small : int
-        ... or this many when neither mesh has more than ``fine_passes_small_vertices``.
+        Passes of the refinement's own schedule on fine meshes of at most
+        ``fine_passes_small_vertices`` vertices.
     fine_passes_small_vertices : int
     lift_ridge : float
         Ridge of the lift's local linear fits, relative to the mean squared edge.
@@ -419,8 +425,9 @@ class MultiscaleConfig:
 
     enabled: bool | None = None
     auto_vertices: int = 60_000
-    fine_schedule: tuple[int, ...] | None = None
     fine_passes: int = 1
+    fine_schedule: tuple[int, ...] | None = (3, 2, 1)
+    fine_seed_share: float = field(default=0.005, metadata={"range": (0.0, 1.0)})
     fine_passes_small: int = 2
     fine_passes_small_vertices: int = 60_000
     lift_ridge: float = 1e-3

@@ -14,7 +14,7 @@ covers a small patch, so dense pairs run every pass of the schedule and take min
    carries the coarse edges around its cell's vertex onto their images on B, and takes the
    fine vertex of B nearest that point;
 4. runs :func:`fine_passes` passes of the usual refinement on the fine meshes (two up to 60k
-   vertices, else one).
+   vertices, else one pass of a short schedule, :func:`fine_config`).
 
 Both shapes must be dense enough to halve, else :func:`hope_rs.match` takes the default path
 (a coarse copy matched against a sparser shape did worse than it). It trades accuracy for time
@@ -34,7 +34,7 @@ from scipy.spatial import cKDTree
 from ..features.descriptors import shot_at
 from ..geometry.mesh import Mesh, unique_edges
 from ..shape import Shape
-from .config import MultiscaleConfig
+from .config import MatchConfig, MultiscaleConfig
 from .landmarks import coarse_landmarks
 from .spectral import applies as spectral_applies
 from .state import QUIET, MatchState, Stage
@@ -47,6 +47,24 @@ def fine_passes(n_a: int, n_b: int, config: MultiscaleConfig = MultiscaleConfig(
     if max(n_a, n_b) <= config.fine_passes_small_vertices:
         return config.fine_passes_small
     return config.fine_passes
+
+
+def fine_config(cfg: MatchConfig, n_a: int, n_b: int) -> MatchConfig:
+    """The settings of the stages after the lift on fine meshes of ``n_a`` and ``n_b``
+    vertices: :func:`fine_passes` passes; above ``fine_passes_small_vertices`` a short
+    schedule and smaller seed patches for the finish (``MultiscaleConfig.fine_schedule``,
+    ``fine_seed_share``)."""
+    ms = cfg.multiscale
+    passes = min(cfg.refine.max_passes, fine_passes(n_a, n_b, ms))
+    refine = dataclasses.replace(cfg.refine, max_passes=passes)
+    if max(n_a, n_b) <= ms.fine_passes_small_vertices:
+        return dataclasses.replace(cfg, refine=refine)
+    growth = dataclasses.replace(cfg.finish.growth, seed_share=ms.fine_seed_share)
+    return dataclasses.replace(
+        cfg,
+        refine=dataclasses.replace(refine, schedule=ms.fine_schedule or cfg.refine.schedule),
+        finish=dataclasses.replace(cfg.finish, growth=growth),
+    )
 
 
 def _edges(faces: np.ndarray) -> np.ndarray:
@@ -202,8 +220,4 @@ class MultiscaleStage(Stage):
             f"({self.why(state)})",
         )
         log.ran("lift", time.perf_counter() - relay.last, "coarse map carried to every vertex")
-        passes = min(cfg.refine.max_passes, fine_passes(a.n_vertices, b.n_vertices, cfg.multiscale))
-        schedule = cfg.multiscale.fine_schedule or cfg.refine.schedule
-        state.config = dataclasses.replace(
-            cfg, refine=dataclasses.replace(cfg.refine, max_passes=passes, schedule=schedule)
-        )
+        state.config = fine_config(cfg, a.n_vertices, b.n_vertices)
