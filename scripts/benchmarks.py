@@ -220,7 +220,36 @@ def resolution() -> str:
         )
     if len(out) == 2:
         return _failures(_resolution_sets())
-    return "\n".join(out) + "\n" + _failures(_resolution_sets())
+    return "\n".join(out) + "\n" + _failures(_resolution_sets()) + _resolution_pairs()
+
+
+def _resolution_pairs() -> str:
+    """Every pair of the mixed-resolution sets: HOPE's mean error, seconds and flag, and the
+    same at each shape's own resolution."""
+    out = [
+        "\nEvery pair (mean error ÷ sqrt(area) of B; *flagged*: `quality.likely_failed`):\n",
+        "| set | pair | vertices A → B | HOPE mean error | HOPE s | flagged "
+        "| own resolution: mean error | s |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for name in _resolution_sets():
+        rows = [r for r in _rows(name) if not r.get("failed")]
+        for pair in dict.fromkeys(r["pair"] for r in rows):
+            by = {r["method"]: r for r in rows if r["pair"] == pair}
+            h, f = by.get("hope"), by.get("hope-fullres")
+            if h is None:
+                continue
+            own = (
+                "| – | – "
+                if f is None
+                else f"| {float(f['mean']):.4f} | {float(f['seconds']):.1f} "
+            )
+            flag = {"1": "yes", "0": "no"}.get(h.get("likely_failed", ""), "–")
+            out.append(
+                f"| {name} | {pair} | {h['n_a']} → {h['n_b']} | {float(h['mean']):.4f} "
+                f"| {float(h['seconds']):.1f} | {flag} {own}|"
+            )
+    return "\n".join(out) + "\n" if len(out) > 3 else ""
 
 
 def run_landmarks() -> None:
