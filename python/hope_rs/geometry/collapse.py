@@ -150,12 +150,13 @@ def collapse_to_sites(mesh: Mesh, sites: np.ndarray) -> Coarse:
     return c.result(alive)
 
 
-def collapse_to_count(mesh: Mesh, n_target: int) -> Coarse | None:
+def collapse_to_count(mesh: Mesh, n_target: int, *, tolerance: float = 0.05) -> Coarse | None:
     """A manifold coarse copy of ``mesh`` with about ``n_target`` vertices: the sites of
-    :func:`hope_rs.geometry.coarsen.coarse_to_count`'s uniform grid, every other vertex merged
+    :func:`hope_rs.geometry.coarsen.coarse_to_count`'s uniform grid (``tolerance``: see
+    :func:`~hope_rs.geometry.coarsen.uniform_cells_for_count`), every other vertex merged
     into its site by :func:`collapse_to_sites`; ``None`` when ``mesh`` has no more than
     ``n_target`` vertices."""
-    cells = uniform_cells_for_count(mesh, n_target)
+    cells = uniform_cells_for_count(mesh, n_target, tolerance=tolerance)
     if cells is None:
         return None
     sites, _ = cell_sites(mesh.vertices, cells)
