@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 from meshes import bumpy_sphere, euler_characteristic, mesh_defects
 
 import hope_rs
+from hope_rs.geometry.coarsen import coarse_to_count
 from hope_rs.geometry.collapse import collapse_to_count, collapse_to_sites
 
 VALID = {"degenerate": 0, "duplicate": 0, "non_manifold_edges": 0, "flipped_edges": 0}
@@ -97,3 +98,20 @@ def test_a_faust_body_at_1000_vertices_has_surface_geodesics():
     c = collapse_to_count(mesh, 1000)
     _check_coarse(mesh, c)
     pp3d.EdgeFlipGeodesicSolver(np.asarray(c.mesh.vertices), np.asarray(c.mesh.faces))
+
+
+def test_the_resolution_stage_coarsens_a_small_dense_shape_to_a_manifold():
+    from hope_rs.pipeline.resolution import coarse_copy
+
+    v, f = bumpy_sphere(2000, 7)
+    shape = hope_rs.Shape(hope_rs.Mesh(v, f))
+    collapsed, _ = coarse_copy(shape, 400, 0.05, manifold_max_vertices=2000)
+    _check_coarse(shape.internal, collapsed)
+    np.testing.assert_array_equal(
+        collapsed.mesh.faces, collapse_to_count(shape.internal, 400).mesh.faces
+    )
+    # Above the limit, plain clustering.
+    clustered, _ = coarse_copy(shape, 400, 0.05, manifold_max_vertices=1999)
+    np.testing.assert_array_equal(
+        clustered.mesh.faces, coarse_to_count(shape.internal, 400).mesh.faces
+    )
