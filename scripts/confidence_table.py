@@ -55,6 +55,9 @@ DATA = Path(os.environ.get("HOPE_DATA", ROOT.parent / "shared" / "data"))
 HELD_OUT = ["faust_r", "tosca_r", "tosca_nonisometric_r"]
 #: A match is right when its geodesic error (sqrt(area) units) is at most this.
 WRONG_ABOVE = 0.05
+#: A pair should be flagged ``likely_failed`` when more than FLAG_FAR of its vertices lie
+#: farther than FAR_ABOVE from their true match, and not when fewer than FLAG_NEAR do.
+FAR_ABOVE, FLAG_FAR, FLAG_NEAR = 0.15, 0.20, 0.05
 LEVELS = (0.1, 0.3, 0.5, 0.7, 0.9)
 
 
@@ -264,22 +267,39 @@ def render(
             "of A's area turned over by the map (`quality.flipped_share`)."
         ),
         "",
+        flag_check(per_pair),
+        "",
         (
-            "| set | pair | mean error | wrong | mean confidence | area turned over "
-            "| likely failed | AUROC |"
+            f"| set | pair | mean error | wrong | far (> {FAR_ABOVE}) | mean confidence "
+            "| area turned over | likely failed | AUROC |"
         ),
-        "|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for name, pair, err, conf, right, q in per_pair:
         a = auroc(conf, right)
         lines.append(
             f"| {name} | {pair} | {err.mean():.3f} | {1 - right.mean():.3f} | "
+            f"{np.mean(err > FAR_ABOVE):.3f} | "
             f"{q.mean_confidence:.3f} | {q.flipped_share:.3f} | "
             f"{'yes' if q.likely_failed else 'no'} | "
             + ("n/a" if np.isnan(a) else f"{a:.3f}")
             + " |"
         )
     return "\n".join(lines) + "\n"
+
+
+def flag_check(per_pair: list) -> str:
+    """One line: how many pairs with more than FLAG_FAR of their vertices beyond FAR_ABOVE
+    are flagged, and how many with fewer than FLAG_NEAR are flagged anyway."""
+    far = [float(np.mean(err > FAR_ABOVE)) for _, _, err, *_ in per_pair]
+    flagged = [q.likely_failed for *_, q in per_pair]
+    bad = [f for x, f in zip(far, flagged) if x > FLAG_FAR]
+    good = [f for x, f in zip(far, flagged) if x < FLAG_NEAR]
+    return (
+        f"Pairs with more than {FLAG_FAR:.0%} of their vertices farther than {FAR_ABOVE} from "
+        f"the true match: {len(bad)}, of them flagged {sum(bad)}. Pairs with fewer than "
+        f"{FLAG_NEAR:.0%}: {len(good)}, of them flagged {sum(good)}."
+    )
 
 
 def main(argv=None) -> int:

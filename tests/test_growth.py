@@ -9,6 +9,7 @@ import hope_rs
 from hope_rs import _core
 from hope_rs.pipeline import growth
 from hope_rs.pipeline import shared_faces as SF
+from hope_rs.pipeline.anchors import firm_regions
 from hope_rs.pipeline.config import GrowthConfig
 from hope_rs.pipeline.handles import irregular_vertices, seed_handles
 
@@ -112,6 +113,36 @@ def test_a_shifted_lattice_patch_does_not_seed_but_the_pinned_map_does():
     # The true map's patch holds the grid's corners (fewer than six faces): it seeds.
     same = np.arange(n * n)
     assert seed_handles(s, s, same, share, GrowthConfig().seed_irregular).all()
+
+
+def test_patches_shifted_against_a_larger_one_do_not_seed_and_the_growth_undoes_them():
+    # Alternating diagonals make every vertex irregular (degree 4 or 8), and a shift by an
+    # even number of edges keeps faces: a shifted band is a patch of handles that is pinned.
+    n = 33
+    s = hope_rs.Shape(hope_rs.Mesh(*flat_grid(n, alternate=True)))
+    i, j = np.divmod(np.arange(n * n), n)
+    band = (i >= 2) & (i <= 9) & (j <= n - 3)
+    shift = np.where(band, np.arange(n * n) + 2, np.arange(n * n))  # two columns on
+    f = s.rank[shift[s.order]]  # internal numbering
+    cfg = GrowthConfig()
+    seeds = seed_handles(s, s, f, cfg.seed_share, cfg.seed_irregular)
+    label, sizes = firm_regions(s, seeds)
+    assert (sizes >= cfg.seed_share * n * n).sum() >= 2  # the band and the rest both seed
+    kept = growth.agreeing_patches(s, s, f, seeds, cfg.face_error)
+    in_band = band[s.order]
+    assert kept[seeds & ~in_band].all() and not kept[in_band].any()
+    np.testing.assert_array_equal(growth.grow(s, s, f, cfg), np.arange(n * n))
+
+
+def test_patches_of_one_map_all_seed():
+    n = 33
+    s = hope_rs.Shape(hope_rs.Mesh(*flat_grid(n, alternate=True)))
+    f = np.arange(n * n)
+    f[s.rank[np.arange(16 * n, 17 * n)]] = -1  # a middle row unknown: two identity patches
+    cfg = GrowthConfig()
+    seeds = seed_handles(s, s, f, cfg.seed_share, cfg.seed_irregular)
+    assert len(np.unique(firm_regions(s, seeds)[0][seeds])) == 2
+    np.testing.assert_array_equal(growth.agreeing_patches(s, s, f, seeds, cfg.face_error), seeds)
 
 
 def test_partial_maps_invert_and_their_unknown_vertices_are_not_handles():

@@ -7,7 +7,9 @@ of the map it can trust and rebuilds the rest outward from it, vertex by vertex:
   least ``GrowthConfig.seed_share`` of A's vertices that hold an irregular handle
   (``GrowthConfig.seed_irregular``): wrong handles lie in small patches (a region that HOPE
   shifted as a whole by a few edges) or, on a regular lattice such as a subdivided mesh, in
-  patches without an irregular vertex (a shift by whole edges keeps faces there).
+  patches without an irregular vertex (a shift by whole edges keeps faces there). Patches
+  must also agree with one another (:func:`agreeing_patches`): on a lattice whose every vertex
+  is irregular (alternating diagonals) several patches may each be shifted differently.
 - **Across shared faces**: a face of A with two mapped vertices names the image of its third
   vertex, if the two triangles have nearly the same shape (see ``_core.grow_across_faces``).
 - **By local affine fits**: where the triangulations differ (retriangulated regions, often
@@ -29,6 +31,7 @@ from scipy.spatial import cKDTree
 from .. import _core
 from ..kernels.khop import khop_neighbourhoods
 from ..shape import Shape
+from .anchors import firm_regions
 from .config import GrowthConfig
 from .handles import seed_handles
 
@@ -48,7 +51,8 @@ def grow(a: Shape, b: Shape, f: np.ndarray, config: GrowthConfig = GrowthConfig(
     n_a, n_b = a.n_vertices, b.n_vertices
     cfg = config
     ab, ba = _Growth(a, b, cfg), _Growth(b, a, cfg)
-    seeds = np.where(seed_handles(a, b, f, cfg.seed_share, cfg.seed_irregular), f, -1)
+    seeds = seed_handles(a, b, f, cfg.seed_share, cfg.seed_irregular)
+    seeds = np.where(agreeing_patches(a, b, f, seeds, cfg.face_error), f, -1)
     g = ab.regrow(ab.grow(seeds, cfg.faces_first))
     h = _inverse(ba.regrow(ba.grow(_inverse(seeds, n_b), cfg.faces_first)), n_a)
     for _ in range(cfg.agreement_rounds):
@@ -56,6 +60,30 @@ def grow(a: Shape, b: Shape, f: np.ndarray, config: GrowthConfig = GrowthConfig(
         g = ab.grow(agreed, cfg.agreement_order)
         h = _inverse(ba.grow(_inverse(agreed, n_b), cfg.agreement_order), n_a)
     return np.where(g >= 0, g, f)
+
+
+def agreeing_patches(
+    a: Shape, b: Shape, f: np.ndarray, seeds: np.ndarray, face_error: float
+) -> np.ndarray:
+    """``seeds`` (bool per vertex of A) less the connected patches that disagree with the
+    larger ones: largest first, a patch is kept unless the map grown across faces from the
+    patches kept so far reaches it and gives most of the vertices it reaches another image
+    (two patches of one right map agree wherever the growth reaches, being one map)."""
+    label, sizes = firm_regions(a, seeds)
+    fa, fb = a.internal.faces.astype(np.int64), b.internal.faces.astype(np.int64)
+    keep = np.zeros_like(seeds)
+    grown = np.full(a.n_vertices, -1, dtype=np.int64)
+    for p in np.argsort(-sizes, kind="stable"):
+        part = label == p
+        if not part.any():
+            continue
+        reached = part & (grown >= 0)
+        if reached.any() and np.mean(grown[reached] == f[reached]) < 0.5:
+            continue
+        keep |= part
+        grown = np.where(keep, f, -1)
+        grown = _core.grow_across_faces(fa, a.points, fb, b.points, grown, face_error)
+    return keep
 
 
 def _inverse(g: np.ndarray, n: int) -> np.ndarray:
