@@ -218,7 +218,38 @@ def resolution() -> str:
             f"| {name} | {what} | {h['pairs']} | **{h['mean']:.4f}** | {h['exact']:.1f} "
             f"| {h['worst']:.4f} | {len(h['flagged'])} | {h['seconds']:.1f} {full}|"
         )
-    return "\n".join(out) + "\n" if len(out) > 2 else ""
+    if len(out) == 2:
+        return _failures(_resolution_sets())
+    return "\n".join(out) + "\n" + _failures(_resolution_sets()) + _resolution_pairs()
+
+
+def _resolution_pairs() -> str:
+    """Every pair of the mixed-resolution sets: HOPE's mean error, seconds and flag, and the
+    same at each shape's own resolution."""
+    out = [
+        "\nEvery pair (mean error ÷ sqrt(area) of B; *flagged*: `quality.likely_failed`):\n",
+        "| set | pair | vertices A → B | HOPE mean error | HOPE s | flagged "
+        "| own resolution: mean error | s |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for name in _resolution_sets():
+        rows = [r for r in _rows(name) if not r.get("failed")]
+        for pair in dict.fromkeys(r["pair"] for r in rows):
+            by = {r["method"]: r for r in rows if r["pair"] == pair}
+            h, f = by.get("hope"), by.get("hope-fullres")
+            if h is None:
+                continue
+            own = (
+                "| – | – "
+                if f is None
+                else f"| {float(f['mean']):.4f} | {float(f['seconds']):.1f} "
+            )
+            flag = {"1": "yes", "0": "no"}.get(h.get("likely_failed", ""), "–")
+            out.append(
+                f"| {name} | {pair} | {h['n_a']} → {h['n_b']} | {float(h['mean']):.4f} "
+                f"| {float(h['seconds']):.1f} | {flag} {own}|"
+            )
+    return "\n".join(out) + "\n" if len(out) > 3 else ""
 
 
 def run_landmarks() -> None:
@@ -244,7 +275,9 @@ def _rows(name: str) -> list[dict]:
 
 
 def _stats(rows: list[dict], method: str) -> dict | None:
-    rs = [r for r in rows if r["method"] == method]
+    """Figures of ``method`` over the pairs it scored (a failed pair is left out: see
+    :func:`_failures`); ``None`` when it scored none."""
+    rs = [r for r in rows if r["method"] == method and not r.get("failed")]
     if not rs:
         return None
 
@@ -263,6 +296,16 @@ def _stats(rows: list[dict], method: str) -> dict | None:
         "flagged": [float(r["mean"]) for r in rs if r.get("likely_failed") == "1"],
         "judged": any(r.get("likely_failed") not in (None, "") for r in rs),
     }  # fmt: skip
+
+
+def _failures(names) -> str:
+    """The (pair, method) rows of the sets ``names`` that failed, a line each with the reason."""
+    bad = [(n, r) for n in names for r in _rows(n) if r.get("failed")]
+    if not bad:
+        return ""
+    return "\nFailed, left out of the table:\n\n" + "".join(
+        f"- {n} {r['pair']} {r['method']}: {r['failed']}\n" for n, r in bad
+    )
 
 
 def headline() -> str:
@@ -466,8 +509,9 @@ def render() -> None:
             + "".join(f"- {line}\n" for line in prov_resolution)
             + "\nWritten by `hope-rs resolution-set` from the first "
             f"{RESOLUTION_PAIRS} pairs of {', '.join(RESOLUTION_SOURCES)} (ground truth carried "
-            "over: a subdivided mesh keeps its vertices first; a clustered one carries each "
-            "ground-truth point to the kept vertex of its cell). `hope` is the default match "
+            "over: a subdivided mesh keeps its vertices first; a clustered one, whose every vertex "
+            "is a vertex of A merged with its neighbours by manifold-keeping edge collapses, "
+            "keeps the ground-truth lines whose point of A it keeps). `hope` is the default match "
             "(which matches a much denser shape at the other's resolution, "
             "`hope_rs.pipeline.resolution`); *own resolution* is the same with "
             "`MatchConfig.resolution.enabled=False`. Errors ÷ sqrt(area) of B over the "

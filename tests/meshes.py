@@ -203,3 +203,31 @@ def flat_grid(n: int, alternate: bool = False) -> tuple[np.ndarray, np.ndarray]:
         return v, one
     odd = np.tile((i + j) % 2 == 1, 2)
     return v, np.where(odd[:, None], other, one)
+
+
+def mesh_defects(faces: np.ndarray) -> dict:
+    """What keeps ``faces`` from being a valid oriented manifold triangle mesh: faces with a
+    repeated corner, faces on the same three vertices, edges of three or more faces, and
+    directed edges met twice (two neighbouring faces of opposite orientation); all 0 when
+    valid. ``boundary`` counts the edges of one face (not a defect)."""
+    f = np.asarray(faces)
+    degenerate = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])
+    directed = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    _, per_edge = np.unique(np.sort(directed, axis=1), axis=0, return_counts=True)
+    _, per_directed = np.unique(directed, axis=0, return_counts=True)
+    return {
+        "degenerate": int(degenerate.sum()),
+        "duplicate": int(len(f) - len(np.unique(np.sort(f, axis=1), axis=0))),
+        "non_manifold_edges": int((per_edge > 2).sum()),
+        "flipped_edges": int((per_directed > 1).sum()),
+        "boundary": int((per_edge == 1).sum()),
+    }
+
+
+def euler_characteristic(n_vertices: int, faces: np.ndarray) -> int:
+    """V - E + F of a triangle mesh (2 per closed genus-0 piece, 1 per disc)."""
+    f = np.asarray(faces)
+    edges = np.unique(
+        np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1), axis=0
+    )
+    return n_vertices - len(edges) + len(f)

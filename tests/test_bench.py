@@ -195,3 +195,57 @@ def test_show_command_renders_a_png(tmp_path, capsys):
     (tmp_path / "map.txt").write_text("0\n1\n")
     assert main([*argv, "--png", str(png)]) == 2
     assert "has 2 entries but A has 300" in capsys.readouterr().err
+
+
+def test_a_failing_pair_is_reported_and_the_others_still_run(
+    vts_set, tmp_path, monkeypatch, capsys
+):
+    """One pair whose mesh cannot be read and one method that raises on one pair: both are
+    rows with their reason, left out of the figures; every other (pair, method) is scored."""
+    from hope_rs.evaluation import bench
+
+    folder = tmp_path / "perm"
+    (folder / "corres").mkdir(parents=True)
+    for name in ("p", "q"):
+        (folder / f"{name}.off").write_text((vts_set / f"{name}.off").read_text())
+        (folder / "corres" / f"{name}.vts").write_text(
+            (vts_set / "corres" / f"{name}.vts").read_text()
+        )
+    (folder / "bad.off").write_text("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n")
+    (folder / "corres" / "bad.vts").write_text("1\n")
+    (folder / "pairs.txt").write_text("p q\np bad\nq p\n")
+    real = bench.run_method
+
+    def flaky(name, ctx):
+        if (
+            name == "hope"
+            and ctx.a.vertices[0, 0] == hope_rs.load_mesh(folder / "q.off").vertices[0, 0]
+        ):
+            raise RuntimeError("GC_SAFETY_ASSERT FAILURE: duplicate edge\n(more lines)")
+        return real(name, ctx)
+
+    monkeypatch.setattr(bench, "run_method", flaky)
+    out = tmp_path / "res"
+    assert main(["bench", str(tmp_path), "--out", str(out), "--methods", "init,hope", "-q",
+                 "--no-render"]) == 0  # fmt: skip
+    rows = list(csv.DictReader((out / "perm.csv").read_text().splitlines()))
+    got = {(r["pair"], r["method"]): r for r in rows}
+    assert list(got) == [
+        ("p->q", "init"), ("p->q", "hope"), ("p->bad", "init"), ("p->bad", "hope"),
+        ("q->p", "init"), ("q->p", "hope"),
+    ]  # fmt: skip
+    ok = [k for k, r in got.items() if not r["failed"]]
+    assert ok == [("p->q", "init"), ("p->q", "hope"), ("q->p", "init")]
+    for k in ok:
+        assert 0 <= float(got[k]["mean"]) < 0.3
+    assert "index" in got[("p->bad", "hope")]["failed"]
+    assert got[("q->p", "hope")]["failed"] == (
+        "RuntimeError: GC_SAFETY_ASSERT FAILURE: duplicate edge (more lines)"
+    )
+    md = (out / "perm.md").read_text()
+    # The figures are over the scored pairs only; the failures are listed with their reason.
+    assert "| init | 2 |" in md and "| hope | 1 |" in md
+    assert "Failed (3, left out of the figures above)" in md
+    assert "- q->p hope: RuntimeError: GC_SAFETY_ASSERT FAILURE" in md
+    err = capsys.readouterr().err
+    assert "3 failed" in err and "perm p->bad init" in err

@@ -10,6 +10,10 @@ Writes to the results folder, per data set ``SET``:
 and ``summary.md``, every data set's table in one file (rebuilt from all ``*.csv`` present, so
 separate runs into one folder add up). Errors use surface geodesics (``method="surface"`` of
 :func:`hope_rs.evaluation.evaluate.geodesic_errors`), normalised by sqrt(area) of the target.
+
+A (pair, method) that raises (a mesh the method or the scoring cannot handle) gets a row with
+only its ``failed`` reason, left out of the figures and listed under its table; the other
+pairs and methods still run.
 """
 
 from __future__ import annotations
@@ -32,7 +36,7 @@ from .show import render_pair
 FIELDS = [
     "dataset", "pair", "method", "n_a", "n_b", "n_scored", "exact", "mean", "mean_x100", "auc",
     "auc_010", "edge_stretch", "coverage", "seconds", "start", "start_exact", "start_mean",
-    "confidence_auroc", "likely_failed", "mean_a",
+    "confidence_auroc", "likely_failed", "mean_a", "failed",
 ]  # fmt: skip
 
 
@@ -121,7 +125,7 @@ def _table(rows: list[dict], methods: list[str]) -> str:
     )
     lines = []
     for m in methods:
-        rs = [r for r in rows if r["method"] == m]
+        rs = [r for r in rows if r["method"] == m and not r.get("failed")]
         if not rs:
             continue
 
@@ -143,13 +147,32 @@ def _table(rows: list[dict], methods: list[str]) -> str:
     return head + "\n".join(lines) + "\n"
 
 
+def _failure(pair: Pair, method: str, err: Exception, a=None, b=None) -> dict:
+    """The row of a (pair, method) that raised: its reason on one line."""
+    reason = " ".join(f"{type(err).__name__}: {err}".split())
+    return {
+        "dataset": pair.dataset, "pair": pair.name, "method": method,
+        "n_a": "" if a is None else a.n_vertices, "n_b": "" if b is None else b.n_vertices,
+        "failed": reason[:300],
+    }  # fmt: skip
+
+
+def _failed_lines(rows: list[dict]) -> str:
+    bad = [r for r in rows if r.get("failed")]
+    if not bad:
+        return ""
+    return f"\nFailed ({len(bad)}, left out of the figures above):\n\n" + "".join(
+        f"- {r['pair']} {r['method']}: {r['failed']}\n" for r in bad
+    )
+
+
 def _set_markdown(name: str, rows: list[dict], methods: list[str]) -> str:
-    ran = {r["method"] for r in rows}
+    ran = {r["method"] for r in rows if not r.get("failed")}
     methods = [m for m in methods if m in ran]
     pairs = list(dict.fromkeys(r["pair"] for r in rows))
     main = [m for m in methods if m not in ABLATIONS]
     abl = [m for m in methods if m in ABLATIONS]
-    n_scored = sorted({int(r["n_scored"]) for r in rows})
+    n_scored = sorted({int(r["n_scored"]) for r in rows if not r.get("failed")})
     md = [
         f"## {name}\n",
         (
@@ -161,6 +184,8 @@ def _set_markdown(name: str, rows: list[dict], methods: list[str]) -> str:
         ),
         _table(rows, main),
     ]
+    if _failed_lines(rows):
+        md.append(_failed_lines(rows))
     if abl:
         abl_pairs = sorted({r["pair"] for r in rows if r["method"] in abl}, key=pairs.index)
         same = [r for r in rows if r["pair"] in abl_pairs]
@@ -289,13 +314,26 @@ def run_bench(
             shown: list[tuple[float, Pair, np.ndarray]] = []
             show_method = "hope" if "hope" in methods else methods[-1]
             for pair, ms in (p for p in plan if p[0].dataset == folder.name):
-                a, b = load_mesh(pair.a), load_mesh(pair.b)
-                ai, bi = pair.ground_truth(a.n_vertices, b.n_vertices)
+                a = b = None
+                try:
+                    a, b = load_mesh(pair.a), load_mesh(pair.b)
+                    ai, bi = pair.ground_truth(a.n_vertices, b.n_vertices)
+                except Exception as err:  # one pair that cannot be read never stops the bench
+                    for m in ms:
+                        rows.append(_failure(pair, m, err, a, b))
+                        bar.step(f"{folder.name} {pair.name} {m} FAILED {rows[-1]['failed']}")
+                    _write_csv(out / f"{folder.name}.csv", rows)
+                    continue
                 ctx = PairContext(a, b)
                 starts: dict = {}
                 for m in ms:
-                    res = run_method(m, ctx)
-                    row, e = _score_row(pair, m, res, ctx, ai, bi, starts)
+                    try:
+                        res = run_method(m, ctx)
+                        row, e = _score_row(pair, m, res, ctx, ai, bi, starts)
+                    except Exception as err:  # nor one method that fails on one pair
+                        rows.append(_failure(pair, m, err, a, b))
+                        bar.step(f"{folder.name} {pair.name} {m} FAILED {rows[-1]['failed']}")
+                        continue
                     rows.append(row)
                     errors.setdefault(m, []).append(e)
                     if m == show_method:
@@ -306,7 +344,8 @@ def run_bench(
                 continue
             all_rows += rows
             n_pairs = {m: len(es) for m, es in errors.items()}
-            _plot_curves(folder.name, errors, n_pairs, out / f"{folder.name}_curves.png")
+            if errors:
+                _plot_curves(folder.name, errors, n_pairs, out / f"{folder.name}_curves.png")
             if render and shown:
                 _render_extremes(folder.name, shown, show_method, ups, out)
             write_tables(out)
@@ -386,4 +425,9 @@ def cmd_bench(args) -> int:
         progress=not args.quiet,
     )  # fmt: skip
     print(f"{len(rows)} results written to {args.out} (summary.md, *.csv, *.md, *.png)")
+    failed = [r for r in rows if r.get("failed")]
+    if failed:
+        print(f"{len(failed)} failed (listed in the tables):", file=sys.stderr)
+        for r in failed:
+            print(f"  {r['dataset']} {r['pair']} {r['method']}: {r['failed']}", file=sys.stderr)
     return 0

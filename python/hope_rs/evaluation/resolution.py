@@ -5,9 +5,10 @@ faust_reg) gives one pair per condition, with the ground truth carried over by r
 
 * ``sub1``, ``sub2``: B subdivided once / twice (each face into four at its edge midpoints,
   about 4x / 16x the vertices); the original vertices come first, so B's ground truth holds;
-* ``dec1k``: A clustered to about 1,000 vertices (uniform-grid vertex clustering, each kept
-  vertex a vertex of A; its largest connected component); a ground-truth point of A is
-  carried to the nearest kept vertex;
+* ``dec1k``: A clustered to about 1,000 vertices (the sites of a uniform grid, every other
+  vertex merged into the site nearest it along the surface by edge collapses that keep a
+  manifold: :mod:`hope_rs.geometry.collapse`); each kept vertex is a vertex of A, and the
+  ground truth is the lines whose point of A is kept (exact, nothing carried to a neighbour);
 
 and for each, the same pairs the other way round (``*_rev``: ``match(B', A)`` for
 ``sub*``, ``match(B, A')`` for ``dec1k``).
@@ -22,9 +23,8 @@ import shutil
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial import cKDTree
 
-from ..geometry.coarsen import coarse_to_count
+from ..geometry.collapse import collapse_to_count
 from ..geometry.mesh import Mesh, load_mesh
 from ..geometry.subdivide import subdivide
 from .derived_sets import (
@@ -55,13 +55,15 @@ def _condition(cond: str, ma: Mesh, mb: Mesh, ai: np.ndarray, bi: np.ndarray):
     if cond in ("sub1", "sub2"):
         return ma, subdivide(mb, int(cond[-1])), ai, bi
     if cond == "dec1k":
-        c = coarse_to_count(ma, DECIMATED_VERTICES)
+        c = collapse_to_count(ma, DECIMATED_VERTICES)
         if c is None:
             raise ValueError(f"a mesh of {ma.n_vertices} vertices cannot be clustered to fewer")
-        # Clustering leaves isolated vertices and small islands: the largest component only.
+        # An input of several pieces keeps its largest only.
         part = _largest_component(c.mesh, np.ones(c.mesh.n_vertices, dtype=bool))
-        nearest = cKDTree(part.mesh.vertices).query(ma.vertices[ai])[1]
-        return part.mesh, mb, nearest.astype(np.int64), bi
+        on_part = np.full(ma.n_vertices, -1, dtype=np.int64)
+        on_part[c.sites[part.origin]] = np.arange(part.origin.size)
+        keep = on_part[ai] >= 0
+        return part.mesh, mb, on_part[ai[keep]], bi[keep]
     raise ValueError(
         f"unknown resolution condition {cond!r}; the conditions are "
         f"{', '.join(RESOLUTION_CONDITIONS)}"

@@ -17,7 +17,7 @@ from scipy.sparse.csgraph import dijkstra
 from .mesh import Mesh, unique_edges
 from .sites import cell_sites, grid_cells
 
-__all__ = ["Coarse", "CoarsenConfig", "coarse_mesh", "coarse_to_count"]
+__all__ = ["Coarse", "CoarsenConfig", "coarse_mesh", "coarse_to_count", "uniform_cells_for_count"]
 
 
 @dataclass(frozen=True)
@@ -66,13 +66,12 @@ def _uniform_cells(vertices: np.ndarray, side: float) -> np.ndarray:
     return (q[:, 0] * dims[1] + q[:, 1]) * dims[2] + q[:, 2]
 
 
-def coarse_to_count(
+def uniform_cells_for_count(
     mesh: Mesh, n_target: int, *, tolerance: float = 0.05, max_tries: int = 8
-) -> Coarse | None:
-    """Vertex clustering of ``mesh`` on a uniform grid whose cube side is chosen so that
-    about ``n_target`` vertices remain, each grid site then owning the vertices nearest it
-    along the surface (within ``tolerance`` of it, or the nearest of
-    ``max_tries`` sides tried); ``None`` when ``mesh`` has no more than ``n_target`` vertices.
+) -> np.ndarray | None:
+    """Cell id of each vertex on the uniform grid whose cube side leaves about ``n_target``
+    occupied cells (within ``tolerance`` of it, or the nearest of ``max_tries`` sides tried);
+    ``None`` when ``mesh`` has no more than ``n_target`` vertices.
 
     On a surface the count of occupied cells goes as side^-2, so each try rescales the side
     by the square root of the count's ratio to the target."""
@@ -92,7 +91,21 @@ def coarse_to_count(
             break
         side *= np.sqrt(count / n_target)
     assert best is not None  # max_tries >= 1: the first try is the best so far
-    return _clustered(mesh, _surface_cells(mesh, best))
+    return best
+
+
+def coarse_to_count(
+    mesh: Mesh, n_target: int, *, tolerance: float = 0.05, max_tries: int = 8
+) -> Coarse | None:
+    """Vertex clustering of ``mesh`` on a uniform grid whose cube side is chosen so that
+    about ``n_target`` vertices remain (:func:`uniform_cells_for_count`), each grid site then
+    owning the vertices nearest it along the surface; ``None`` when ``mesh`` has no more than
+    ``n_target`` vertices. The result can have non-manifold edges; see
+    :mod:`hope_rs.geometry.collapse` for a coarse copy that stays a manifold."""
+    cells = uniform_cells_for_count(mesh, n_target, tolerance=tolerance, max_tries=max_tries)
+    if cells is None:
+        return None
+    return _clustered(mesh, _surface_cells(mesh, cells))
 
 
 def _surface_cells(mesh: Mesh, cells: np.ndarray) -> np.ndarray:

@@ -9,7 +9,10 @@ vertices, the "resolution" stage
 
 1. clusters the denser shape's vertices on a uniform grid sized for the sparser one's count
    (:func:`hope_rs.geometry.coarsen.coarse_to_count`; each coarse vertex is a vertex of the
-   dense mesh, and owns the dense vertices of its cell);
+   dense mesh, and owns the dense vertices of its cell); up to
+   ``ResolutionConfig.manifold_max_vertices`` by edge collapses that keep the copy a valid
+   manifold (:mod:`hope_rs.geometry.collapse`; plain clustering can glue non-manifold edges
+   and turn faces over, which misleads the coarse match);
 2. matches the pair at that common resolution with the whole stage list (descriptors,
    refinement, spectral pass, finish);
 3. lifts the map (:func:`hope_rs.pipeline.multiscale.lift_map`, ``centred``): each vertex
@@ -41,6 +44,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..geometry.coarsen import Coarse, coarse_to_count
+from ..geometry.collapse import collapse_to_count
 from ..geometry.subdivide import subdivide
 from ..shape import Shape
 from .handles import face_handles
@@ -82,11 +86,18 @@ def subdivided_copy(shape: Shape, times: int) -> Shape:
     return Shape(mesh, k_max=shape.k_max, orient=False, config=shape.config)
 
 
-def coarse_copy(shape: Shape, n_target: int, tolerance: float) -> tuple[Coarse, Shape] | None:
+def coarse_copy(
+    shape: Shape, n_target: int, tolerance: float, manifold_max_vertices: int = 0
+) -> tuple[Coarse, Shape] | None:
     """(Coarse, its Shape) of ``shape``'s internal mesh with about ``n_target`` vertices, or
-    ``None`` when the clustering leaves no face. The copy keeps the oriented faces as they
-    come (a second orientation would flip clustering's non-manifold spots)."""
-    c = coarse_to_count(shape.internal, n_target, tolerance=tolerance)
+    ``None`` when the clustering leaves no face: by manifold-keeping edge collapses
+    (:func:`hope_rs.geometry.collapse.collapse_to_count`) when ``shape`` has at most
+    ``manifold_max_vertices`` vertices, else by plain clustering. The copy keeps the oriented
+    faces as they come (a second orientation would flip clustering's non-manifold spots)."""
+    if shape.n_vertices <= manifold_max_vertices:
+        c = collapse_to_count(shape.internal, n_target, tolerance=tolerance)
+    else:
+        c = coarse_to_count(shape.internal, n_target, tolerance=tolerance)
     if c is None:
         return None
     return c, Shape(c.mesh, k_max=shape.k_max, orient=False, config=shape.config)
@@ -125,7 +136,12 @@ class ResolutionStage(Stage):
             f"times denser than the other ({sparse.n_vertices})"
         )
         t = state.log.start("resolution", detail=detail)
-        level = coarse_copy(dense, sparse.n_vertices, cfg.resolution.count_tolerance)
+        level = coarse_copy(
+            dense,
+            sparse.n_vertices,
+            cfg.resolution.count_tolerance,
+            cfg.resolution.manifold_max_vertices,
+        )
         if level is None:
             state.timings["resolution"] = time.perf_counter() - t
             why = f"{detail}, but clustering it leaves no face: matched at full resolution"

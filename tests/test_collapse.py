@@ -1,0 +1,117 @@
+"""Vertex clustering by manifold-keeping edge collapses (hope_rs.geometry.collapse)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import data_path
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from meshes import bumpy_sphere, euler_characteristic, mesh_defects
+
+import hope_rs
+from hope_rs.geometry.coarsen import coarse_to_count
+from hope_rs.geometry.collapse import collapse_to_count, collapse_to_sites
+
+VALID = {"degenerate": 0, "duplicate": 0, "non_manifold_edges": 0, "flipped_edges": 0}
+
+
+def _check_coarse(mesh, c, *, boundary: int = 0) -> None:
+    """``c`` is a valid coarse copy of ``mesh``: a manifold of the same topology and
+    orientation, each vertex a vertex of ``mesh``, each vertex of ``mesh`` owned by one."""
+    defects = mesh_defects(c.mesh.faces)
+    assert {k: defects[k] for k in VALID} == VALID
+    assert (defects["boundary"] == 0) == (boundary == 0)
+    assert euler_characteristic(c.mesh.n_vertices, c.mesh.faces) == euler_characteristic(
+        mesh.n_vertices, mesh.faces
+    )
+    np.testing.assert_array_equal(c.mesh.vertices, mesh.vertices[c.sites])
+    np.testing.assert_array_equal(c.owner[c.sites], np.arange(c.sites.size))
+    assert c.owner.min() >= 0 and c.owner.max() < c.sites.size
+    # No vertex left without a face: every kept vertex is on the surface.
+    assert np.unique(c.mesh.faces).size == c.mesh.n_vertices
+
+
+@settings(max_examples=8, deadline=None)
+@given(seed=st.integers(0, 1000), target=st.integers(40, 400))
+def test_collapse_keeps_a_closed_manifold_near_the_count(seed, target):
+    v, f = bumpy_sphere(900, seed)
+    mesh = hope_rs.Mesh(v, f)
+    c = collapse_to_count(mesh, target)
+    _check_coarse(mesh, c)
+    # The grid's sites plus the few vertices whose every collapse was refused.
+    assert 0.8 * target <= c.mesh.n_vertices <= 1.25 * target
+    # Orientation kept: the enclosed volume keeps its sign.
+    assert np.sign(_volume(c.mesh)) == np.sign(_volume(mesh))
+
+
+def _volume(m) -> float:
+    v, f = np.asarray(m.vertices), np.asarray(m.faces)
+    return float(np.einsum("ij,ij->i", v[f[:, 0]], np.cross(v[f[:, 1]], v[f[:, 2]])).sum())
+
+
+def test_an_open_surface_keeps_its_boundary():
+    v, f = bumpy_sphere(900, 3)
+    cap = (v[f][:, :, 2] > 0.5).any(axis=1)  # cut a cap off: a disc
+    mesh = hope_rs.Mesh(v, f[~cap])
+    used = np.unique(mesh.faces)
+    mesh = hope_rs.Mesh(v[used], np.searchsorted(used, mesh.faces))
+    c = collapse_to_count(mesh, 150)
+    _check_coarse(mesh, c, boundary=1)
+
+    # The boundary moves only along itself: each boundary vertex of the copy was one before.
+    def boundary_vertices(faces):
+        e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+        u, n = np.unique(e, axis=0, return_counts=True)
+        return np.unique(u[n == 1])
+
+    assert set(c.sites[boundary_vertices(c.mesh.faces)]) <= set(boundary_vertices(mesh.faces))
+
+
+def test_two_close_sheets_are_not_glued():
+    """Two nested spheres 2% apart, in one mesh: grid cells hold both sheets, yet each vertex
+    is merged only along its own surface, so the copy has two pieces as the input."""
+    v, f = bumpy_sphere(600, 4)
+    mesh = hope_rs.Mesh(np.vstack([v, 0.98 * v]), np.vstack([f, f[:, ::-1] + len(v)]))
+    c = collapse_to_count(mesh, 200)
+    _check_coarse(mesh, c)
+    inner = c.sites >= len(v)
+    assert 0 < inner.sum() < c.sites.size
+    # No face joins the sheets.
+    assert (inner[c.mesh.faces].all(axis=1) | (~inner[c.mesh.faces]).all(axis=1)).all()
+
+
+def test_every_vertex_a_site_changes_nothing():
+    v, f = bumpy_sphere(200, 1)
+    mesh = hope_rs.Mesh(v, f)
+    c = collapse_to_sites(mesh, np.arange(200))
+    np.testing.assert_array_equal(c.mesh.faces, mesh.faces)
+    assert collapse_to_count(mesh, 200) is None
+
+
+@pytest.mark.slow
+def test_a_faust_body_at_1000_vertices_has_surface_geodesics():
+    """The plain clustering of this body has non-manifold edges, on which potpourri3d's
+    surface geodesics abort; the collapsed copy is a valid closed surface."""
+    pp3d = pytest.importorskip("potpourri3d")
+    mesh = hope_rs.load_mesh(data_path("faust_r", "tr_reg_002.off"))
+    c = collapse_to_count(mesh, 1000)
+    _check_coarse(mesh, c)
+    pp3d.EdgeFlipGeodesicSolver(np.asarray(c.mesh.vertices), np.asarray(c.mesh.faces))
+
+
+def test_the_resolution_stage_coarsens_a_small_dense_shape_to_a_manifold():
+    from hope_rs.pipeline.resolution import coarse_copy
+
+    v, f = bumpy_sphere(2000, 7)
+    shape = hope_rs.Shape(hope_rs.Mesh(v, f))
+    collapsed, _ = coarse_copy(shape, 400, 0.05, manifold_max_vertices=2000)
+    _check_coarse(shape.internal, collapsed)
+    np.testing.assert_array_equal(
+        collapsed.mesh.faces, collapse_to_count(shape.internal, 400).mesh.faces
+    )
+    # Above the limit, plain clustering.
+    clustered, _ = coarse_copy(shape, 400, 0.05, manifold_max_vertices=1999)
+    np.testing.assert_array_equal(
+        clustered.mesh.faces, coarse_to_count(shape.internal, 400).mesh.faces
+    )
