@@ -9,7 +9,8 @@ vertex of A to the vertex of B nearest in a product space: the deformed coordina
 lightly weighted, the spectral embedding mapped by the functional map (which keeps a
 vertex off a nearby part that its deformed position touches). Repeated a few times.
 
-It runs only when the two shapes' spectra differ (:func:`spectral_mismatch`): isometric
+It reads the spectral pass's eigenbases, and runs only when that pass computed them and the
+two shapes' spectra differ (:func:`spectral_mismatch`): isometric
 shapes have the same Laplace–Beltrami eigenvalues at unit area, and on them the pass would
 trade HOPE's sub-edge accuracy for a nearest-point map (docs/decisions.md#deform).
 """
@@ -83,7 +84,10 @@ class DeformStage(Stage):
         if state.landmarks is not None or state.partial is not None:
             return QUIET  # the landmarks' and the partial stage's maps are not re-matched here
         a, b = state.a, state.b
-        if min(a.n_vertices, b.n_vertices) < cfg.k_spectral + 2:
+        k = max(cfg.k_spectral, cfg.k_displacement, cfg.n_eigenvalues + 1)
+        if not (a.has_spectral_basis(k) and b.has_spectral_basis(k)):
+            # The spectral pass did not run (disabled, too large, too small): no basis to read,
+            # and solving one here would cost more than the pass.
             return QUIET
         if any(boundary_edges(s.internal.faces).size for s in (a, b)):
             return QUIET  # an open surface's spectrum differs from a closed one's for that alone
