@@ -92,7 +92,10 @@ class DeformStage(Stage):
         if any(boundary_edges(s.internal.faces).size for s in (a, b)):
             return QUIET  # an open surface's spectrum differs from a closed one's for that alone
         t = time.perf_counter()
-        self.mismatch = spectral_mismatch(a, b, cfg.n_eigenvalues)
+        try:
+            self.mismatch = spectral_mismatch(a, b, cfg.n_eigenvalues)
+        except RuntimeError:  # an eigenbasis the spectral pass could not read either
+            return "an eigenbasis could not be computed"
         state.timings["deform"] = time.perf_counter() - t
         if self.mismatch <= cfg.min_mismatch:
             return QUIET  # isometric shapes: the common case, not worth a line in the log
