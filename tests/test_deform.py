@@ -33,7 +33,6 @@ def test_spectra_agree_for_an_isometric_copy_and_differ_more_the_more_it_is_stre
     same = spectral_mismatch(Shape(blob), Shape(moved))
     more = [spectral_mismatch(Shape(blob), Shape(stretched(blob, s))) for s in (2.0, 8.0)]
     assert same < 0.01 < more[0] < more[1]
-    assert more[1] > DeformConfig().min_mismatch
 
 
 def test_the_pass_keeps_a_right_map_between_isometric_copies(blob):
@@ -92,7 +91,7 @@ def test_the_pass_lowers_the_error_of_a_gorilla_to_woman_pair():
     cfg = MatchConfig()
     off = dataclasses.replace(cfg, deform=DeformConfig(enabled=False))
     res_on, res_off = hope_rs.match(a, b, config=cfg), hope_rs.match(a, b, config=off)
-    assert res_on.stage("deform").ran
+    assert res_on.stage("deform").ran  # the default gate: these spectra differ by about 0.2
     e_on = geodesic_errors(b, res_on.map, a_idx=ai, b_idx=bi).mean()
     e_off = geodesic_errors(b, res_off.map, a_idx=ai, b_idx=bi).mean()
     # Edge-graph errors: about 0.13 without the pass, 0.09 with it.
