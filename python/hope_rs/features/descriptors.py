@@ -162,6 +162,14 @@ def laplacian_basis_as_numbered(
     return np.maximum(evals[by_value], 0.0), evecs[:, by_value], np.asarray(M.diagonal())
 
 
+def rayleigh_quotients(mesh: Mesh, evecs: np.ndarray) -> np.ndarray:
+    """``evecs[:, i]ᵀ L evecs[:, i]`` for each column, with ``L`` the robust Laplacian of
+    ``mesh`` scaled to unit area: the eigenvalues of mass-orthonormal eigenvectors in
+    ``mesh``'s numbering (and close to them for the coarse-seeded basis)."""
+    L, _ = _unit_area_laplacian(mesh)
+    return np.einsum("ij,ij->j", evecs, L @ evecs)
+
+
 def _shift_invert(L, M, sigma: float, stop: threading.Event | None):
     """``x -> (L - sigma M)^-1 x`` as ARPACK's shift-invert operator: the LU factorisation
     ``eigsh`` builds itself for sparse symmetric input (same matrix, same bits), with a check of

@@ -852,6 +852,40 @@ class OrientConfig:
         object.__setattr__(self, "hypotheses", tuple(self.hypotheses))
 
 
+@dataclass(frozen=True)
+class DeformConfig:
+    """The deformation-aware pass for non-isometric shapes (:mod:`hope_rs.pipeline.deform`,
+    docs/decisions.md#deform).
+
+    Attributes
+    ----------
+    enabled : bool
+    min_mismatch : float
+        The pass runs when the shapes' first ``n_eigenvalues`` non-zero Laplace–Beltrami
+        eigenvalues at unit area differ by more than this mean |log ratio|
+        (:func:`~hope_rs.pipeline.deform.spectral_mismatch`); isometric shapes differ by a
+        few hundredths, different bodies by about 0.2; noise or welded shortcuts on an
+        isometric copy reach about 0.1, and the pass does not help them.
+    n_eigenvalues : int
+    iterations : int
+        Rounds of deforming A along the map and matching again.
+    k_displacement : int
+        A's eigenfunctions spanning the displacement (fewer: a smoother deformation).
+    k_spectral : int
+        Eigenfunctions of the spectral embedding in the nearest-vertex search ...
+    spectral_weight : float
+        ... and its weight against the coordinates (both at unit area).
+    """
+
+    enabled: bool = True
+    min_mismatch: float = field(default=0.15, metadata={"finite": True, "range": (0.0, None)})
+    n_eigenvalues: int = field(default=30, metadata={"range": (1, 1000)})
+    iterations: int = field(default=3, metadata={"range": (1, 100)})
+    k_displacement: int = field(default=10, metadata={"range": (1, 1000)})
+    k_spectral: int = field(default=40, metadata={"range": (1, 1000)})
+    spectral_weight: float = field(default=0.03, metadata={"finite": True, "range": (0.0, None)})
+
+
 #: ``match``'s keyword options → (stage field of :class:`MatchConfig`, field of that stage).
 KEYWORDS: dict[str, tuple[str | None, str]] = {
     "k_max": (None, "k_max"),
@@ -885,6 +919,8 @@ class MatchConfig:
         What the caller's landmarks do, when there are any.
     orient : OrientConfig
         Repairing a map that turns A over.
+    deform : DeformConfig
+        The deformation-aware pass for non-isometric shapes.
 
     Examples
     --------
@@ -909,6 +945,7 @@ class MatchConfig:
     landmarks: LandmarkConfig = field(default_factory=LandmarkConfig)
     partial: PartialConfig = field(default_factory=PartialConfig)
     orient: OrientConfig = field(default_factory=OrientConfig)
+    deform: DeformConfig = field(default_factory=DeformConfig)
 
     def with_options(self, **options) -> MatchConfig:
         """A copy with ``match``'s keyword options (see :data:`KEYWORDS`) set."""

@@ -100,11 +100,14 @@ class _Relay:
 
 
 def _nested_config(state: MatchState):
-    """The settings of a nested match: this stage and the confidence off."""
+    """The settings of a nested match: this stage, the confidence and the deformation pass
+    off (the pass runs once, on the map this stage keeps: its nearest-point maps turn more
+    triangles over than the maps it starts from)."""
     cfg = state.config
     return dataclasses.replace(
         cfg,
         orient=dataclasses.replace(cfg.orient, enabled=False),
+        deform=dataclasses.replace(cfg.deform, enabled=False),
         confidence=dataclasses.replace(cfg.confidence, enabled=False),
     )
 

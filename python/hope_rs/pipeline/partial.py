@@ -190,7 +190,12 @@ class PartialStage(Stage):
         cfg = state.config
         a, b = state.a, state.b
         trials = cfg.partial.scale_trials
-        off = dataclasses.replace(cfg, partial=dataclasses.replace(cfg.partial, enabled=False))
+        # A part's spectrum is not the whole's: the deformation pass is for whole shapes.
+        off = dataclasses.replace(
+            cfg,
+            partial=dataclasses.replace(cfg.partial, enabled=False),
+            deform=dataclasses.replace(cfg.deform, enabled=False),
+        )
         if cfg.partial.max_turned is not None:
             off = dataclasses.replace(
                 off, refine=dataclasses.replace(cfg.refine, max_turned=cfg.partial.max_turned)

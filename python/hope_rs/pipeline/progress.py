@@ -27,8 +27,8 @@ logger.addHandler(logging.NullHandler())
 
 #: Every stage name a match can report, in the order they run. "coarse" and "lift" appear
 #: only with ``multiscale=True``, "resolution" only when one shape is much denser than the
-#: other, "landmarks" only with landmarks; "polish" is the refinement's last, not one-to-one
-#: step.
+#: other, "landmarks" only with landmarks, "deform" only between non-isometric shapes;
+#: "polish" is the refinement's last, not one-to-one step.
 STAGES = (
     "shapes",
     "partial",
@@ -43,6 +43,7 @@ STAGES = (
     "spectral",
     "faces",
     "orient",
+    "deform",
     "confidence",
 )
 

@@ -7,6 +7,7 @@ Adding or removing a stage touches its own module, this list and its field of
 from __future__ import annotations
 
 from .confidence import ConfidenceStage
+from .deform import DeformStage
 from .initial import DescriptorStage, InitialStage
 from .landmarks import LandmarkStage
 from .multiscale import MultiscaleStage
@@ -35,5 +36,6 @@ def default_stages() -> list[Stage]:
         SpectralStage(),  # "spectral"
         FinishStage(),  # "faces"
         OrientStage(),  # "orient": when the map turns much of A over
+        DeformStage(),  # "deform": only when the shapes' spectra differ (not isometric)
         ConfidenceStage(),  # "confidence"
     ]
