@@ -2,8 +2,10 @@
 
 Each round runs every pair in a fresh process per tree (``PYTHONPATH=<tree>/python``), the two
 trees in alternating order; each process matches once to warm up and then ``--repeats`` times.
-Prints per pair the median seconds of each tree, the ratio new / old, and whether the two
-trees' maps are bit-identical (SHA-256 of ``res.map``)::
+Prints per pair the median seconds of each tree, the ratio new / old, the same for the CPU
+seconds of all the process's threads (steadier than wall time on a busy machine, though blind to
+work that idles a core), and whether the two trees' maps are bit-identical (SHA-256 of
+``res.map``)::
 
     python benches/bench_against.py --old /work/main --pairs faust_r/tr_reg_000:faust_r/tr_reg_001
     python benches/bench_against.py --old /work/main --rounds 5   # the default pairs
@@ -31,14 +33,15 @@ import numpy as np
 import hope_rs
 a, b, repeats = hope_rs.load_mesh(sys.argv[1]), hope_rs.load_mesh(sys.argv[2]), int(sys.argv[3])
 res = hope_rs.match(a, b)
-times = []
+times, cpu = [], []
 for _ in range(repeats):
-    t = time.perf_counter()
+    t, c = time.perf_counter(), time.process_time()
     res = hope_rs.match(a, b)
     times.append(time.perf_counter() - t)
+    cpu.append(time.process_time() - c)
 m = np.ascontiguousarray(res.map, dtype=np.int64)
 stages = {k: v for k, v in res.timings.items()}
-print(json.dumps({"times": times, "sha": hashlib.sha256(m.tobytes()).hexdigest(),
+print(json.dumps({"times": times, "cpu": cpu, "sha": hashlib.sha256(m.tobytes()).hexdigest(),
                   "file": hope_rs.__file__, "timings": stages}))
 """
 
@@ -71,6 +74,7 @@ def main(argv=None) -> None:
     for spec in args.pairs:
         a, b = (args.data / f"{x}.off" for x in spec.split(":"))
         times: dict[str, list[float]] = {"old": [], "new": []}
+        cpu: dict[str, list[float]] = {"old": [], "new": []}
         stages: dict[str, list[dict]] = {"old": [], "new": []}
         shas: dict[str, set[str]] = {"old": set(), "new": set()}
         for rnd in range(args.rounds):
@@ -78,6 +82,7 @@ def main(argv=None) -> None:
             for side in order:
                 r = run(args.old if side == "old" else args.new, a, b, args.repeats)
                 times[side] += r["times"]
+                cpu[side] += r["cpu"]
                 stages[side].append(r["timings"])
                 shas[side].add(r["sha"])
         mo, mn = statistics.median(times["old"]), statistics.median(times["new"])
@@ -85,6 +90,11 @@ def main(argv=None) -> None:
         print(
             f"{spec}: old median {mo:.2f} s, new median {mn:.2f} s, new / old {mn / mo:.2f} "
             f"({len(times['old'])} timings each); maps {'identical' if same else 'DIFFER'}"
+        )
+        co, cn = statistics.median(cpu["old"]), statistics.median(cpu["new"])
+        print(
+            f"    CPU seconds (all threads): old median {co:.2f}, new median {cn:.2f}, "
+            f"new / old {cn / co:.2f}"
         )
         for key in sorted(stages["new"][0]):
             so = statistics.median(s.get(key, 0.0) for s in stages["old"])

@@ -35,6 +35,53 @@ pub fn closest_rotations(m: &[f64]) -> Result<Vec<f64>> {
     Ok(out)
 }
 
+/// The local step of ARAP with uniform weights: for each vertex v, the rotation maximising
+/// `tr(R M_v)` (see [`closest_rotations`]) where `M_v = sum_e ex[e] ey[e]ᵀ` over the directed
+/// edges `edges[indptr[v]..indptr[v + 1]]` of v, summed in that order. `ex` and `ey` hold one
+/// 3-vector per directed edge (the edge at rest and deformed). The sums run as a sparse product
+/// of the edges' outer products with a 0/1 matrix would (each product rounded once, added in
+/// order to 0), so the rotations are the same bits as those of that product's matrices.
+pub fn edge_rotations(indptr: &[usize], edges: &[u32], ex: &[f64], ey: &[f64]) -> Result<Vec<f64>> {
+    let n_edges = ex.len() / 3;
+    if !ex.len().is_multiple_of(3) || ey.len() != ex.len() {
+        return invalid("edge_rotations needs ex and ey of the same shape (n_edges, 3)");
+    }
+    if indptr.is_empty()
+        || indptr[0] != 0
+        || indptr.last() != Some(&edges.len())
+        || indptr.windows(2).any(|w| w[0] > w[1])
+    {
+        return invalid("edge_rotations needs a row pointer over the edge list");
+    }
+    if edges.iter().any(|&e| e as usize >= n_edges) {
+        return invalid("edge_rotations: an edge index is out of range");
+    }
+    if ex.iter().chain(ey).any(|x| !x.is_finite()) {
+        return invalid("edge_rotations needs finite edge vectors");
+    }
+    let n = indptr.len() - 1;
+    let mut out = vec![0.0; 9 * n];
+    out.par_chunks_mut(9 * CHUNK)
+        .enumerate()
+        .for_each(|(c, o)| {
+            for (k, r) in o.chunks_exact_mut(9).enumerate() {
+                let v = c * CHUNK + k;
+                let mut m = [0.0f64; 9];
+                for &e in &edges[indptr[v]..indptr[v + 1]] {
+                    let e = e as usize;
+                    let (a, b) = (&ex[3 * e..3 * e + 3], &ey[3 * e..3 * e + 3]);
+                    for i in 0..3 {
+                        for j in 0..3 {
+                            m[3 * i + j] += a[i] * b[j];
+                        }
+                    }
+                }
+                r.copy_from_slice(&closest_rotation(&m));
+            }
+        });
+    Ok(out)
+}
+
 /// Horn's method for one matrix `m` (row-major): with `m = sum a bᵀ`, the result rotates the
 /// `a`s onto the `b`s as well as a rotation can.
 fn closest_rotation(m: &[f64; 9]) -> [f64; 9] {
@@ -204,5 +251,27 @@ mod tests {
         nan[4] = f64::NAN;
         assert!(closest_rotations(&nan).is_err());
         assert!(closest_rotations(&[]).unwrap().is_empty());
+    }
+
+    #[test]
+    fn edge_rotations_sum_each_vertexs_outer_products_in_order() {
+        // Two vertices: vertex 0 owns edges 2 and 0 (in that order), vertex 1 edge 1.
+        let ex = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+        let ey = [0.0, 1.0, 0.0, -1.0, 0.0, 0.0, 0.0, 0.0, 1.0];
+        let got = edge_rotations(&[0, 2, 3], &[2, 0, 1], &ex, &ey).unwrap();
+        let mut m0 = [0.0; 9];
+        for e in [2usize, 0] {
+            for i in 0..3 {
+                for j in 0..3 {
+                    m0[3 * i + j] += ex[3 * e + i] * ey[3 * e + j];
+                }
+            }
+        }
+        let m1 = [0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let want = closest_rotations(&[m0, m1].concat()).unwrap();
+        assert_eq!(got, want);
+        assert!(edge_rotations(&[0, 2, 3], &[2, 0, 3], &ex, &ey).is_err());
+        assert!(edge_rotations(&[0, 2], &[2, 0, 1], &ex, &ey).is_err());
+        assert!(edge_rotations(&[0, 2, 3], &[2, 0, 1], &ex, &ey[..6]).is_err());
     }
 }

@@ -16,34 +16,51 @@ pub const COUNT_WEIGHT: i64 = 4;
 
 /// The assignment cost `COUNT_WEIGHT * K[p, q] + (q == f[p]) * (1 + COUNT_WEIGHT * s[p])` of
 /// the overlap `K`, where `s[p]` is `stay` for a witness p and 0 otherwise: the extra counts a
-/// witness's current match is worth.
-pub fn bonus_cost(k: Csr<u32>, f: &[u32], witnesses: &[bool], stay: u32) -> Csr<i64> {
-    let mut data = vec![0i64; k.nnz()];
-    let mut rows: Vec<&mut [i64]> = Vec::with_capacity(k.n_rows);
+/// witness's current match is worth. Computed in place on the counts: 32-bit values halve
+/// what the auction streams through in its rescans (the solver reads any integer type alike).
+pub fn bonus_cost(k: Csr<u32>, f: &[u32], witnesses: &[bool], stay: u32) -> Result<Csr<u32>> {
+    // A count is at most the number of witnesses (one per vertex of A).
+    let largest = COUNT_WEIGHT as u64 * (k.n_rows as u64 + 1 + stay as u64) + 1;
+    if largest > u32::MAX as u64 {
+        return invalid(format!(
+            "{} vertices of A are too many for 32-bit overlap costs",
+            k.n_rows
+        ));
+    }
+    let Csr {
+        n_rows,
+        n_cols,
+        indptr,
+        indices,
+        mut data,
+    } = k;
+    let mut rows: Vec<(&mut [u32], &[u32])> = Vec::with_capacity(n_rows);
     let mut rest = data.as_mut_slice();
-    for r in 0..k.n_rows {
-        let (head, tail) = rest.split_at_mut(k.indptr[r + 1] - k.indptr[r]);
-        rows.push(head);
+    for r in 0..n_rows {
+        let (head, tail) = rest.split_at_mut(indptr[r + 1] - indptr[r]);
+        rows.push((head, &indices[indptr[r]..indptr[r + 1]]));
         rest = tail;
     }
-    rows.into_par_iter().enumerate().for_each(|(r, out)| {
-        let lo = k.indptr[r];
-        let bonus = 1 + COUNT_WEIGHT * (stay as i64) * (witnesses[r] as i64);
-        for (j, d) in out.iter_mut().enumerate() {
-            *d = COUNT_WEIGHT * k.data[lo + j] as i64 + (k.indices[lo + j] == f[r]) as i64 * bonus;
-        }
-    });
-    Csr {
-        n_rows: k.n_rows,
-        n_cols: k.n_cols,
-        indptr: k.indptr,
-        indices: k.indices,
+    let weight = COUNT_WEIGHT as u32;
+    rows.into_par_iter()
+        .enumerate()
+        .for_each(|(r, (out, cols))| {
+            let bonus = 1 + weight * stay * (witnesses[r] as u32);
+            for (d, &c) in out.iter_mut().zip(cols) {
+                *d = weight * *d + (c == f[r]) as u32 * bonus;
+            }
+        });
+    Ok(Csr {
+        n_rows,
+        n_cols,
+        indptr,
+        indices,
         data,
-    }
+    })
 }
 
 /// Column of the largest value of row `r` (ties: the last one), None for an empty row.
-pub fn best_in_row(c: &CsrView<i64>, r: usize) -> Option<u32> {
+pub fn best_in_row(c: &CsrView<u32>, r: usize) -> Option<u32> {
     let (lo, hi) = (c.indptr[r], c.indptr[r + 1]);
     (lo..hi)
         .max_by_key(|&a| (c.data[a], a))
@@ -153,13 +170,13 @@ pub fn step_cost<A: Rows, B: Rows>(
     top_k: Option<usize>,
     keep: &[u32],
     stay: u32,
-) -> Result<Csr<i64>> {
+) -> Result<Csr<u32>> {
     let opts = OverlapOptions {
         top_k,
         keep: Some(keep),
     };
     let rows = overlap_rows(nbrs_a, nbrs_b, f, witnesses, opts)?;
-    Ok(bonus_cost(rows.into_csr(), f, witnesses, stay))
+    bonus_cost(rows.into_csr(), f, witnesses, stay)
 }
 
 #[cfg(test)]
@@ -203,14 +220,18 @@ mod tests {
                 top_k: None,
                 keep: Some(&keep),
             };
-            let cost = bonus_cost(overlap_cost(&rows, &rows, &f, &w, opts).unwrap(), &f, &w, 0);
+            let cost =
+                bonus_cost(overlap_cost(&rows, &rows, &f, &w, opts).unwrap(), &f, &w, 0).unwrap();
             let reference =
                 auction_assignment_int_hinted(&cost.view(), true, 16, Some(&hint)).unwrap();
             assert_eq!(g, reference, "k={k}");
             // The bonus is exactly 1 on the current match and the counts are multiplied.
             for (r, &fr) in f.iter().enumerate() {
                 for a in cost.indptr[r]..cost.indptr[r + 1] {
-                    assert_eq!(cost.data[a] % COUNT_WEIGHT, (cost.indices[a] == fr) as i64);
+                    assert_eq!(
+                        cost.data[a] as i64 % COUNT_WEIGHT,
+                        (cost.indices[a] == fr) as i64
+                    );
                 }
             }
             // The swap is undone: the strip is matched to itself.
@@ -237,7 +258,8 @@ mod tests {
             top_k: None,
             keep: Some(&f),
         };
-        let cost = bonus_cost(overlap_cost(&rows, &rows, &f, &w, opts).unwrap(), &f, &w, 0);
+        let cost =
+            bonus_cost(overlap_cost(&rows, &rows, &f, &w, opts).unwrap(), &f, &w, 0).unwrap();
         for (r, &q) in got.iter().enumerate() {
             let (lo, hi) = (cost.indptr[r], cost.indptr[r + 1]);
             let best = cost.data[lo..hi].iter().max().unwrap();
@@ -263,7 +285,7 @@ mod tests {
         let f = [0u32, 2];
         let hint = [0i64, 2];
         let solve = |w: &[bool], stay: u32| {
-            let c = bonus_cost(k.clone(), &f, w, stay);
+            let c = bonus_cost(k.clone(), &f, w, stay).unwrap();
             auction_assignment_int_hinted(&c.view(), true, 16, Some(&hint)).unwrap()
         };
         assert_eq!(
@@ -277,7 +299,7 @@ mod tests {
             vec![0, 2],
             "one extra count keeps the match"
         );
-        let c = bonus_cost(k.clone(), &f, &[true, false], 1);
+        let c = bonus_cost(k.clone(), &f, &[true, false], 1).unwrap();
         assert_eq!(c.data, vec![4 * 3 + 1 + 4, 4 * 4, 4 * 5 + 1]);
     }
 
@@ -289,7 +311,7 @@ mod tests {
             n_cols: 2,
             indptr: vec![0, 1, 2, 4],
             indices: vec![0, 1, 0, 1],
-            data: vec![5i64, 5, 1, 2],
+            data: vec![5u32, 5, 1, 2],
         };
         assert_eq!(best_in_row(&c.view(), 2), Some(1));
         assert_eq!(best_in_row(&c.view(), 0), Some(0));

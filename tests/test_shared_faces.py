@@ -78,6 +78,28 @@ def test_closest_rotations_match_the_svd_and_reject_bad_input():
         _core.closest_rotations(bad)
 
 
+def test_edge_rotations_are_the_rotations_of_the_summed_outer_products_bit_for_bit():
+    # The sums the ARAP step formed as a sparse product: the same bits, so the same finish.
+    v, faces = bumpy_sphere(300, 1)
+    s = hope_rs.Shape((v, faces))
+    arap = SF._Arap(s.points, s.edges, FinishConfig())
+    rng = np.random.default_rng(4)
+    y = s.points + rng.normal(scale=0.05, size=s.points.shape)
+    ey = y[arap.i] - y[arap.j]
+    cov = arap.per_vertex @ (arap.ex[:, :, None] * ey[:, None, :]).reshape(-1, 9)
+    want = _core.closest_rotations(cov.reshape(-1, 3, 3))
+    got = _core.edge_rotations(arap.edge_ptr, arap.edge_ids, arap.ex, ey)
+    assert np.array_equal(got, want)
+    with pytest.raises(ValueError, match="one shape"):
+        _core.edge_rotations(arap.edge_ptr, arap.edge_ids, arap.ex, ey[:-1])
+    with pytest.raises(ValueError, match="out of range"):
+        _core.edge_rotations(arap.edge_ptr, arap.edge_ids + len(ey), arap.ex, ey)
+    bad = ey.copy()
+    bad[3, 0] = np.inf
+    with pytest.raises(ValueError, match="finite"):
+        _core.edge_rotations(arap.edge_ptr, arap.edge_ids, arap.ex, bad)
+
+
 def test_finish_puts_a_drifted_patch_back_on_a_scaled_relabelled_copy(faust_pair):
     a = faust_pair[0]
     b, truth = moved_copy(a, 4)  # relabelled, rotated, scaled by 1.7

@@ -27,6 +27,7 @@ __all__ = [
     "greedy_pairs",
     "nearest_among",
     "closest_rotations",
+    "edge_rotations",
     "grow_across_faces",
 ]
 
@@ -174,6 +175,17 @@ def closest_rotations(m: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     """For each 3 x 3 matrix ``M`` of an (n, 3, 3) array, the rotation ``R`` maximising
     ``tr(R M)`` (Horn's quaternion method); raises ValueError on other shapes or non-finite
     values."""
+
+def edge_rotations(
+    indptr: npt.NDArray[np.int64],
+    edges: npt.NDArray[np.int64],
+    ex: npt.NDArray[np.float64],
+    ey: npt.NDArray[np.float64],
+) -> npt.NDArray[np.float64]:
+    """ARAP's local step, (n, 3, 3): for each vertex v, :func:`closest_rotations` of
+    ``sum(ex[e] ey[e]ᵀ)`` over the directed edges ``edges[indptr[v]:indptr[v + 1]]`` (summed in
+    that order from zero, as a 0/1 sparse matrix times the stacked outer products sums them);
+    ``ex``, ``ey``: (n_edges, 3) edges at rest and deformed."""
 
 def grow_across_faces(
     faces_a: npt.NDArray[np.int64],

@@ -22,10 +22,11 @@ pub const DEFAULT_FLOOR_DIV: i64 = EPS_START_DIV * EPS_FLOOR_DIV;
 const K: usize = 12;
 
 /// Integer value types the exact solver reads in place. Costs whose values fit in 32 bits (every
-/// HOPE overlap cost) are best passed as `i32`: half the memory to fault in and to stream through
+/// HOPE overlap cost) are best passed as `i32` or `u32`: half the memory to fault in and to stream through
 /// the rescans.
 pub trait IntValue: Copy + Default + Send + Sync + Into<i64> {}
 impl IntValue for i32 {}
+impl IntValue for u32 {}
 impl IntValue for i64 {}
 
 /// Shifted, unscaled person values (all <= 0, >= -range) by (person, arc).

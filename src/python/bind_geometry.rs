@@ -1,6 +1,6 @@
 //! Geometry and map helpers: closest rotations, growing a map across shared faces, and greedy
 //! pairing with row capacities.
-use super::convert::{faces_vec, owned, plain_vec, points_vec, u32_vec};
+use super::convert::{faces_vec, owned, plain_vec, points_vec, u32_vec, usize_vec};
 use super::detached;
 use numpy::{
     IntoPyArray, PyArray1, PyArray3, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
@@ -28,6 +28,37 @@ pub(super) fn closest_rotations<'py>(
         None => a.iter().copied().collect(),
     };
     let r = detached(py, || crate::rotation::closest_rotations(&flat))?;
+    Ok(numpy::ndarray::Array3::from_shape_vec((n, 3, 3), r)
+        .expect("n * 9 values")
+        .into_pyarray(py))
+}
+
+/// ARAP's local step: for each vertex the closest rotation to the sum of its directed edges'
+/// outer products `ex[e] ey[e]ᵀ`, edges `edges[indptr[v]..indptr[v + 1]]` (see
+/// `rotation::edge_rotations`). Returns (n, 3, 3).
+#[pyfunction]
+pub(super) fn edge_rotations<'py>(
+    py: Python<'py>,
+    indptr: PyReadonlyArray1<'py, i64>,
+    edges: PyReadonlyArray1<'py, i64>,
+    ex: PyReadonlyArray2<'py, f64>,
+    ey: PyReadonlyArray2<'py, f64>,
+) -> PyResult<Bound<'py, PyArray3<f64>>> {
+    let indptr = usize_vec(&indptr, "indptr")?;
+    let edges = u32_vec(&edges, "edges")?;
+    let (ex, ey) = (points_vec(&ex)?, points_vec(&ey)?);
+    if ex.len() != ey.len() {
+        return Err(PyValueError::new_err(format!(
+            "edge_rotations needs ex and ey of one shape (n_edges, 3), got {} and {} rows",
+            ex.len(),
+            ey.len()
+        )));
+    }
+    let (ex, ey) = (ex.as_flattened(), ey.as_flattened());
+    let n = indptr.len().saturating_sub(1);
+    let r = detached(py, || {
+        crate::rotation::edge_rotations(&indptr, &edges, ex, ey)
+    })?;
     Ok(numpy::ndarray::Array3::from_shape_vec((n, 3, 3), r)
         .expect("n * 9 values")
         .into_pyarray(py))

@@ -3,6 +3,7 @@
 use super::bind_graph::MeshGraph;
 use super::convert::{csr_out, owned, pattern, plain_vec, u32_vec, PyCsr};
 use super::detached;
+use crate::csr::Csr;
 use crate::overlap::{overlap_rows, BallsAt, OverlapOptions, OverlapRows};
 use crate::step::{best_overlap, overlap_assignment_timed, step_cost, StepOptions};
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1};
@@ -156,5 +157,13 @@ pub(super) fn overlap_step_cost_graphs<'py>(
     let (ra, rb, f, w) = step_inputs(a, b, k, &f, &witnesses)?;
     let keep = u32_vec(&keep, "keep")?;
     let cost = detached(py, || step_cost(&ra, &rb, &f, &w, top_k, &keep, stay))?;
+    // As i64, the type the assignment bindings take.
+    let cost = Csr {
+        n_rows: cost.n_rows,
+        n_cols: cost.n_cols,
+        data: cost.data.iter().map(|&v| v as i64).collect(),
+        indptr: cost.indptr,
+        indices: cost.indices,
+    };
     Ok(csr_out(py, cost))
 }

@@ -89,7 +89,7 @@ where
     convert_vec(a, what)
 }
 
-fn usize_vec(a: &PyReadonlyArray1<'_, i64>, what: &str) -> PyResult<Vec<usize>> {
+pub(super) fn usize_vec(a: &PyReadonlyArray1<'_, i64>, what: &str) -> PyResult<Vec<usize>> {
     convert_vec(a, what)
 }
 

@@ -14,7 +14,9 @@ use bind_assignment::{
     py_auction_assignment_float, py_auction_assignment_int, py_warm_assignment_int,
 };
 use bind_descriptors::{py_nearest_among, py_shot_descriptors};
-use bind_geometry::{closest_rotations, greedy_pairs, grow_across_faces, PyPointClusters};
+use bind_geometry::{
+    closest_rotations, edge_rotations, greedy_pairs, grow_across_faces, PyPointClusters,
+};
 use bind_graph::{khop_neighbourhoods, MeshGraph};
 use bind_lmd::local_map_distortion_graphs;
 use bind_overlap::{
@@ -75,6 +77,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(greedy_pairs, m)?)?;
     m.add_function(wrap_pyfunction!(py_nearest_among, m)?)?;
     m.add_function(wrap_pyfunction!(closest_rotations, m)?)?;
+    m.add_function(wrap_pyfunction!(edge_rotations, m)?)?;
     m.add_function(wrap_pyfunction!(grow_across_faces, m)?)?;
     Ok(())
 }

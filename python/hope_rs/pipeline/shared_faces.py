@@ -77,6 +77,9 @@ class _Arap:
         self.per_vertex = sp.csr_matrix(
             (np.ones(len(i)), (i, np.arange(len(i)))), shape=(n, len(i))
         )
+        # Each vertex's edges in order, for the rotations' sums (``_core.edge_rotations``).
+        self.edge_ptr = self.per_vertex.indptr.astype(np.int64)
+        self.edge_ids = self.per_vertex.indices.astype(np.int64)
         self.ex = points[i] - points[j]
 
     def fit(self, start: np.ndarray, handles: np.ndarray) -> np.ndarray:
@@ -88,9 +91,8 @@ class _Arap:
         solve = sla.splu(lff).solve
         y = np.array(start, dtype=np.float64)
         for _ in range(self.config.arap_iterations):
-            ey = y[i] - y[j]
-            cov = per_vertex @ (ex[:, :, None] * ey[:, None, :]).reshape(-1, 9)
-            rot = _core.closest_rotations(cov.reshape(self.n, 3, 3))
+            # The closest rotation to each vertex's sum of ex eyᵀ over its edges, in one pass.
+            rot = _core.edge_rotations(self.edge_ptr, self.edge_ids, ex, y[i] - y[j])
             rhs = per_vertex @ (0.5 * np.einsum("nij,nj->ni", rot[i] + rot[j], ex))
             rhs = rhs[free] - lfh @ y[handles] + weight * start[free]
             y[free] = np.column_stack([solve(np.ascontiguousarray(rhs[:, c])) for c in range(3)])
