@@ -4,6 +4,7 @@ from pathlib import Path
 import pytest
 from hypothesis import settings
 
+from hope_rs.evaluation.datasets import pairs_of
 from hope_rs.evaluation.demo import demo_pair
 from hope_rs.geometry.map_io import check_writable_folder
 from hope_rs.geometry.mesh import load_mesh
@@ -24,6 +25,14 @@ def data_path(*parts: str) -> Path:
     if not p.exists():
         pytest.skip(f"benchmark data not found at {p} (set HOPE_DATA)")
     return p
+
+
+def shared_pair(data_set: str, name: str) -> tuple:
+    """Meshes and ground-truth vertices ``(a, b, a_idx, b_idx)`` of the pair ``name`` (as
+    ``"A->B"``) of a shared data set."""
+    pair = next(p for p in pairs_of(data_path(data_set)) if p.name == name)
+    a, b = load_mesh(pair.a), load_mesh(pair.b)
+    return (a, b, *pair.ground_truth(a.n_vertices, b.n_vertices))
 
 
 @pytest.fixture(scope="session")

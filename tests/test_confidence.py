@@ -2,7 +2,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import data_path
+from conftest import shared_pair
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from meshes import bumpy_sphere, bumpy_sphere_files, flat_grid, inverse, relabel
@@ -10,7 +10,6 @@ from strategies import bumpy_surfaces, half_corrupted, isometric_copies, permuta
 
 import hope_rs
 from hope_rs.cli.commands import main
-from hope_rs.evaluation.datasets import pairs_of
 from hope_rs.evaluation.evaluate import confidence_auroc
 from hope_rs.pipeline.confidence import (
     MatchQuality,
@@ -214,10 +213,7 @@ def test_flipped_share_of_open_surfaces_counts_the_smaller_side():
 
 @pytest.mark.slow
 def test_auroc_on_a_held_out_remeshed_pair():
-    folder = data_path("faust_r")
-    pair = next(p for p in pairs_of(folder) if p.name == "tr_reg_000->tr_reg_001")
-    a, b = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
-    a_idx, b_idx = pair.ground_truth(a.n_vertices, b.n_vertices)
+    a, b, a_idx, b_idx = shared_pair("faust_r", "tr_reg_000->tr_reg_001")
     # One pass without the spectral pass leaves wrong regions to find.
     res = hope_rs.match(a, b, max_passes=1, spectral=False)
     errors = hope_rs.geodesic_errors(b, res.map, a_idx=a_idx, b_idx=b_idx)
@@ -254,10 +250,7 @@ def test_cli_writes_the_confidence_for_show(tmp_path, capsys):
 def test_quality_flags_a_failed_benchmark_pair():
     # Gorilla -> man (TOSCA non-isometric, remeshed): without the orient stage, which repairs
     # it, the map is wrong almost everywhere (mean geodesic error about 0.7).
-    folder = data_path("tosca_nonisometric_r")
-    pair = next(p for p in pairs_of(folder) if p.name == "8_gorilla_02->8_man_02")
-    a, b = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
-    a_idx, b_idx = pair.ground_truth(a.n_vertices, b.n_vertices)
+    a, b, a_idx, b_idx = shared_pair("tosca_nonisometric_r", "8_gorilla_02->8_man_02")
     res = hope_rs.match(a, b, config=MatchConfig(orient=OrientConfig(enabled=False)))
     errors = hope_rs.geodesic_errors(b, res.map, a_idx=a_idx, b_idx=b_idx)
     assert np.mean(errors > 0.05) > 0.9

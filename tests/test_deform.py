@@ -6,12 +6,11 @@ import dataclasses
 
 import numpy as np
 import pytest
-from conftest import data_path
+from conftest import shared_pair
 from meshes import bumped, bumpy_sphere, moved_copy
 
 import hope_rs
 from hope_rs import MatchConfig
-from hope_rs.evaluation.datasets import pairs_of
 from hope_rs.evaluation.evaluate import geodesic_errors
 from hope_rs.pipeline.config import DeformConfig
 from hope_rs.pipeline.deform import deform_refine, spectral_mismatch
@@ -84,10 +83,7 @@ def test_the_config_rejects_a_negative_weight():
 
 @pytest.mark.slow
 def test_the_pass_lowers_the_error_of_a_gorilla_to_woman_pair():
-    folder = data_path("tosca_nonisometric_r")
-    pair = next(p for p in pairs_of(folder) if p.name == "8_gorilla_02->8_woman_01")
-    a, b = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
-    ai, bi = pair.ground_truth(a.n_vertices, b.n_vertices)
+    a, b, ai, bi = shared_pair("tosca_nonisometric_r", "8_gorilla_02->8_woman_01")
     cfg = MatchConfig()
     off = dataclasses.replace(cfg, deform=DeformConfig(enabled=False))
     res_on, res_off = hope_rs.match(a, b, config=cfg), hope_rs.match(a, b, config=off)

@@ -4,7 +4,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from conftest import data_path
+from conftest import data_path, shared_pair
 from meshes import bumpy_sphere
 
 import hope_rs
@@ -131,20 +131,12 @@ def test_open_surfaces_are_left_alone():
     assert not info.ran and "open surface" in info.reason
 
 
-def _nonisometric_pair(name: str):
-    """Meshes and ground-truth vertices ``(ma, mb, ai, bi)`` of the tosca_nonisometric_r pair
-    whose name ends with ``name``."""
-    pair = next(p for p in pairs_of(data_path("tosca_nonisometric_r")) if p.name.endswith(name))
-    ma, mb = load_mesh(pair.a), load_mesh(pair.b)
-    return (ma, mb, *pair.ground_truth(ma.n_vertices, mb.n_vertices))
-
-
 @pytest.mark.slow
 def test_a_failed_start_is_repaired_by_a_start_derived_again():
     # TOSCA gorilla -> woman (non-isometric, remeshed): the SHOT start fails (about half of A
     # turned over), no hypothesis alone turns at most min_turned over; the reverse match with
     # its turned regions re-placed from the rest does.
-    ma, mb, ai, bi = _nonisometric_pair("8_gorilla_02->8_woman_02")
+    ma, mb, ai, bi = shared_pair("tosca_nonisometric_r", "8_gorilla_02->8_woman_02")
     once = dataclasses.replace(MatchConfig(), orient=OrientConfig(again=False))
     before = hope_rs.match(ma, mb, config=once)
     res = hope_rs.match(ma, mb)
@@ -161,7 +153,7 @@ def test_a_start_that_loses_to_the_own_map_is_not_derived_from_and_the_next_star
     # TOSCA gorilla -> man: the reverse match turns a quarter over and costs more than the
     # stage's own map, so nothing is derived from it and the WKS start runs, which keeps the
     # orientation; maps derived from another hypothesis turn little over yet swap the body.
-    ma, mb, ai, bi = _nonisometric_pair("8_gorilla_02->8_man_02")
+    ma, mb, ai, bi = shared_pair("tosca_nonisometric_r", "8_gorilla_02->8_man_02")
     res = hope_rs.match(ma, mb)
     trials = res.stage("orient").trials
     assert [t.label for t in trials if t.kept] == ["wks"]
