@@ -8,6 +8,13 @@ use numpy::{
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
+/// `n` row-major 3 × 3 matrices (`9 n` values) as an (n, 3, 3) array.
+fn rotations_out(py: Python<'_>, n: usize, r: Vec<f64>) -> Bound<'_, PyArray3<f64>> {
+    numpy::ndarray::Array3::from_shape_vec((n, 3, 3), r)
+        .expect("n * 9 values")
+        .into_pyarray(py)
+}
+
 /// For each 3 × 3 matrix `M` of an (n, 3, 3) array, the rotation maximising `tr(R M)` (see
 /// `rotation.rs`).
 #[pyfunction]
@@ -28,9 +35,7 @@ pub(super) fn closest_rotations<'py>(
         None => a.iter().copied().collect(),
     };
     let r = detached(py, || crate::rotation::closest_rotations(&flat))?;
-    Ok(numpy::ndarray::Array3::from_shape_vec((n, 3, 3), r)
-        .expect("n * 9 values")
-        .into_pyarray(py))
+    Ok(rotations_out(py, n, r))
 }
 
 /// ARAP's local step: for each vertex the closest rotation to the sum of its directed edges'
@@ -59,9 +64,7 @@ pub(super) fn edge_rotations<'py>(
     let r = detached(py, || {
         crate::rotation::edge_rotations(&indptr, &edges, ex, ey)
     })?;
-    Ok(numpy::ndarray::Array3::from_shape_vec((n, 3, 3), r)
-        .expect("n * 9 values")
-        .into_pyarray(py))
+    Ok(rotations_out(py, n, r))
 }
 
 /// Grows a partial map (−1 where unknown) across the faces A and B share (see
