@@ -13,6 +13,7 @@ four landmarks), then writes
     python scripts/benchmarks.py --landmarks-only  # the landmark bench only, then rewrite
     python scripts/benchmarks.py --resolution-only  # the mixed-resolution sets only, then rewrite
     python scripts/benchmarks.py --perturbed-only  # the noise and shortcut sets only, then rewrite
+    python scripts/benchmarks.py --reversed-only  # the reversed pairs only, then rewrite
 
 Needs the eval extra (pyFM, potpourri3d) and ../shared/data (or HOPE_DATA).
 """
@@ -73,6 +74,9 @@ PERTURBED = {
     "vertex counting as either of its two",
 }
 PERTURBED_SOURCES = ("faust_r", "tosca_r")
+#: Sets whose pairs are also matched the other way (``perturb-set --conditions reversed``):
+#: pairs of the same shapes that no setting was chosen on.
+REVERSED_SOURCES = ("tosca_nonisometric_r",)
 PERTURBED_METHODS = ["init", "hope"]
 #: The landmark bench: its sets, landmarks per pair, and the swap rule (share of the scored
 #: vertices farther than SWAP_ERROR from their match, sqrt(area) units).
@@ -150,6 +154,18 @@ def run_perturbed() -> None:
     )
 
 
+def _reversed_sets() -> list[str]:
+    return [f"{s}_reversed" for s in REVERSED_SOURCES]
+
+
+def run_reversed() -> None:
+    """The pairs of REVERSED_SOURCES matched the other way, with their provenance."""
+    run_derived(
+        "reversed", "perturb-set", REVERSED_SOURCES, "reversed", PERTURBED_METHODS,
+        _reversed_sets(),
+    )  # fmt: skip
+
+
 def perturbed() -> str:
     """The perturbed-target section's table: a row per set (HOPE), with the flagged pairs."""
     head = (
@@ -158,12 +174,13 @@ def perturbed() -> str:
         "| HOPE median s / pair |"
     )
     out = [head, "|---|---|---|---|---|---|---|---|---|"]
-    for name in _perturbed_sets():
+    for name in _perturbed_sets() + _reversed_sets():
         rows = _rows(name)
         h, i = _stats(rows, "hope"), _stats(rows, "init")
         if h is None:
             continue
-        what = PERTURBED[name.split("_")[-1]]
+        cond = name.split("_")[-1]
+        what = PERTURBED.get(cond, "the pairs matched the other way (B as A, A as B)")
         auroc = f"{h['auroc']:.3f}" if h["auroc"] is not None else "–"
         im = f"{i['mean']:.4f}" if i else "–"
         flagged = f"{len(h['flagged'])}" + (
@@ -442,7 +459,9 @@ def render() -> None:
     prov_partial = _provenance("provenance_partial.txt")
     prov_landmarks = _provenance("provenance_landmarks.txt")
     prov_resolution = _provenance("provenance_resolution.txt")
-    prov_perturbed = _provenance("provenance_perturbed.txt")
+    prov_perturbed = _provenance("provenance_perturbed.txt") + [
+        f"reversed pairs: {line}" for line in _provenance("provenance_reversed.txt")
+    ]
     lm_table = landmarks()
     res_table = resolution()
     pert_table = perturbed()
@@ -483,7 +502,9 @@ def render() -> None:
             + "".join(f"- {line}\n" for line in prov_perturbed)
             + "\nWritten by `hope-rs perturb-set` from every pair of "
             f"{', '.join(PERTURBED_SOURCES)} (A unchanged, B perturbed, ground truth carried "
-            "over; the noise is seeded by the pair's index). A shortcut weld merges two "
+            "over; the noise is seeded by the pair's index), and of "
+            f"{', '.join(REVERSED_SOURCES)} matched the other way (the reversed sets, whose "
+            "pairs no setting was chosen on). A shortcut weld merges two "
             "vertices closer than 0.1 sqrt(area) in space but farther than 0.3 along the "
             "surface; only poses with at least 3 such welds are kept, and a map onto the "
             "welded B is scored on the clean B. Errors ÷ sqrt(area) of the (clean) B.\n\n"
@@ -555,6 +576,11 @@ def main() -> int:
         help="run the noise and shortcut sets again, reuse the other results",
     )
     only.add_argument(
+        "--reversed-only",
+        action="store_true",
+        help="run the reversed pairs again, reuse the other results",
+    )
+    only.add_argument(
         "--landmarks-only",
         action="store_true",
         help="run the landmark bench again, reuse the other results",
@@ -566,6 +592,7 @@ def main() -> int:
         or args.landmarks_only
         or args.resolution_only
         or args.perturbed_only
+        or args.reversed_only
         or args.render_only
     )
     if only and not (RUN / "provenance.txt").exists():
@@ -576,6 +603,8 @@ def main() -> int:
         run_resolution()
     elif args.perturbed_only:
         run_perturbed()
+    elif args.reversed_only:
+        run_reversed()
     elif not args.render_only:
         if not (args.partial_only or args.landmarks_only):
             run_shared()
@@ -586,6 +615,7 @@ def main() -> int:
         if not (args.partial_only or args.landmarks_only):
             run_resolution()
             run_perturbed()
+            run_reversed()
     render()
     return 0
 

@@ -159,3 +159,21 @@ def test_a_start_that_loses_to_the_own_map_is_not_derived_from_and_the_next_star
     assert [t.label for t in trials if t.kept] == ["wks"]
     assert not any(t.label.startswith(("reverse+", "reseed+")) for t in trials)
     assert geodesic_errors(mb, res.map, a_idx=ai, b_idx=bi).mean() < 0.15
+
+
+@pytest.mark.slow
+def test_a_flagged_map_that_turns_little_over_is_repaired(mirrored_start):
+    # With the turned-over trigger out of reach (min_turned = 1), the mirrored start's map is
+    # tried again only because the confidence's rule flags it.
+    a, b, start = mirrored_start
+    flag_only = OrientConfig(min_turned=1.0)
+    cfg = dataclasses.replace(MatchConfig(), orient=flag_only)
+    off = dataclasses.replace(cfg, orient=dataclasses.replace(flag_only, on_failed=False))
+    kept = hope_rs.match(a, b, init=start, config=off)
+    assert not kept.stage("orient").ran and kept.quality.likely_failed
+    res = hope_rs.match(a, b, init=start, config=cfg)
+    info = res.stage("orient")
+    assert info.ran and "flagged likely failed" in info.reason.split(";")[0]
+    assert "chose kept" not in info.reason
+    assert not res.quality.likely_failed
+    assert geodesic_errors(b, res.map).mean() < 0.01

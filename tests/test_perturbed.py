@@ -83,7 +83,9 @@ def test_perturbed_sets_carry_the_ground_truth(tmp_path):
             "".join(f"{i + 1}\n" for i in range(0, mesh.n_vertices, 3))
         )
     (src / "pairs.txt").write_text("s t\n")
-    out = write_perturbed_sets(src, tmp_path / "out")
+    out = write_perturbed_sets(
+        src, tmp_path / "out", conditions=["noise02", "noise05", "shortcuts"]
+    )
     assert sorted(d.name for d in out) == ["tubes_noise02", "tubes_noise05", "tubes_shortcuts"]
     for d in out:
         (pair,) = pairs_of(d)
@@ -127,3 +129,23 @@ def test_perturb_set_cli(tmp_path, capsys):
     assert not (tmp_path / "bad").exists()
     with pytest.raises(ValueError, match="unknown perturbation"):
         write_perturbed_sets(tmp_path, tmp_path / "out", conditions=["blur"])
+
+
+def test_a_reversed_set_swaps_the_shapes_and_their_ground_truth(tmp_path):
+    src = tmp_path / "src" / "pair"
+    (src / "corres").mkdir(parents=True)
+    s, t = hope_rs.Mesh(*bumpy_sphere(300, 1)), hope_rs.Mesh(*bumpy_sphere(400, 2))
+    write_off(src / "s.off", s.vertices, s.faces)
+    write_off(src / "t.off", t.vertices, t.faces)
+    (src / "corres" / "s.vts").write_text("1\n2\n3\n")
+    (src / "corres" / "t.vts").write_text("7\n8\n9\n")
+    (src / "pairs.txt").write_text("s t\n")
+    (d,) = write_perturbed_sets(src, tmp_path / "out", conditions=["reversed"])
+    assert d.name == "pair_reversed"
+    (pair,) = pairs_of(d)
+    a, b = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
+    assert (a.n_vertices, b.n_vertices) == (400, 300)
+    np.testing.assert_allclose(a.vertices, t.vertices, atol=1e-5)
+    ai, bi = pair.ground_truth(a.n_vertices, b.n_vertices)
+    np.testing.assert_array_equal(ai, [6, 7, 8])
+    np.testing.assert_array_equal(bi, [0, 1, 2])

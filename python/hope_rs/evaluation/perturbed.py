@@ -11,6 +11,8 @@ B perturbed, the ground truth carried over:
   in space but farther than ``WELD_SURFACE`` sqrt(area) along the surface (edge-graph
   geodesics) into one at their midpoint. Pairs whose B has fewer than ``MIN_WELDS`` such welds
   are left out.
+* ``reversed``: the pair matched the other way (B as A, A as B), both unchanged: the same
+  shapes with the roles swapped, pairs no setting was chosen on.
 
 A welded B has fewer vertices than the clean one: ``origin/NAME.vts`` gives, per vertex of the
 welded mesh, its 1-based vertex on the clean B, ``welds/NAME.txt`` the welded vertex pairs of
@@ -61,6 +63,7 @@ PERTURBATIONS = {
     "noise02": "B with Gaussian vertex noise of 0.2% of sqrt(area)",
     "noise05": "B with Gaussian vertex noise of 0.5% of sqrt(area)",
     "shortcuts": "B with 3-10 topological shortcuts (welds)",
+    "reversed": "the pair matched the other way (B as A, A as B)",
 }
 
 #: Most welds per shape, and the fewest for a pair to be kept.
@@ -193,6 +196,8 @@ def shortcut_errors(
 
 
 def _perturb(cond: str, mesh_b: Mesh, i: int) -> tuple[Mesh, Welded | None]:
+    if cond == "reversed":
+        return mesh_b, None
     if cond == "noise02":
         return add_noise(mesh_b, 0.002, i), None
     if cond == "noise05":
@@ -231,12 +236,16 @@ def _write_set(pairs, cond: str, d: Path) -> int:
             (d / sub).mkdir()
     lines = []
     for i, pair in enumerate(pairs):
-        ma, mb = load_mesh(pair.a), load_mesh(pair.b)
+        pa, pb_path = pair.a, pair.b
+        ma, mb = load_mesh(pa), load_mesh(pb_path)
         ai, bi = pair.ground_truth(ma.n_vertices, mb.n_vertices)
+        if cond == "reversed":
+            pa, pb_path, ma, mb, ai, bi = pb_path, pa, mb, ma, bi, ai
         pb, welded = _perturb(cond, mb, i)
         if welded is not None and len(welded.welds) < MIN_WELDS:
             continue
-        na, nb = f"{i:02d}_{pair.a.stem}", f"{i:02d}_{pair.b.stem}_{cond}"
+        suffix = "" if cond == "reversed" else f"_{cond}"
+        na, nb = f"{i:02d}_{pa.stem}", f"{i:02d}_{pb_path.stem}{suffix}"
         write_off(d / f"{na}.off", ma)
         write_vts(d / "corres" / f"{na}.vts", ai)
         write_off(d / f"{nb}.off", pb)

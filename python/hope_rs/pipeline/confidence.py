@@ -40,7 +40,7 @@ from .anchors import (
     reachable,
     shift_lower_bound,
 )
-from .config import CONFIDENCE_FEATURES, ConfidenceConfig, RefineConfig, RepairConfig
+from .config import CONFIDENCE_FEATURES, ConfidenceConfig, MatchConfig, RefineConfig, RepairConfig
 from .lmd import local_map_distortion
 from .result import MatchQuality
 from .state import MatchState, Stage
@@ -51,6 +51,7 @@ __all__ = [
     "MatchQuality",
     "confidence_features",
     "flipped_share",
+    "map_quality",
     "match_quality",
     "predict_confidence",
     "state_quality",
@@ -80,6 +81,33 @@ def match_quality(
         mean < config.failed_mean or share < config.failed_share or flipped > config.failed_flipped
     )
     return MatchQuality(mean, share, bool(failed), float(flipped))
+
+
+def map_quality(
+    a: Shape,
+    b: Shape,
+    f: np.ndarray,
+    hope: np.ndarray | None,
+    zoomout: np.ndarray | None,
+    config: MatchConfig,
+) -> MatchQuality:
+    """The :class:`MatchQuality` the confidence stage would give the map ``f`` of two whole
+    shapes, with HOPE's and ZoomOut's maps ``hope`` and ``zoomout`` (internal numbering;
+    ``None``: not available), under ``config``'s confidence and refinement settings (whether
+    or not ``config`` asks for a confidence)."""
+    cfg = config.confidence
+    x = confidence_features(
+        a,
+        b,
+        f,
+        hope,
+        zoomout,
+        cfg,
+        min_consistent=config.refine.min_consistent,
+        repair=config.refine.repair,
+    )
+    confidence = vertex_confidence(a, b, f, x, cfg)
+    return match_quality(confidence, cfg, flipped=flipped_share(a, b, f))
 
 
 def state_quality(state: MatchState) -> MatchQuality | None:

@@ -808,6 +808,10 @@ class OrientConfig:
         The stage tries other maps when the final map turns more than this share of A's area
         over (``MatchQuality.flipped_share``); a right map of remeshed shapes turns a few
         percent over where the triangulations disagree, more between different bodies.
+    on_failed : bool
+        The stage also tries other maps when the final map turns less over but the
+        confidence's rule flags it (``MatchQuality.likely_failed``), and a hypothesis counts as
+        good enough to stop at only when that rule does not flag it.
     hypotheses : tuple of str
         The alternative maps tried ("mirror", "mirror_turned", "reseed": derived from a
         map, the one turning the least over refined; "reverse": from the match of B to A
@@ -828,6 +832,7 @@ class OrientConfig:
 
     enabled: bool = True
     min_turned: float = 0.2
+    on_failed: bool = True
     hypotheses: tuple[str, ...] = ("mirror", "mirror_turned", "reseed", "reverse", "wks")
     seam_rings: int = 2
     distortion_weight: float = field(default=1.0, metadata={"finite": True})

@@ -4,7 +4,9 @@ Both shapes are oriented outward before matching, so a right map keeps the windi
 triangles on B (:mod:`hope_rs.pipeline.turned`). A map that carries a region onto its mirror
 image (a left leg onto the right one, a whole body onto its mirror image) keeps every geodesic
 distance, so the refinement and LMD cannot see it, but it turns that region's triangles over.
-When the final map turns more than ``OrientConfig.min_turned`` of A's area over, this stage
+When the final map turns more than ``OrientConfig.min_turned`` of A's area over, or turns
+less over but the confidence's rule flags it (``OrientConfig.on_failed``,
+:func:`~hope_rs.pipeline.confidence.map_quality`), this stage
 builds alternative maps (hypotheses), refines them through the rest of the pipeline and keeps
 whichever of them and the map it started from scores best (:func:`map_cost`: turned-over
 share plus LMD inconsistency). Each refined hypothesis is a trial of
@@ -25,7 +27,8 @@ The derived hypotheses are unrefined maps; the one turning the least over is ref
 other starts follow in the order of ``OrientConfig.hypotheses``; after each, while no refined
 map turns at most ``min_turned`` over, the maps derived from that start's refined map (if it
 beats the stage's own) are tried too (``OrientConfig.again``). The
-stage stops at the first refined map that turns at most ``min_turned`` over and costs less.
+stage stops at the first refined map that turns at most ``min_turned`` over, costs less and
+(``on_failed``) is not flagged by the confidence's rule.
 
 B's symmetry is the match of B's mirror image (coordinates reflected in a plane through its
 centroid) to B itself: vertex ``i`` of the mirror image is vertex ``i`` of B reflected, so the
@@ -44,6 +47,7 @@ from scipy.spatial import cKDTree
 from ..geometry.mesh import Mesh, boundary_edges
 from ..shape import Shape
 from .anchors import anchor_step, firm_regions
+from .confidence import map_quality
 from .lmd import local_map_distortion
 from .progress import ProgressEvent
 from .state import QUIET, MatchState, Stage
@@ -135,6 +139,8 @@ class _Hypotheses:
         self.progress: Callable = _Relay(state)
         #: Turned-over share per trial label (the notes of the stage's reason).
         self.turned: dict[str, float] = {}
+        #: Per trial label, whether the confidence's rule flags the map (``on_failed`` only).
+        self.failed: dict[str, bool] = {}
         self.notes: list[str] = []
         self.sym: np.ndarray | None = None
 
@@ -145,8 +151,25 @@ class _Hypotheses:
     def score(self, t: Trial) -> float:
         a, b = self.state.a, self.state.b
         f = self.internal(t)
-        self.turned[t.candidate.label] = self.tf.share(f)
+        label = t.candidate.label
+        self.turned[label] = self.tf.share(f)
+        if self.cfg.on_failed:
+            c = t.candidate
+            hope = None if t.result.hope_map is None else c.a.map_in(c.b, t.result.hope_map)
+            q = map_quality(a, b, f, hope, t.zoomout, self.state.config)
+            self.failed[label] = q.likely_failed
         return -map_cost(a, b, f, self.tf, self.cfg.distortion_weight)
+
+    def good_enough(self, t: Trial, min_score: float) -> bool:
+        """Whether a scored trial turns at most ``min_turned`` over, scores above
+        ``min_score`` and (``on_failed``) is not flagged by the confidence's rule."""
+        label = t.candidate.label
+        return (
+            self.turned[label] <= self.cfg.min_turned
+            and t.score is not None
+            and t.score > min_score
+            and not self.failed.get(label, False)
+        )
 
     def candidate(self, label: str, init) -> Candidate:
         """The pipeline from ``init`` (a descriptor kind or a map in internal numbering)."""
@@ -221,7 +244,8 @@ class _Hypotheses:
 
 class OrientStage(Stage):
     """The "orient" stage (see the module notes); runs when the map turns more than
-    ``OrientConfig.min_turned`` of A's area over, on whole closed shapes without landmarks."""
+    ``OrientConfig.min_turned`` of A's area over or is flagged likely failed, on whole closed
+    shapes without landmarks."""
 
     name = "orient"
     #: A map another stage found final can still be a mirror image (LMD trusts it everywhere).
@@ -230,6 +254,8 @@ class OrientStage(Stage):
     def attach(self, state: MatchState) -> None:
         #: The turned-over triangles of A on B, built when the stage decides whether to run.
         self._turned: TurnedFaces | None = None
+        #: Why the stage runs (its log line).
+        self._why = ""
 
     def skip_reason(self, state: MatchState):
         cfg = state.config.orient
@@ -248,9 +274,19 @@ class OrientStage(Stage):
         t = time.perf_counter()
         self._turned = TurnedFaces(state.a, state.b)
         share = self._turned.share(state.f)
+        self._why = f"{share:.0%} of A turned over"
+        flagged = False
+        if share <= cfg.min_turned and cfg.on_failed:
+            # A map wrong on a whole region can turn little over (a swapped pair of limbs,
+            # or a mirror image whose seams tear) yet fail the confidence's rule.
+            q = map_quality(state.a, state.b, state.f, state.hope_map, state.zoomout, state.config)
+            flagged = q.likely_failed
+            self._why += f", flagged likely failed (mean confidence {q.mean_confidence:.2f})"
         state.timings["orient"] = time.perf_counter() - t
-        if share <= cfg.min_turned:
-            return f"{share:.0%} of A's area turned over (at most {cfg.min_turned:.0%})"
+        if share <= cfg.min_turned and not flagged:
+            return f"{share:.0%} of A's area turned over (at most {cfg.min_turned:.0%})" + (
+                ", not flagged" if cfg.on_failed else ""
+            )
         return None
 
     def run(self, state: MatchState) -> None:
@@ -259,20 +295,14 @@ class OrientStage(Stage):
         tf, f = self._turned, state.f
         assert tf is not None and f is not None  # skip_reason measured the final map
         share = tf.share(f)
-        state.log.start("orient", detail=f"{share:.0%} of A turned over: trying other maps")
+        state.log.start("orient", detail=f"{self._why}: trying other maps")
         hyp = _Hypotheses(state, tf)
         own = current(state, "orient", "kept")
         own.score = own.record.score = hyp.score(own)
         min_score = own.score + cfg.min_gain
 
         def good_enough(tried: list[Trial]) -> bool:
-            """Whether a trial turns at most ``min_turned`` over and beats the own map."""
-            return any(
-                hyp.turned[x.candidate.label] <= cfg.min_turned
-                and x.score is not None
-                and x.score > min_score
-                for x in tried
-            )
+            return any(hyp.good_enough(x, min_score) for x in tried)
 
         # The maps derived from the stage's own first; then other starts (a swapped pair of
         # limbs comes back neither mirrored nor re-seeded), in the order of the hypotheses.
@@ -304,11 +334,12 @@ class OrientStage(Stage):
         scored = "; ".join(
             f"{x.candidate.label}: {hyp.turned[x.candidate.label]:.0%} turned, "
             f"cost {-(x.score or 0.0):.3f}"
+            + (", flagged" if hyp.failed.get(x.candidate.label) else "")
             for x in (own, *tried)
         )
         notes = "; ".join(hyp.notes)
         state.log.ran(
             "orient",
             state.timings["orient"],
-            f"{notes}; {scored}; chose {kept.candidate.label}",
+            f"{self._why}; {notes}; {scored}; chose {kept.candidate.label}",
         )
