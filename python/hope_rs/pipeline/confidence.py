@@ -1,8 +1,13 @@
 """How far to trust each vertex's match: the "confidence" stage.
 
+It runs before the deformation pass (:mod:`hope_rs.pipeline.deform`), which moves each image by
+a smooth displacement, not onto another region: the confidence and the pair-level flag judge
+the map that pass starts from (its nearest-point map is less consistent locally, which the
+features read as doubt where the pass made the map better).
+
 A wrong region of a map is often consistent locally (a limb carried onto its mirror image
 keeps its 2-rings), so no one feature tells. The confidence combines what the pipeline knows
-about the final map ``f``, each in the shapes' internal numbering (see
+about the map ``f``, each in the shapes' internal numbering (see
 :data:`~hope_rs.pipeline.config.CONFIDENCE_FEATURES`):
 
 * LMD of ``f`` (:mod:`hope_rs.pipeline.lmd`): its consistent share and mean distortion;
@@ -260,7 +265,7 @@ def turned_factor(a: Shape, b: Shape, f: np.ndarray, config: ConfidenceConfig) -
 
 class ConfidenceStage(Stage):
     """The "confidence" stage: ``state.confidence`` from :func:`confidence_features` of the
-    final map, HOPE's and ZoomOut's (``state.zoomout``), by :func:`predict_confidence`; 0 on
+    map (final but for the deformation pass), HOPE's and ZoomOut's (``state.zoomout``), by :func:`predict_confidence`; 0 on
     the vertices of a whole that the partial stage found without a counterpart on the part
     (``state.partial.counterpart``) and on vertices in no face."""
 
@@ -277,7 +282,7 @@ class ConfidenceStage(Stage):
 
     def run(self, state: MatchState) -> None:
         cfg = state.config.confidence
-        t = state.log.start("confidence", detail="per-vertex confidence of the final map")
+        t = state.log.start("confidence", detail="per-vertex confidence of the map")
         counterpart = None if state.partial is None else state.partial.counterpart
         assert state.f is not None  # the stages before it made the map
         x = confidence_features(

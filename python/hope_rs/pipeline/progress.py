@@ -43,8 +43,8 @@ STAGES = (
     "spectral",
     "faces",
     "orient",
-    "deform",
     "confidence",
+    "deform",
 )
 
 

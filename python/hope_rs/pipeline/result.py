@@ -78,7 +78,8 @@ class MatchResult:
         Per vertex of A, how far to trust its match, in [0, 1]: a calibrated estimate of the
         probability that ``map[i]`` lies within 0.05 sqrt(area) of the right vertex
         (docs/confidence.md). Low over a region the map placed wrongly. ``None`` with
-        ``confidence=False``.
+        ``confidence=False``. Between non-isometric shapes it judges the map before the
+        deformation pass (the "deform" stage), which moves each image only a little.
     quality : MatchQuality or None
         The pair-level summary of ``confidence`` (``quality.likely_failed``: look at the
         pair before using its map); when B is a part of A matched in reverse (the default,

@@ -35,7 +35,10 @@ def default_stages() -> list[Stage]:
         RefineStage(),  # "refine", "polish"
         SpectralStage(),  # "spectral"
         FinishStage(),  # "faces"
-        OrientStage(),  # "orient": when the map turns much of A over
-        DeformStage(),  # "deform": only when the shapes' spectra differ (not isometric)
+        OrientStage(),  # "orient": when the map turns much of A over or looks failed
+        # The confidence judges the map the deformation pass starts from: the pass moves each
+        # image by a smooth displacement, not onto another region, and its nearest-point map is
+        # less locally consistent than the map it refines (docs/decisions.md#deform).
         ConfidenceStage(),  # "confidence"
+        DeformStage(),  # "deform": only when the shapes' spectra differ (not isometric)
     ]
