@@ -76,7 +76,8 @@ def errors_of(pair: Pair, mb, mapping, a_idx, b_idx) -> np.ndarray:
 
 def matched(pair: Pair, config: MatchConfig, init: str, cache: Path) -> dict:
     """The pair's cached maps (input numbering) and scored errors: keys ``map``, ``hope``,
-    ``zoomout`` (all -1 without one), ``a_idx``, ``errors``, ``seconds``. The cache is keyed
+    ``zoomout`` (all -1 without one), ``judged`` (the map when the confidence stage runs,
+    before the deformation pass), ``a_idx``, ``errors``, ``seconds``. The cache is keyed
     by the settings that change the maps (the confidence's are not among them)."""
     cfg = dataclasses.replace(config, confidence=ConfidenceConfig(enabled=False))
     path = cache / cfg.key()[:16] / init / pair.dataset / f"{pair.name}.npz"
@@ -91,6 +92,8 @@ def matched(pair: Pair, config: MatchConfig, init: str, cache: Path) -> dict:
     def grab(state, name):
         if name == "spectral" and state.zoomout is not None:
             seen["zoomout"] = a.map_out(b, state.zoomout)
+        if name == "confidence" and state.f is not None:
+            seen["judged"] = a.map_out(b, state.f)
 
     t = time.perf_counter()
     res = run_match(a, b, init, cfg, on_stage=grab)
@@ -100,6 +103,7 @@ def matched(pair: Pair, config: MatchConfig, init: str, cache: Path) -> dict:
         "map": res.map,
         "hope": res.hope_map,
         "zoomout": seen.get("zoomout", np.full(ma.n_vertices, -1, dtype=np.int64)),
+        "judged": seen.get("judged", res.map),
         "a_idx": np.asarray(a_idx, dtype=np.int64),
         "errors": errors_of(pair, mb, res.map, a_idx, b_idx),
         "seconds": np.float64(seconds),
@@ -112,11 +116,13 @@ def matched(pair: Pair, config: MatchConfig, init: str, cache: Path) -> dict:
 
 
 def _internal(pair: Pair, m: dict, config: MatchConfig):
-    """``(a, b, f, features, flipped)`` of the cached maps, in the shapes' internal numbering."""
+    """``(a, b, f, features, flipped)`` of the cached maps, in the shapes' internal numbering:
+    ``f`` the map the confidence stage judges, ``flipped`` the final map's turned-over share
+    (as :func:`~hope_rs.pipeline.confidence.state_quality` reads them)."""
     a = Shape(hope_rs.load_mesh(pair.a), k_max=config.k_max, config=config.shape)
     b = Shape(hope_rs.load_mesh(pair.b), k_max=config.k_max, config=config.shape)
     z = None if (m["zoomout"] < 0).any() else a.map_in(b, m["zoomout"])
-    f = a.map_in(b, m["map"])
+    f = a.map_in(b, m.get("judged", m["map"]))
     x = confidence_features(
         a,
         b,
@@ -127,7 +133,7 @@ def _internal(pair: Pair, m: dict, config: MatchConfig):
         min_consistent=config.refine.min_consistent,
         repair=config.refine.repair,
     )
-    return a, b, f, x, flipped_share(a, b, f)
+    return a, b, f, x, flipped_share(a, b, a.map_in(b, m["map"]))
 
 
 def features_of(pair: Pair, m: dict, config: MatchConfig) -> tuple[np.ndarray, float]:
