@@ -209,7 +209,8 @@ def render(
         + (
             f"; and the sets {', '.join(extra)} that `hope-rs perturb-set` built from them "
             "(B with vertex noise of 0.2% or 0.5% of sqrt(area), or welded by topological "
-            "shortcuts and scored on the clean B, a weld counting as either of its two)"
+            "shortcuts and scored on the clean B, a weld counting as either of its two; "
+            "`_reversed`: the pairs matched the other way)"
             if extra
             else ""
         ),
