@@ -175,8 +175,15 @@ def test_ctrl_c_of_a_pool_batch_prints_the_summary_and_ends_its_workers(many_pai
     assert proc.returncode == 130, stderr
     assert "Traceback" not in stderr and "rerun the same command" in stderr
     done = sorted(out.glob("*.txt"))
-    assert f"{total} pairs: {len(done)} matched, 0 skipped, 0 failed" in stdout
-    assert f"{total - len(done)} not run (interrupted)" in stdout
+    # The summary counts the pairs that finished before the interrupt; a map written as Ctrl-C
+    # landed is kept but can be left out of the count (a rerun skips it once its manifest line
+    # is written, else computes it again).
+    counted = [
+        k for k in (len(done), len(done) - 1)
+        if f"{total} pairs: {k} matched, 0 skipped, 0 failed, {total - k} not run (interrupted)"
+        in stdout
+    ]  # fmt: skip
+    assert counted, stdout
     assert_whole(done)
     assert_no_survivors(tag, grace=5)
 
