@@ -11,9 +11,10 @@ from meshes import bumpy_sphere, euler_characteristic, mesh_defects, py_collapse
 
 import hope_rs
 from hope_rs import _core
-from hope_rs.geometry.coarsen import coarse_to_count, uniform_cells_for_count
+from hope_rs.geometry.coarsen import uniform_cells_for_count
 from hope_rs.geometry.collapse import collapse_to_count, collapse_to_sites, shortest_path_tree
 from hope_rs.geometry.sites import cell_sites
+from hope_rs.pipeline.resolution import coarse_copy
 
 VALID = {"degenerate": 0, "duplicate": 0, "non_manifold_edges": 0, "flipped_edges": 0}
 
@@ -140,18 +141,13 @@ def test_a_faust_body_at_1000_vertices_has_surface_geodesics():
     pp3d.EdgeFlipGeodesicSolver(np.asarray(c.mesh.vertices), np.asarray(c.mesh.faces))
 
 
-def test_the_resolution_stage_coarsens_a_small_dense_shape_to_a_manifold():
-    from hope_rs.pipeline.resolution import coarse_copy
-
+def test_the_resolution_stage_coarsens_a_dense_shape_to_a_manifold():
     v, f = bumpy_sphere(2000, 7)
     shape = hope_rs.Shape(hope_rs.Mesh(v, f))
-    collapsed, _ = coarse_copy(shape, 400, 0.05, manifold_max_vertices=2000)
+    collapsed, cs = coarse_copy(shape, 400, 0.05)
     _check_coarse(shape.internal, collapsed)
     np.testing.assert_array_equal(
         collapsed.mesh.faces, collapse_to_count(shape.internal, 400).mesh.faces
     )
-    # Above the limit, plain clustering.
-    clustered, _ = coarse_copy(shape, 400, 0.05, manifold_max_vertices=1999)
-    np.testing.assert_array_equal(
-        clustered.mesh.faces, coarse_to_count(shape.internal, 400).mesh.faces
-    )
+    assert cs.n_vertices == collapsed.mesh.n_vertices
+    assert coarse_copy(shape, 2000, 0.05) is None
