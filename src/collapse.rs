@@ -243,7 +243,9 @@ pub fn collapse_to_sites(
         .iter()
         .find(|f| f[0] == f[1] || f[1] == f[2] || f[2] == f[0])
     {
-        return invalid(format!("face {f:?} repeats a vertex; remove degenerate faces"));
+        return invalid(format!(
+            "face {f:?} repeats a vertex; remove degenerate faces"
+        ));
     }
     let mut is_site = vec![false; n];
     for &s in sites {
@@ -446,7 +448,11 @@ mod tests {
         assert_eq!(check(&c), (2, 0, 0));
         // Every site kept, few others; each vertex owned by a kept one, a site by itself.
         assert!(sites.iter().all(|s| c.sites.contains(s)));
-        assert!(c.sites.len() < sites.len() + sites.len() / 4, "{}", c.sites.len());
+        assert!(
+            c.sites.len() < sites.len() + sites.len() / 4,
+            "{}",
+            c.sites.len()
+        );
         for (j, &s) in c.sites.iter().enumerate() {
             assert_eq!(c.owner[s as usize], j as u32);
         }

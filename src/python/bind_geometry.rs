@@ -193,5 +193,9 @@ pub(super) fn collapse_to_sites<'py>(
     let faces_out = numpy::ndarray::Array2::from_shape_vec((c.faces.len(), 3), flat)
         .expect("3 indices per face")
         .into_pyarray(py);
-    Ok((owned(py, &widen(&c.sites)), owned(py, &widen(&c.owner)), faces_out))
+    Ok((
+        owned(py, &widen(&c.sites)),
+        owned(py, &widen(&c.owner)),
+        faces_out,
+    ))
 }
