@@ -172,7 +172,6 @@ type CollapsedOut<'py> = (
 /// shortest-path tree `dist`, `pred`, `source` from `sites` (see `collapse.rs`; negative
 /// predecessor or source: none).
 #[pyfunction]
-#[allow(clippy::too_many_arguments)]
 pub(super) fn collapse_to_sites<'py>(
     py: Python<'py>,
     vertices: PyReadonlyArray2<'py, f64>,
