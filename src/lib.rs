@@ -2,6 +2,7 @@
 //!
 //! The `python` feature (enabled by maturin) adds the thin `_core` extension module in `python/`.
 pub mod auction;
+pub mod collapse;
 pub mod csr;
 pub mod error;
 pub mod face_growth;

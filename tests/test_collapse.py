@@ -7,11 +7,14 @@ import pytest
 from conftest import data_path
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from meshes import bumpy_sphere, euler_characteristic, mesh_defects
+from meshes import bumpy_sphere, euler_characteristic, mesh_defects, py_collapse_to_sites
 
 import hope_rs
-from hope_rs.geometry.coarsen import coarse_to_count
-from hope_rs.geometry.collapse import collapse_to_count, collapse_to_sites
+from hope_rs import _core
+from hope_rs.geometry.coarsen import uniform_cells_for_count
+from hope_rs.geometry.collapse import collapse_to_count, collapse_to_sites, shortest_path_tree
+from hope_rs.geometry.sites import cell_sites
+from hope_rs.pipeline.resolution import coarse_copy
 
 VALID = {"degenerate": 0, "duplicate": 0, "non_manifold_edges": 0, "flipped_edges": 0}
 
@@ -81,6 +84,44 @@ def test_two_close_sheets_are_not_glued():
     assert (inner[c.mesh.faces].all(axis=1) | (~inner[c.mesh.faces]).all(axis=1)).all()
 
 
+@settings(max_examples=6, deadline=None)
+@given(seed=st.integers(0, 1000), target=st.integers(40, 300), open_cut=st.booleans())
+def test_the_core_makes_the_collapses_of_the_python_reference(seed, target, open_cut):
+    """The Rust collapses (src/collapse.rs) and the Python reference (tests/meshes.py) keep
+    the same vertices and faces and merge each vertex into the same one."""
+    v, f = bumpy_sphere(700, seed)
+    if open_cut:  # a disc: the boundary rules too
+        f = f[~(v[f][:, :, 2] > 0.5).any(axis=1)]
+        used = np.unique(f)
+        v, f = v[used], np.searchsorted(used, f)
+    mesh = hope_rs.Mesh(v, f)
+    sites, _ = cell_sites(mesh.vertices, uniform_cells_for_count(mesh, target))
+    got, want = collapse_to_sites(mesh, sites), py_collapse_to_sites(mesh, sites)
+    np.testing.assert_array_equal(got.sites, want.sites)
+    np.testing.assert_array_equal(got.owner, want.owner)
+    np.testing.assert_array_equal(got.mesh.faces, want.mesh.faces)
+    defects = mesh_defects(got.mesh.faces)
+    assert {k: defects[k] for k in VALID} == VALID
+    assert euler_characteristic(got.mesh.n_vertices, got.mesh.faces) == euler_characteristic(
+        len(v), f
+    )
+
+
+def test_the_core_refuses_a_site_beyond_the_mesh():
+    v, f = bumpy_sphere(100, 0)
+    mesh = hope_rs.Mesh(v, f)
+    dist, pred, source = shortest_path_tree(mesh, np.array([0]))
+    with pytest.raises(ValueError, match="site 100 is beyond the 100 vertices"):
+        _core.collapse_to_sites(
+            v,
+            f.astype(np.int64),
+            np.array([100]),
+            dist,
+            pred.astype(np.int64),
+            source.astype(np.int64),
+        )
+
+
 def test_every_vertex_a_site_changes_nothing():
     v, f = bumpy_sphere(200, 1)
     mesh = hope_rs.Mesh(v, f)
@@ -100,18 +141,13 @@ def test_a_faust_body_at_1000_vertices_has_surface_geodesics():
     pp3d.EdgeFlipGeodesicSolver(np.asarray(c.mesh.vertices), np.asarray(c.mesh.faces))
 
 
-def test_the_resolution_stage_coarsens_a_small_dense_shape_to_a_manifold():
-    from hope_rs.pipeline.resolution import coarse_copy
-
+def test_the_resolution_stage_coarsens_a_dense_shape_to_a_manifold():
     v, f = bumpy_sphere(2000, 7)
     shape = hope_rs.Shape(hope_rs.Mesh(v, f))
-    collapsed, _ = coarse_copy(shape, 400, 0.05, manifold_max_vertices=2000)
+    collapsed, cs = coarse_copy(shape, 400, 0.05)
     _check_coarse(shape.internal, collapsed)
     np.testing.assert_array_equal(
         collapsed.mesh.faces, collapse_to_count(shape.internal, 400).mesh.faces
     )
-    # Above the limit, plain clustering.
-    clustered, _ = coarse_copy(shape, 400, 0.05, manifold_max_vertices=1999)
-    np.testing.assert_array_equal(
-        clustered.mesh.faces, coarse_to_count(shape.internal, 400).mesh.faces
-    )
+    assert cs.n_vertices == collapsed.mesh.n_vertices
+    assert coarse_copy(shape, 2000, 0.05) is None

@@ -201,3 +201,18 @@ def grow_across_faces(
     relative to the edge, in edge lengths). Known entries stay. Raises ValueError on faces out
     of range, a map of the wrong length, entries outside -1..n_b-1, a map that is not
     one-to-one, or a negative or NaN ``max_error``."""
+
+def collapse_to_sites(
+    vertices: npt.NDArray[np.float64],
+    faces: npt.NDArray[np.int64],
+    sites: npt.NDArray[np.int64],
+    dist: npt.NDArray[np.float64],
+    pred: npt.NDArray[np.int64],
+    source: npt.NDArray[np.int64],
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Every vertex merged into its site by half-edge collapses that keep a manifold, keep the
+    boundary and turn no face over, along the multi-source shortest-path tree from ``sites``
+    (``dist``: inf where unreached; ``pred``, ``source``: negative where none). Returns the
+    kept vertices (input numbering), the kept vertex each input vertex went to (their
+    numbering) and the (m, 3) faces left (their numbering). Raises ValueError on indices out
+    of range, a face repeating a vertex, or arrays not of one entry per vertex."""

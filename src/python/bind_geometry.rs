@@ -1,9 +1,9 @@
-//! Geometry and map helpers: closest rotations, growing a map across shared faces, and greedy
-//! pairing with row capacities.
+//! Geometry and map helpers: closest rotations, growing a map across shared faces, greedy
+//! pairing with row capacities and coarsening by manifold-keeping edge collapses.
 use super::convert::{faces_vec, owned, plain_vec, points_vec, u32_vec, usize_vec};
 use super::detached;
 use numpy::{
-    IntoPyArray, PyArray1, PyArray3, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
+    IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
 };
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -159,4 +159,42 @@ impl PyPointClusters {
         let ids: Vec<i64> = ids.into_iter().map(i64::from).collect();
         Ok((owned(py, &ids), owned(py, &tie)))
     }
+}
+
+/// Kept input vertices, the coarse vertex each input vertex went to, and the coarse faces.
+type CollapsedOut<'py> = (
+    Bound<'py, PyArray1<i64>>,
+    Bound<'py, PyArray1<i64>>,
+    Bound<'py, PyArray2<i64>>,
+);
+
+/// Merges every vertex into its site by manifold-keeping half-edge collapses along the
+/// shortest-path tree `dist`, `pred`, `source` from `sites` (see `collapse.rs`; negative
+/// predecessor or source: none).
+#[pyfunction]
+pub(super) fn collapse_to_sites<'py>(
+    py: Python<'py>,
+    vertices: PyReadonlyArray2<'py, f64>,
+    faces: PyReadonlyArray2<'py, i64>,
+    sites: PyReadonlyArray1<'py, i64>,
+    dist: PyReadonlyArray1<'py, f64>,
+    pred: PyReadonlyArray1<'py, i64>,
+    source: PyReadonlyArray1<'py, i64>,
+) -> PyResult<CollapsedOut<'py>> {
+    let (p, f) = (points_vec(&vertices)?, faces_vec(&faces)?);
+    let sites = u32_vec(&sites, "sites")?;
+    let (dist, pred, source) = (plain_vec(&dist), plain_vec(&pred), plain_vec(&source));
+    let c = detached(py, || {
+        crate::collapse::collapse_to_sites(&p, &f, &sites, &dist, &pred, &source)
+    })?;
+    let widen = |v: &[u32]| v.iter().map(|&x| i64::from(x)).collect::<Vec<i64>>();
+    let flat: Vec<i64> = widen(c.faces.as_flattened());
+    let faces_out = numpy::ndarray::Array2::from_shape_vec((c.faces.len(), 3), flat)
+        .expect("3 indices per face")
+        .into_pyarray(py);
+    Ok((
+        owned(py, &widen(&c.sites)),
+        owned(py, &widen(&c.owner)),
+        faces_out,
+    ))
 }

@@ -15,7 +15,8 @@ use bind_assignment::{
 };
 use bind_descriptors::{py_nearest_among, py_shot_descriptors};
 use bind_geometry::{
-    closest_rotations, edge_rotations, greedy_pairs, grow_across_faces, PyPointClusters,
+    closest_rotations, collapse_to_sites, edge_rotations, greedy_pairs, grow_across_faces,
+    PyPointClusters,
 };
 use bind_graph::{khop_neighbourhoods, MeshGraph};
 use bind_lmd::local_map_distortion_graphs;
@@ -79,5 +80,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(closest_rotations, m)?)?;
     m.add_function(wrap_pyfunction!(edge_rotations, m)?)?;
     m.add_function(wrap_pyfunction!(grow_across_faces, m)?)?;
+    m.add_function(wrap_pyfunction!(collapse_to_sites, m)?)?;
     Ok(())
 }

@@ -2,8 +2,9 @@
 
 Each cell of the Morton grid of :mod:`hope_rs.geometry.sites` keeps one vertex; faces are
 relabelled and collapsed ones dropped. The multiscale match and the coarse-seeded eigenbases
-use these copies; the match at a common resolution uses :func:`coarse_to_count`, on a uniform
-grid whose side is chosen for a vertex count.
+use these copies. :func:`coarse_to_count` clusters on a uniform grid whose side is chosen for a
+vertex count; the match at a common resolution takes that grid's sites but merges the other
+vertices by manifold-keeping edge collapses (:mod:`hope_rs.geometry.collapse`).
 """
 
 from __future__ import annotations

@@ -444,8 +444,8 @@ class ResolutionConfig:
 
     Each shape is measured in its own sqrt(area), so its vertex count is its vertex density:
     when one shape has more than ``max_ratio`` times the other's vertices, the denser one is
-    clustered down to about the sparser one's count, the whole stage list matches the pair
-    there, and the map is lifted to the dense mesh.
+    coarsened to about the sparser one's count by manifold-keeping edge collapses, the whole
+    stage list matches the pair there, and the map is lifted to the dense mesh.
 
     Attributes
     ----------
@@ -467,10 +467,6 @@ class ResolutionConfig:
         The pass runs only when this share of the vertices are handles of the lifted map
         (:func:`~hope_rs.pipeline.handles.face_handles`): shapes remeshed independently have
         almost none, and there the pass would cost time for nothing.
-    manifold_max_vertices : int
-        A denser shape of at most this many vertices is coarsened by manifold-keeping edge
-        collapses (:mod:`hope_rs.geometry.collapse`), a larger one by plain clustering: the
-        collapses run in Python, about half a millisecond per vertex.
     """
 
     enabled: bool = True
@@ -479,7 +475,6 @@ class ResolutionConfig:
     refine: bool = True
     refine_schedule: tuple[int, ...] = (3, 2, 1)
     refine_min_handles: float = field(default=0.04, metadata={"range": (0.0, 1.0)})
-    manifold_max_vertices: int = field(default=10_000, metadata={"range": (0, None)})
 
     def __post_init__(self):
         _set_radii(self, "refine_schedule", "ResolutionConfig.refine_schedule must be")

@@ -1,4 +1,4 @@
-"""Matching at a common resolution: the denser shape clustered down to the sparser one's
+"""Matching at a common resolution: the denser shape coarsened to the sparser one's
 vertex density, the pair matched there, the map lifted to the dense mesh.
 
 A k-hop ball is a number of edges, so on a mesh with edges five times shorter the same k
@@ -7,12 +7,12 @@ neighbourhoods. Each shape is measured in its own sqrt(area), so its vertex coun
 density: when one shape has more than ``ResolutionConfig.max_ratio`` times the other's
 vertices, the "resolution" stage
 
-1. clusters the denser shape's vertices on a uniform grid sized for the sparser one's count
-   (:func:`hope_rs.geometry.coarsen.coarse_to_count`; each coarse vertex is a vertex of the
-   dense mesh, and owns the dense vertices of its cell); up to
-   ``ResolutionConfig.manifold_max_vertices`` by edge collapses that keep the copy a valid
-   manifold (:mod:`hope_rs.geometry.collapse`; plain clustering can glue non-manifold edges
-   and turn faces over, which misleads the coarse match);
+1. coarsens the denser shape to the sparser one's count: the sites of a uniform grid sized
+   for that count, every other vertex merged into the site nearest it along the surface by
+   edge collapses that keep the copy a valid manifold
+   (:func:`hope_rs.geometry.collapse.collapse_to_count`; each coarse vertex is a vertex of
+   the dense mesh, and owns the dense vertices merged into it; plain clustering glues
+   non-manifold edges and turns faces over, which misleads the coarse match);
 2. matches the pair at that common resolution with the whole stage list (descriptors,
    refinement, spectral pass, finish);
 3. lifts the map (:func:`hope_rs.pipeline.multiscale.lift_map`, ``centred``): each vertex
@@ -43,7 +43,7 @@ from typing import Callable
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..geometry.coarsen import Coarse, coarse_to_count
+from ..geometry.coarsen import Coarse
 from ..geometry.collapse import collapse_to_count
 from ..geometry.subdivide import subdivide
 from ..shape import Shape
@@ -86,19 +86,13 @@ def subdivided_copy(shape: Shape, times: int) -> Shape:
     return Shape(mesh, k_max=shape.k_max, orient=False, config=shape.config)
 
 
-def coarse_copy(
-    shape: Shape, n_target: int, tolerance: float, manifold_max_vertices: int = 0
-) -> tuple[Coarse, Shape] | None:
-    """(Coarse, its Shape) of ``shape``'s internal mesh with about ``n_target`` vertices, or
-    ``None`` when the clustering leaves no face: by manifold-keeping edge collapses
-    (:func:`hope_rs.geometry.collapse.collapse_to_count`) when ``shape`` has at most
-    ``manifold_max_vertices`` vertices, else by plain clustering. The copy keeps the oriented
-    faces as they come (a second orientation would flip clustering's non-manifold spots)."""
-    if shape.n_vertices <= manifold_max_vertices:
-        c = collapse_to_count(shape.internal, n_target, tolerance=tolerance)
-    else:
-        c = coarse_to_count(shape.internal, n_target, tolerance=tolerance)
-    if c is None:
+def coarse_copy(shape: Shape, n_target: int, tolerance: float) -> tuple[Coarse, Shape] | None:
+    """(Coarse, its Shape) of ``shape``'s internal mesh with about ``n_target`` vertices, by
+    manifold-keeping edge collapses (:func:`hope_rs.geometry.collapse.collapse_to_count`), or
+    ``None`` when ``shape`` has no more vertices or the copy has no face. The copy keeps the
+    oriented faces as they come."""
+    c = collapse_to_count(shape.internal, n_target, tolerance=tolerance)
+    if c is None or len(c.mesh.faces) == 0:
         return None
     return c, Shape(c.mesh, k_max=shape.k_max, orient=False, config=shape.config)
 
@@ -136,12 +130,7 @@ class ResolutionStage(Stage):
             f"times denser than the other ({sparse.n_vertices})"
         )
         t = state.log.start("resolution", detail=detail)
-        level = coarse_copy(
-            dense,
-            sparse.n_vertices,
-            cfg.resolution.count_tolerance,
-            cfg.resolution.manifold_max_vertices,
-        )
+        level = coarse_copy(dense, sparse.n_vertices, cfg.resolution.count_tolerance)
         if level is None:
             state.timings["resolution"] = time.perf_counter() - t
             why = f"{detail}, but clustering it leaves no face: matched at full resolution"
