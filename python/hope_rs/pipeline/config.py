@@ -193,6 +193,10 @@ class RefineConfig:
         Hop radii of one pass; ``None``: k_max → 1 (docs/decisions.md#schedule).
     max_passes : int
         Passes of the schedule at most (docs/decisions.md#stopping).
+    late_pass, late_k_max : int, int or None
+        From pass ``late_pass`` on a pass runs only the schedule's hop radii up to
+        ``late_k_max``; ``None``: every pass runs the whole schedule
+        (docs/decisions.md#schedule).
     min_consistent : float
         LMD's witness rule: the share of a vertex's 2-ring that must keep its distances
         (docs/decisions.md#lmd); the spectral pass's anchors use it too.
@@ -234,6 +238,8 @@ class RefineConfig:
 
     schedule: tuple[int, ...] | None = None
     max_passes: int = field(default=4, metadata={"range": (1, None)})
+    late_pass: int = field(default=2, metadata={"range": (0, None)})
+    late_k_max: int | None = field(default=None, metadata={"range": (1, None)})
     min_consistent: float = field(default=0.5, metadata={"range": (0.0, 1.0)})
     # Column counts are 32-bit in the Rust core.
     top_k: int = field(default=48, metadata={"range": (1, 2**31 - 1)})
@@ -254,6 +260,16 @@ class RefineConfig:
 
     def __post_init__(self):
         _check_share("RefineConfig.max_turned", self.max_turned)
+        if self.late_k_max is not None and not (
+            _is_count(self.late_k_max) and self.late_k_max >= 1
+        ):
+            raise ValueError(
+                f"RefineConfig.late_k_max must be None or a hop radius >= 1, got {self.late_k_max!r}"
+            )
+        if not (_is_count(self.late_pass) and self.late_pass >= 0):
+            raise ValueError(
+                f"RefineConfig.late_pass must be a pass index >= 0, got {self.late_pass!r}"
+            )
         # A tuple, so that the config stays hashable whatever sequence was given.
         if self.schedule is not None and not isinstance(self.schedule, tuple):
             with contextlib.suppress(TypeError):  # not a sequence: match's option check says so
@@ -567,6 +583,11 @@ def read_config(path) -> MatchConfig:
 def _is_number(x) -> bool:
     """Whether ``x`` is a finite real number (``bool`` is not one)."""
     return not isinstance(x, bool) and isinstance(x, numbers.Real) and math.isfinite(x)
+
+
+def _is_count(x) -> bool:
+    """Whether ``x`` is an integer (``bool`` is not one)."""
+    return isinstance(x, numbers.Integral) and not isinstance(x, bool)
 
 
 def _check_share(name: str, value) -> None:

@@ -39,6 +39,7 @@ __all__ = [
     "best_overlap",
     "default_schedule",
     "global_repair",
+    "pass_schedule",
     "refine",
 ]
 
@@ -47,6 +48,14 @@ def default_schedule(k_max: int) -> list[int]:
     """One pass: k going k_max → 1. Coarse neighbourhoods first fix large errors, fine ones then
     sharpen (docs/decisions.md#schedule)."""
     return list(range(k_max, 0, -1))
+
+
+def pass_schedule(schedule: Sequence[int], config: RefineConfig, n_pass: int) -> list[int]:
+    """The hop radii of pass ``n_pass`` (0-based): ``schedule``, from ``config.late_pass`` on
+    only its radii up to ``config.late_k_max`` (its smallest when none is)."""
+    if config.late_k_max is None or n_pass < config.late_pass:
+        return list(schedule)
+    return [k for k in schedule if k <= config.late_k_max] or [min(schedule)]
 
 
 @dataclass
@@ -123,10 +132,9 @@ def refine(
     events = RefineEvents() if events is None else events
     clock = StepClock() if clock is None else clock
     st = start_state(a, b, f0, config, schedule, events, marks, clock)
-    steps = pass_steps(schedule)
     for n_pass in range(config.max_passes):
         st.n_pass, st.pass_changed = n_pass, 0
-        if not run_steps(st, steps):
+        if not run_steps(st, pass_steps(pass_schedule(schedule, config, n_pass))):
             break  # a step ended the passes
         st.last_pass_changed = st.pass_changed
         if st.pass_changed < config.converged_fraction * a.n_vertices or n_pass == st.last_pass:
@@ -190,8 +198,10 @@ class _RefineSteps(RefineEvents):
         if schedule is None:
             schedule = default_schedule(min(sa.k_max, sb.k_max))
         self.n_passes = cfg.max_passes
-        self.per_pass = len(schedule) + (1 if cfg.global_step else 0)
-        self.total = self.n_passes * self.per_pass
+        repair = 1 if cfg.global_step else 0
+        self.total = sum(
+            len(pass_schedule(schedule, cfg, n)) + repair for n in range(self.n_passes)
+        )
         self.polish: Iteration | None
         self.done, self.passes, self.t0, self.polish = 0, 0, time.perf_counter(), None
 
