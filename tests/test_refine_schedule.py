@@ -1,5 +1,5 @@
-"""The hop radii of each refinement pass: the whole schedule, and from ``late_pass`` on only
-the radii up to ``late_k_max``."""
+"""The hop radii of each refinement pass: the schedule's, up to the pass's entry of
+``RefineConfig.pass_k_max``."""
 
 import numpy as np
 import pytest
@@ -9,18 +9,21 @@ import hope_rs
 from hope_rs.pipeline.config import RefineConfig
 from hope_rs.pipeline.refine import pass_schedule, refine
 
+FULL = [8, 7, 6, 5, 4, 3, 2, 1]
 
-def test_pass_schedule_cuts_the_late_passes_only():
-    full = [8, 7, 6, 5, 4, 3, 2, 1]
-    assert all(pass_schedule(full, RefineConfig(), n) == full for n in range(6))
-    cfg = RefineConfig(late_pass=2, late_k_max=4)
-    assert [pass_schedule(full, cfg, n) for n in range(4)] == [full, full, *[[4, 3, 2, 1]] * 2]
+
+def test_pass_schedule_caps_each_pass_and_repeats_the_last_cap():
+    assert all(pass_schedule(FULL, RefineConfig(), n) == FULL for n in range(6))
+    cfg = RefineConfig(pass_k_max=(None, 7, 4))
+    got = [pass_schedule(FULL, cfg, n) for n in range(5)]
+    assert got == [FULL, FULL[1:], *[[4, 3, 2, 1]] * 3]
     # The schedule's order is kept, and a schedule with no radius that small keeps its smallest.
     assert pass_schedule([2, 6, 1, 5], cfg, 3) == [2, 1]
     assert pass_schedule([8, 6], cfg, 2) == [6]
+    assert RefineConfig(pass_k_max=[None, 3]).pass_k_max == (None, 3)
 
 
-def test_late_passes_run_only_their_radii():
+def test_each_pass_runs_only_its_radii():
     s = hope_rs.Shape(hope_rs.Mesh(*bumpy_sphere(800, 3)))
     rng = np.random.default_rng(0)
     wrong = np.arange(s.n_vertices)
@@ -28,25 +31,17 @@ def test_late_passes_run_only_their_radii():
     wrong[moved] = rng.permutation(moved)
     # No stopping rule ends the passes early: every pass runs.
     cfg = RefineConfig(
-        max_passes=3, converged_fraction=0.0, min_untrusted_drop=0.0, late_pass=1, late_k_max=2
+        max_passes=3, converged_fraction=0.0, min_untrusted_drop=0.0, pass_k_max=(None, 3, 2)
     )
     res = refine(s, s, wrong, cfg)
     radii = {
         n: [it.k for it in res.history if it.n_pass == n and it.k > 0 and not it.polish]
         for n in range(3)
     }
-    assert radii == {0: list(range(s.k_max, 0, -1)), 1: [2, 1], 2: [2, 1]}
+    assert radii == {0: list(range(s.k_max, 0, -1)), 1: [3, 2, 1], 2: [2, 1]}
 
 
-@pytest.mark.parametrize(
-    ("setting", "message"),
-    [
-        ({"late_k_max": 0}, "late_k_max must be None or a hop radius >= 1, got 0"),
-        ({"late_k_max": 2.5}, "late_k_max must be None or a hop radius >= 1, got 2.5"),
-        ({"late_pass": -1}, "late_pass must be a pass index >= 0, got -1"),
-        ({"late_pass": True}, "late_pass must be a pass index >= 0, got True"),
-    ],
-)
-def test_the_late_settings_are_checked(setting, message):
-    with pytest.raises(ValueError, match=message):
-        RefineConfig(**setting)
+@pytest.mark.parametrize("caps", [(), (0,), (4, 2.5), (True,), "8", 4])
+def test_pass_k_max_is_checked(caps):
+    with pytest.raises(ValueError, match="pass_k_max must be None or a non-empty sequence"):
+        RefineConfig(pass_k_max=caps)

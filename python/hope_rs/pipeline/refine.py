@@ -51,11 +51,14 @@ def default_schedule(k_max: int) -> list[int]:
 
 
 def pass_schedule(schedule: Sequence[int], config: RefineConfig, n_pass: int) -> list[int]:
-    """The hop radii of pass ``n_pass`` (0-based): ``schedule``, from ``config.late_pass`` on
-    only its radii up to ``config.late_k_max`` (its smallest when none is)."""
-    if config.late_k_max is None or n_pass < config.late_pass:
+    """The hop radii of pass ``n_pass`` (0-based): those of ``schedule`` up to the pass's entry
+    of ``config.pass_k_max`` (its last entry for every later pass; ``None``: all of them), or
+    the schedule's smallest when none is (docs/decisions.md#schedule)."""
+    caps = config.pass_k_max
+    cap = None if caps is None else caps[min(n_pass, len(caps) - 1)]
+    if cap is None:
         return list(schedule)
-    return [k for k in schedule if k <= config.late_k_max] or [min(schedule)]
+    return [k for k in schedule if k <= cap] or [min(schedule)]
 
 
 @dataclass
