@@ -45,3 +45,13 @@ def test_each_pass_runs_only_its_radii():
 def test_pass_k_max_is_checked(caps):
     with pytest.raises(ValueError, match="pass_k_max must be None or a non-empty sequence"):
         RefineConfig(pass_k_max=caps)
+
+
+def test_the_progress_counts_each_pass_s_steps():
+    s = hope_rs.Shape(hope_rs.Mesh(*bumpy_sphere(400, 2)))
+    events = []
+    cfg = hope_rs.MatchConfig(refine=RefineConfig(max_passes=5, pass_k_max=(None, 3, 1)))
+    hope_rs.match(s, s, config=cfg, spectral=False, progress=events.append)
+    totals = {e.total for e in events if e.stage == "refine" and e.total}
+    # Every pass has its repair step; passes 3 to 5 run k = 1 only.
+    assert totals == {(s.k_max + 1) + (3 + 1) + 3 * (1 + 1)}

@@ -201,10 +201,11 @@ class _RefineSteps(RefineEvents):
         if schedule is None:
             schedule = default_schedule(min(sa.k_max, sb.k_max))
         self.n_passes = cfg.max_passes
+        # Steps per pass; the passes after the caps' last entry are like the last one.
         repair = 1 if cfg.global_step else 0
-        self.total = sum(
-            len(pass_schedule(schedule, cfg, n)) + repair for n in range(self.n_passes)
-        )
+        capped = min(self.n_passes, len(cfg.pass_k_max or (None,)))
+        per_pass = [len(pass_schedule(schedule, cfg, n)) + repair for n in range(capped)]
+        self.total = sum(per_pass) + (self.n_passes - capped) * per_pass[-1]
         self.polish: Iteration | None
         self.done, self.passes, self.t0, self.polish = 0, 0, time.perf_counter(), None
 
