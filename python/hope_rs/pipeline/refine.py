@@ -93,7 +93,7 @@ def refine(
     its rule says: the global repair (``config.global_step``; from ``config.region_check_pass``
     on preceded by the region check, from ``config.untrusted_drop_pass`` on ending the passes
     when it stalls), then one HOPE step per hop radius of the schedule (k_max → 1 by
-    default). Passes repeat until one changes fewer than ``config.converged_fraction`` of the
+    default), capped per pass by ``config.pass_k_max`` (:func:`pass_schedule`). Passes repeat until one changes fewer than ``config.converged_fraction`` of the
     vertices, or ``config.max_passes`` passes; then the polish (``config.polish_k``) runs.
 
     A HOPE step selects witnesses by LMD, builds the overlap cost at hop radius k and solves
