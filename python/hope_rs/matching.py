@@ -82,7 +82,7 @@ def match(
 
         - ``k_max`` (int, 8): largest hop radius, in [2, 64].
         - ``schedule`` (list of int): hop radii of one refinement pass, each in [1, k_max];
-          default k_max → 1 (a fourth pass keeps those ≤ 5, ``RefineConfig.pass_k_max``).
+          default k_max → 1.
         - ``max_passes`` (int, 4): passes of the schedule at most; refinement stops earlier
           once a pass changes almost nothing.
         - ``min_consistent`` (float, 0.5): LMD's witness rule, in [0, 1].

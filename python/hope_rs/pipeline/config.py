@@ -196,8 +196,7 @@ class RefineConfig:
     pass_k_max : tuple of (int or None) or None
         Per pass, the largest hop radius of the schedule it runs (its last entry for every
         later pass; ``None`` in it: the whole schedule); ``None``: every pass runs the whole
-        schedule. The fourth pass runs k ≤ 5: its larger radii cost the most and moved the
-        maps least (docs/decisions.md#schedule).
+        schedule (docs/decisions.md#schedule).
     min_consistent : float
         LMD's witness rule: the share of a vertex's 2-ring that must keep its distances
         (docs/decisions.md#lmd); the spectral pass's anchors use it too.
@@ -239,7 +238,7 @@ class RefineConfig:
 
     schedule: tuple[int, ...] | None = None
     max_passes: int = field(default=4, metadata={"range": (1, None)})
-    pass_k_max: tuple[int | None, ...] | None = (None, None, None, 5)
+    pass_k_max: tuple[int | None, ...] | None = None
     min_consistent: float = field(default=0.5, metadata={"range": (0.0, 1.0)})
     # Column counts are 32-bit in the Rust core.
     top_k: int = field(default=48, metadata={"range": (1, 2**31 - 1)})
