@@ -193,6 +193,10 @@ class RefineConfig:
         Hop radii of one pass; ``None``: k_max → 1 (docs/decisions.md#schedule).
     max_passes : int
         Passes of the schedule at most (docs/decisions.md#stopping).
+    pass_k_max : tuple of (int or None) or None
+        Per pass, the largest hop radius of the schedule it runs (its last entry for every
+        later pass; ``None`` in it: the whole schedule); ``None``: every pass runs the whole
+        schedule (docs/decisions.md#schedule).
     min_consistent : float
         LMD's witness rule: the share of a vertex's 2-ring that must keep its distances
         (docs/decisions.md#lmd); the spectral pass's anchors use it too.
@@ -234,6 +238,7 @@ class RefineConfig:
 
     schedule: tuple[int, ...] | None = None
     max_passes: int = field(default=4, metadata={"range": (1, None)})
+    pass_k_max: tuple[int | None, ...] | None = None
     min_consistent: float = field(default=0.5, metadata={"range": (0.0, 1.0)})
     # Column counts are 32-bit in the Rust core.
     top_k: int = field(default=48, metadata={"range": (1, 2**31 - 1)})
@@ -254,6 +259,20 @@ class RefineConfig:
 
     def __post_init__(self):
         _check_share("RefineConfig.max_turned", self.max_turned)
+        if self.pass_k_max is not None:
+            caps = self.pass_k_max
+            with contextlib.suppress(TypeError):  # not a sequence: the check below says so
+                caps = tuple(caps)
+                object.__setattr__(self, "pass_k_max", caps)
+            if not (
+                isinstance(caps, tuple)
+                and caps
+                and all(k is None or (_is_count(k) and k >= 1) for k in caps)
+            ):
+                raise ValueError(
+                    "RefineConfig.pass_k_max must be None or a non-empty sequence of hop radii "
+                    f">= 1 or None, got {self.pass_k_max!r}"
+                )
         # A tuple, so that the config stays hashable whatever sequence was given.
         if self.schedule is not None and not isinstance(self.schedule, tuple):
             with contextlib.suppress(TypeError):  # not a sequence: match's option check says so
@@ -562,6 +581,11 @@ def read_config(path) -> MatchConfig:
 def _is_number(x) -> bool:
     """Whether ``x`` is a finite real number (``bool`` is not one)."""
     return not isinstance(x, bool) and isinstance(x, numbers.Real) and math.isfinite(x)
+
+
+def _is_count(x) -> bool:
+    """Whether ``x`` is an integer (``bool`` is not one)."""
+    return isinstance(x, numbers.Integral) and not isinstance(x, bool)
 
 
 def _check_share(name: str, value) -> None:

@@ -39,6 +39,7 @@ __all__ = [
     "best_overlap",
     "default_schedule",
     "global_repair",
+    "pass_schedule",
     "refine",
 ]
 
@@ -47,6 +48,17 @@ def default_schedule(k_max: int) -> list[int]:
     """One pass: k going k_max → 1. Coarse neighbourhoods first fix large errors, fine ones then
     sharpen (docs/decisions.md#schedule)."""
     return list(range(k_max, 0, -1))
+
+
+def pass_schedule(schedule: Sequence[int], config: RefineConfig, n_pass: int) -> list[int]:
+    """The hop radii of pass ``n_pass`` (0-based): those of ``schedule`` up to the pass's entry
+    of ``config.pass_k_max`` (its last entry for every later pass; ``None``: all of them), or
+    the schedule's smallest when none is (docs/decisions.md#schedule)."""
+    caps = config.pass_k_max
+    cap = None if caps is None else caps[min(n_pass, len(caps) - 1)]
+    if cap is None:
+        return list(schedule)
+    return [k for k in schedule if k <= cap] or [min(schedule)]
 
 
 @dataclass
@@ -81,7 +93,7 @@ def refine(
     its rule says: the global repair (``config.global_step``; from ``config.region_check_pass``
     on preceded by the region check, from ``config.untrusted_drop_pass`` on ending the passes
     when it stalls), then one HOPE step per hop radius of the schedule (k_max → 1 by
-    default). Passes repeat until one changes fewer than ``config.converged_fraction`` of the
+    default), capped per pass by ``config.pass_k_max`` (:func:`pass_schedule`). Passes repeat until one changes fewer than ``config.converged_fraction`` of the
     vertices, or ``config.max_passes`` passes; then the polish (``config.polish_k``) runs.
 
     A HOPE step selects witnesses by LMD, builds the overlap cost at hop radius k and solves
@@ -123,10 +135,9 @@ def refine(
     events = RefineEvents() if events is None else events
     clock = StepClock() if clock is None else clock
     st = start_state(a, b, f0, config, schedule, events, marks, clock)
-    steps = pass_steps(schedule)
     for n_pass in range(config.max_passes):
         st.n_pass, st.pass_changed = n_pass, 0
-        if not run_steps(st, steps):
+        if not run_steps(st, pass_steps(pass_schedule(schedule, config, n_pass))):
             break  # a step ended the passes
         st.last_pass_changed = st.pass_changed
         if st.pass_changed < config.converged_fraction * a.n_vertices or n_pass == st.last_pass:
@@ -190,8 +201,11 @@ class _RefineSteps(RefineEvents):
         if schedule is None:
             schedule = default_schedule(min(sa.k_max, sb.k_max))
         self.n_passes = cfg.max_passes
-        self.per_pass = len(schedule) + (1 if cfg.global_step else 0)
-        self.total = self.n_passes * self.per_pass
+        # Steps per pass; the passes after the caps' last entry are like the last one.
+        repair = 1 if cfg.global_step else 0
+        capped = min(self.n_passes, len(cfg.pass_k_max or (None,)))
+        per_pass = [len(pass_schedule(schedule, cfg, n)) + repair for n in range(capped)]
+        self.total = sum(per_pass) + (self.n_passes - capped) * per_pass[-1]
         self.polish: Iteration | None
         self.done, self.passes, self.t0, self.polish = 0, 0, time.perf_counter(), None
 
