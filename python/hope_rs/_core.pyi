@@ -29,6 +29,7 @@ __all__ = [
     "closest_rotations",
     "edge_rotations",
     "grow_across_faces",
+    "collapse_to_sites",
 ]
 
 _Csr: TypeAlias = tuple[npt.NDArray[np.int64], npt.NDArray[np.int32], np.ndarray]
