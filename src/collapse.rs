@@ -310,73 +310,13 @@ pub fn collapse_to_sites(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_meshes::icosphere;
     use std::collections::HashMap;
 
     /// An icosahedron subdivided `levels` times onto the unit sphere, bumped so that no two
     /// distances tie, faces counter-clockwise seen from outside.
     fn sphere(levels: u32) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
-        let t = (1.0 + 5f64.sqrt()) / 2.0;
-        let mut p: Vec<[f64; 3]> = vec![
-            [-1.0, t, 0.0],
-            [1.0, t, 0.0],
-            [-1.0, -t, 0.0],
-            [1.0, -t, 0.0],
-            [0.0, -1.0, t],
-            [0.0, 1.0, t],
-            [0.0, -1.0, -t],
-            [0.0, 1.0, -t],
-            [t, 0.0, -1.0],
-            [t, 0.0, 1.0],
-            [-t, 0.0, -1.0],
-            [-t, 0.0, 1.0],
-        ];
-        let mut f: Vec<[u32; 3]> = vec![
-            [0, 11, 5],
-            [0, 5, 1],
-            [0, 1, 7],
-            [0, 7, 10],
-            [0, 10, 11],
-            [1, 5, 9],
-            [5, 11, 4],
-            [11, 10, 2],
-            [10, 7, 6],
-            [7, 1, 8],
-            [3, 9, 4],
-            [3, 4, 2],
-            [3, 2, 6],
-            [3, 6, 8],
-            [3, 8, 9],
-            [4, 9, 5],
-            [2, 4, 11],
-            [6, 2, 10],
-            [8, 6, 7],
-            [9, 8, 1],
-        ];
-        for _ in 0..levels {
-            let mut mid: HashMap<(u32, u32), u32> = HashMap::new();
-            let mut next = Vec::new();
-            for t in &f {
-                let mut m = [0u32; 3];
-                for k in 0..3 {
-                    let (a, b) = (t[k], t[(k + 1) % 3]);
-                    let key = (a.min(b), a.max(b));
-                    m[k] = *mid.entry(key).or_insert_with(|| {
-                        let (pa, pb) = (p[a as usize], p[b as usize]);
-                        p.push([
-                            (pa[0] + pb[0]) / 2.0,
-                            (pa[1] + pb[1]) / 2.0,
-                            (pa[2] + pb[2]) / 2.0,
-                        ]);
-                        p.len() as u32 - 1
-                    });
-                }
-                next.push([t[0], m[0], m[2]]);
-                next.push([t[1], m[1], m[0]]);
-                next.push([t[2], m[2], m[1]]);
-                next.push([m[0], m[1], m[2]]);
-            }
-            f = next;
-        }
+        let (mut p, f) = icosphere(levels as usize);
         for (i, x) in p.iter_mut().enumerate() {
             let r = (x[0] * x[0] + x[1] * x[1] + x[2] * x[2]).sqrt();
             let bump = 1.0 + 0.05 * ((i as f64) * 1.7).sin();

@@ -18,6 +18,8 @@ pub mod pairing;
 pub mod rotation;
 pub mod shot;
 pub mod step;
+#[cfg(test)]
+mod test_meshes;
 
 #[cfg(feature = "python")]
 mod python;
