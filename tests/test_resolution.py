@@ -86,6 +86,14 @@ def test_the_stage_runs_only_when_one_shape_is_much_denser():
     assert stage.ran and "B clustered to" in stage.reason
     assert res.map.shape == (m.n_vertices,) and res.map.max() < dense.n_vertices
     assert res.confidence is not None and res.confidence.shape == (m.n_vertices,)
+    # From the dense side the map is many-to-one: it is judged where it was made, at the
+    # common resolution, not by the stages that judge a map at full resolution.
+    back = hope_rs.match(dense, m, max_passes=1)
+    assert "A clustered to" in back.stage("resolution").reason
+    for name in ("orient", "confidence"):
+        s = back.stage(name)
+        assert not s.ran and s.reason.startswith("the map is lifted from the match at")
+    assert back.quality is not None and back.confidence.shape == (dense.n_vertices,)
     off = dataclasses.replace(MatchConfig().resolution, enabled=False)
     full = hope_rs.match(m, dense, max_passes=1, config=MatchConfig(resolution=off))
     assert "resolution" not in [s.name for s in full.stages]

@@ -250,6 +250,7 @@ class OrientStage(Stage):
     name = "orient"
     #: A map another stage found final can still be a mirror image (LMD trusts it everywhere).
     runs_on_final_map = True
+    judges_map = True
 
     def attach(self, state: MatchState) -> None:
         #: The turned-over triangles of A on B, built when the stage decides whether to run.

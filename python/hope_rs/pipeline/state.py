@@ -28,7 +28,7 @@ from .config import MatchConfig
 from .iteration import Iteration, StepClock
 from .part_info import PartialInfo
 from .progress import StageLog
-from .result import MatchResult
+from .result import MatchQuality, MatchResult
 
 __all__ = [
     "EVENTS",
@@ -58,9 +58,13 @@ QUIET = object()
 @dataclass(frozen=True)
 class Halt:
     """A stage's outcome: the map is final. The runner skips every later stage that would
-    remake it (those with :attr:`Stage.runs_on_final_map` False), recording ``reason``."""
+    remake it (those with :attr:`Stage.runs_on_final_map` False), recording ``reason``;
+    with ``judged`` True (the map comes from a nested match that judged it where it was
+    made, such as the resolution stage's match at a common density), also the stages that
+    judge a map (:attr:`Stage.judges_map`)."""
 
     reason: str
+    judged: bool = False
 
 
 class Background:
@@ -147,6 +151,9 @@ class MatchState:
         The spectral pass's ZoomOut map, when it computed one.
     confidence : ndarray or None
         Per vertex of A, the confidence in the final map (the confidence stage).
+    quality : MatchQuality or None
+        The pair's verdict when a nested match made the map and judged it (the resolution
+        stage's); ``None``: judged from the confidence and the map at the end.
     landmarks : (m, 2) ndarray of int or None
         The caller's landmarks (vertex of A, vertex of B), rows sorted by A's vertex; ``None``
         when there are none.
@@ -171,6 +178,7 @@ class MatchState:
     coarse: MatchResult | None = None
     zoomout: np.ndarray | None = None
     confidence: np.ndarray | None = None
+    quality: MatchQuality | None = None
     landmarks: np.ndarray | None = None
     partial: PartialInfo | None = None
 
@@ -191,6 +199,9 @@ class Stage:
     #: stages that make a map set it False; a stage that reads or post-processes the final
     #: map (the confidence, the landmarks' re-pinning, a caller's own stage) keeps True.
     runs_on_final_map: bool = True
+    #: Whether the stage judges the map (its orientation, its confidence): such a stage also
+    #: skips a map a nested match already judged (:attr:`Halt.judged`).
+    judges_map: bool = False
     #: The name of an earlier stage while which this stage's :meth:`background` work runs.
     alongside: str | None = None
 
