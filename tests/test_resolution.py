@@ -90,10 +90,11 @@ def test_the_stage_runs_only_when_one_shape_is_much_denser():
     # common resolution, not by the stages that judge a map at full resolution.
     back = hope_rs.match(dense, m, max_passes=1)
     assert "A clustered to" in back.stage("resolution").reason
-    for name in ("orient", "confidence"):
-        s = back.stage(name)
-        assert not s.ran and s.reason.startswith("the map is lifted from the match at")
-    assert back.quality is not None and back.confidence.shape == (dense.n_vertices,)
+    # The verdict is the match's at the common resolution, where its 2-rings' distances are
+    # kept: measured on the lifted many-to-one map it would flag every such pair.
+    orient = back.stage("orient")
+    assert not orient.ran and "not flagged" in orient.reason, orient.reason
+    assert not back.quality.likely_failed and back.quality.mean_confidence > 0.5
     off = dataclasses.replace(MatchConfig().resolution, enabled=False)
     full = hope_rs.match(m, dense, max_passes=1, config=MatchConfig(resolution=off))
     assert "resolution" not in [s.name for s in full.stages]
@@ -121,6 +122,24 @@ def test_the_lifted_map_of_a_subdivided_copy(faust_pair):
     assert "refined at full resolution" in from_dense.stage("resolution").reason
     e = geodesic_errors(sa, from_dense.map, a_idx=new[:n], b_idx=idx)
     assert np.mean(e == 0) > 0.95 and e.mean() < 0.002
+
+
+@pytest.mark.slow
+def test_a_much_denser_a_is_judged_at_the_common_resolution(faust_pair):
+    """A body subdivided twice (16x the vertices) against itself: the lifted map is many-to-one,
+    so at full resolution it keeps few 2-rings' distances however right it is. The pair takes
+    the verdict of the match at the common resolution, and the orient stage, which would rerun
+    the pipeline at full resolution on a flagged map, is not started."""
+    a, _ = faust_pair
+    dense = subdivide(a, 2)
+    n = a.n_vertices
+    res = hope_rs.match(hope_rs.Shape(dense), hope_rs.Shape(a))
+    assert "A clustered to" in res.stage("resolution").reason
+    orient = res.stage("orient")
+    assert not orient.ran and "not flagged" in orient.reason, orient.reason
+    assert not res.quality.likely_failed
+    e = geodesic_errors(hope_rs.Shape(a), res.map, a_idx=np.arange(n), b_idx=np.arange(n))
+    assert e.mean() < 0.02
 
 
 def test_subdivisions_come_nearest_the_denser_count():

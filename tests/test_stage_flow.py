@@ -20,10 +20,9 @@ def bare_state(run=None) -> MatchState:
 class Recorded(Stage):
     """A stage that notes that it ran and returns ``outcome``."""
 
-    def __init__(self, name, seen, outcome=None, *, on_final=False, final_after=None, judges=False):
+    def __init__(self, name, seen, outcome=None, *, on_final=False, final_after=None):
         self.name, self.seen, self.outcome = name, seen, outcome
         self.runs_on_final_map = on_final
-        self.judges_map = judges
         self.verdict = final_after
 
     def run(self, state):
@@ -69,26 +68,6 @@ def test_a_halt_skips_the_later_stages_that_change_the_map():
     state = run_stages(bare_state(), stages)
     assert seen == ["init", "refine", "confidence"]
     assert names(state) == [("spectral", False, "settled")]  # the others record themselves
-
-
-@pytest.mark.parametrize("judged", [False, True])
-def test_a_judged_halt_also_skips_the_stages_that_judge_the_map(judged):
-    seen = []
-    stages = [
-        Recorded("resolution", seen, Halt("lifted", judged=judged)),
-        Recorded("refine", seen),
-        Recorded("orient", seen, on_final=True, judges=True),
-        Recorded("landmarks", seen, on_final=True),
-        Recorded("confidence", seen, on_final=True, judges=True),
-    ]
-    state = run_stages(bare_state(), stages)
-    judging = [("orient", False, "lifted"), ("confidence", False, "lifted")]
-    if judged:
-        assert seen == ["resolution", "landmarks"]
-        assert names(state) == [("refine", False, "lifted"), *judging]
-    else:
-        assert seen == ["resolution", "orient", "landmarks", "confidence"]
-        assert names(state) == [("refine", False, "lifted")]
 
 
 def test_a_later_stage_can_find_the_map_final_after_an_earlier_one():

@@ -117,8 +117,9 @@ def map_quality(
 
 def state_quality(state: MatchState) -> MatchQuality | None:
     """The :class:`MatchQuality` of the state's map and confidence (``None`` without a
-    confidence), or the one a nested match judged the map with (``state.quality``); a whole's vertices without a counterpart on the part (the partial stage's
-    ``counterpart``) have no right match to find, and the pair is judged on the others."""
+    confidence), or the one a nested match judged the map with (``state.quality``); a whole's
+    vertices without a counterpart on the part (the partial stage's ``counterpart``) have no
+    right match to find, and the pair is judged on the others."""
     if state.quality is not None:
         return state.quality
     if state.confidence is None:
@@ -273,11 +274,13 @@ class ConfidenceStage(Stage):
 
     name = "confidence"
     runs_on_final_map = True
-    judges_map = True
 
     def skip_reason(self, state: MatchState):
         if not state.config.confidence.enabled:
             return "turned off (confidence=False)"
+        if state.confidence is not None:
+            # The "resolution" stage carries it over from the match at a common resolution.
+            return "carried over from the match at a common resolution"
         return None
 
     def run(self, state: MatchState) -> None:

@@ -250,7 +250,6 @@ class OrientStage(Stage):
     name = "orient"
     #: A map another stage found final can still be a mirror image (LMD trusts it everywhere).
     runs_on_final_map = True
-    judges_map = True
 
     def attach(self, state: MatchState) -> None:
         #: The turned-over triangles of A on B, built when the stage decides whether to run.
@@ -280,7 +279,11 @@ class OrientStage(Stage):
         if share <= cfg.min_turned and cfg.on_failed:
             # A map wrong on a whole region can turn little over (a swapped pair of limbs,
             # or a mirror image whose seams tear) yet fail the confidence's rule.
-            q = map_quality(state.a, state.b, state.f, state.hope_map, state.zoomout, state.config)
+            # A map lifted from a match at a common resolution has that match's verdict: a
+            # dense A's many-to-one map keeps few of its 2-rings' distances however right.
+            q = state.quality or map_quality(
+                state.a, state.b, state.f, state.hope_map, state.zoomout, state.config
+            )
             flagged = q.likely_failed
             self._why += f", flagged likely failed (mean confidence {q.mean_confidence:.2f})"
         state.timings["orient"] = time.perf_counter() - t
@@ -331,6 +334,9 @@ class OrientStage(Stage):
             # The refinement the caller's callback saw stays the state's history.
             adopt(state, kept, maps_only=True)
             state.zoomout = kept.zoomout
+            # A verdict carried over from a match at a common resolution judged the map
+            # replaced here; the pair is judged on the new map at the end.
+            state.quality = None
         state.timings["orient"] += time.perf_counter() - t
         scored = "; ".join(
             f"{x.candidate.label}: {hyp.turned[x.candidate.label]:.0%} turned, "

@@ -30,10 +30,12 @@ vertices, the "resolution" stage
    vertex is itself). Kept only when the finish ran: shapes remeshed independently share no
    faces, and there the HOPE steps alone did worse than the lift.
 
-The map is final and judged: its confidence and verdict are the coarse match's (each dense
-vertex of A takes its coarse vertex's), whose own stages judged its orientation; the stages
-after it, the orient and confidence stages included, do not run: a dense A's many-to-one map
-to a sparse B turns triangles over at random (docs/decisions.md#resolution).
+The map is final, and its confidence and the pair's verdict (``MatchResult.quality``) are the
+coarse match's (each dense vertex of A takes its coarse vertex's): a dense A's many-to-one map
+to a sparse B keeps few of its 2-rings' distances however right it is. The stages after it do
+not run, but for the orient stage, which measures the share of A the lifted map turns over
+at full resolution (the lift can turn over a region the coarse map did not) and takes the
+verdict carried over (docs/decisions.md#resolution).
 """
 
 from __future__ import annotations
@@ -188,7 +190,6 @@ class ResolutionStage(Stage):
             # few of its 2-rings' distances however right it is.
             c = res.confidence
             state.confidence = c[coarse.owner] if self.side == "a" else c[a.order]
-        # Judged where it was made too: a many-to-one map turns triangles over at random.
         state.quality = res.quality
         state.timings.update({f"resolution.{k}": v for k, v in res.timings.items()})
         state.timings["resolution"] = time.perf_counter() - t
@@ -197,9 +198,7 @@ class ResolutionStage(Stage):
             state.timings["resolution"],
             f"{detail}: {name} clustered to {cs.n_vertices} vertices, matched there, lifted{note}",
         )
-        return Halt(
-            f"the map is lifted from the match at {cs.n_vertices} vertices of {name}", judged=True
-        )
+        return Halt(f"the map is lifted from the match at {cs.n_vertices} vertices of {name}")
 
     def refined(
         self,

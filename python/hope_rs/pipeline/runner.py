@@ -7,8 +7,7 @@ kind, translates to the shapes' internal numbering, runs the stages
 :func:`run_stages` owns the flow between the stages (see :mod:`hope_rs.pipeline.state`):
 a :class:`~hope_rs.pipeline.state.Halt` a stage returns, or a later stage declares after it
 (:meth:`~hope_rs.pipeline.state.Stage.final_after`), skips the stages after it that would
-change the map (and, when the halt says a nested match judged the map, the stages that judge
-it); each stage's :class:`~hope_rs.pipeline.state.Background` work runs alongside
+change the map; each stage's :class:`~hope_rs.pipeline.state.Background` work runs alongside
 the stage it names and ends with it on every exit, and every stage's
 :meth:`~hope_rs.pipeline.state.Stage.close` runs on every exit, so no background work
 outlives the match.
@@ -40,14 +39,9 @@ def run_stages(state: MatchState, stages: list[Stage]) -> MatchState:
         for stage in stages:
             stage.attach(state)
         for i, stage in enumerate(stages):
-            if halt is not None and halt.judged and stage.judges_map:
-                # Before the stage's own reason: measuring the map to decide costs a pass
-                # over it, and the map was judged where it was made.
-                reason: object = halt.reason
-            else:
-                reason = stage.skip_reason(state)
-                if reason is None and halt is not None and not stage.runs_on_final_map:
-                    reason = halt.reason
+            reason = stage.skip_reason(state)
+            if reason is None and halt is not None and not stage.runs_on_final_map:
+                reason = halt.reason
             if reason is None:
                 halt = _run_one(state, stage, stages[i + 1 :]) or halt
             elif reason is not QUIET:

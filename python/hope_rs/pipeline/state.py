@@ -58,13 +58,9 @@ QUIET = object()
 @dataclass(frozen=True)
 class Halt:
     """A stage's outcome: the map is final. The runner skips every later stage that would
-    remake it (those with :attr:`Stage.runs_on_final_map` False), recording ``reason``;
-    with ``judged`` True (the map comes from a nested match that judged it where it was
-    made, such as the resolution stage's match at a common density), also the stages that
-    judge a map (:attr:`Stage.judges_map`)."""
+    remake it (those with :attr:`Stage.runs_on_final_map` False), recording ``reason``."""
 
     reason: str
-    judged: bool = False
 
 
 class Background:
@@ -199,9 +195,6 @@ class Stage:
     #: stages that make a map set it False; a stage that reads or post-processes the final
     #: map (the confidence, the landmarks' re-pinning, a caller's own stage) keeps True.
     runs_on_final_map: bool = True
-    #: Whether the stage judges the map (its orientation, its confidence): such a stage also
-    #: skips a map a nested match already judged (:attr:`Halt.judged`).
-    judges_map: bool = False
     #: The name of an earlier stage while which this stage's :meth:`background` work runs.
     alongside: str | None = None
 
