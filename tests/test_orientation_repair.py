@@ -150,14 +150,19 @@ def test_a_failed_start_is_repaired_by_a_start_derived_again():
 
 @pytest.mark.slow
 def test_a_start_that_loses_to_the_own_map_is_not_derived_from_and_the_next_start_runs():
-    # TOSCA gorilla -> man: the reverse match turns a quarter over and costs more than the
-    # stage's own map, so nothing is derived from it and the WKS start runs, which keeps the
-    # orientation; maps derived from another hypothesis turn little over yet swap the body.
+    # TOSCA gorilla -> man: maps are derived again only from a start whose refined map costs
+    # less than the stage's own (which start that is depends on the platform's floating point:
+    # the reverse match costs slightly more or less than the own map); none of them keeps the
+    # orientation, and the WKS start, which does, is kept.
     ma, mb, ai, bi = shared_pair("tosca_nonisometric_r", "8_gorilla_02->8_man_02")
     res = hope_rs.match(ma, mb)
     trials = res.stage("orient").trials
+    score = {t.label: t.score for t in trials}
+    for t in trials:
+        base = t.label.split("+")[0]
+        if base != t.label:
+            assert score[base] is not None and score[base] > score["kept"], t.label
     assert [t.label for t in trials if t.kept] == ["wks"]
-    assert not any(t.label.startswith(("reverse+", "reseed+")) for t in trials)
     assert geodesic_errors(mb, res.map, a_idx=ai, b_idx=bi).mean() < 0.15
 
 
