@@ -834,8 +834,9 @@ class OrientConfig:
     hypotheses : tuple of str
         The alternative maps tried ("mirror", "mirror_turned", "reseed": derived from a
         map, the one turning the least over refined; "reverse": from the match of B to A
-        inverted; "wks": the pipeline from WKS), the derived ones first, then the others in
-        the order given, until one turns at most ``min_turned`` over.
+        inverted; "wks": the pipeline from WKS; "reverse_wks": from the match of B to A from
+        WKS, inverted, kept only when it passes the stop rule), the derived ones first, then
+        the others in the order given, until one turns at most ``min_turned`` over.
     seam_rings : int
         1-rings added around the turned-over vertices for the regional hypotheses.
     distortion_weight : float
@@ -852,14 +853,21 @@ class OrientConfig:
     enabled: bool = True
     min_turned: float = 0.2
     on_failed: bool = True
-    hypotheses: tuple[str, ...] = ("mirror", "mirror_turned", "reseed", "reverse", "wks")
+    hypotheses: tuple[str, ...] = (
+        "mirror",
+        "mirror_turned",
+        "reseed",
+        "reverse",
+        "wks",
+        "reverse_wks",
+    )
     seam_rings: int = 2
     distortion_weight: float = field(default=1.0, metadata={"finite": True})
     min_gain: float = field(default=0.02, metadata={"finite": True})
     again: bool = True
 
     def __post_init__(self):
-        known = ("mirror", "mirror_turned", "reseed", "wks", "reverse")
+        known = ("mirror", "mirror_turned", "reseed", "wks", "reverse", "reverse_wks")
         bad = [h for h in self.hypotheses if h not in known]
         if isinstance(self.hypotheses, str) or bad:
             raise ValueError(

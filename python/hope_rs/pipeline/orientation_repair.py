@@ -21,7 +21,10 @@ The hypotheses (``OrientConfig.hypotheses``):
   orientation-keeping rest (:func:`~hope_rs.pipeline.anchors.anchor_step`);
 * ``"wks"``: the pipeline from the WKS initial map instead (a swapped pair of limbs, which
   the others keep);
-* ``"reverse"``: the pipeline from the match of B to A, inverted.
+* ``"reverse"``: the pipeline from the match of B to A, inverted;
+* ``"reverse_wks"``: the same with B to A matched from the WKS initial map (a human to a
+  gorilla, whose SHOT and WKS starts both fail in that direction, while WKS from the gorilla
+  keeps the orientation); kept only when it passes the stop rule below, never derived from.
 
 The derived hypotheses are unrefined maps; the one turning the least over is refined. The
 other starts follow in the order of ``OrientConfig.hypotheses``; after each, while no refined
@@ -229,17 +232,17 @@ class _Hypotheses:
             return []
         return self.refine([self.candidate(prefix + best, raw[best])])
 
-    def reverse(self) -> list[Trial]:
+    def reverse(self, label: str = "reverse") -> list[Trial]:
         """The pipeline from the match of B to A (unscored trial) inverted: each vertex of
-        A onto the vertex of B whose image lies nearest it in space."""
+        A onto the vertex of B whose image lies nearest it in space; ``"reverse_wks"``: B to
+        A from the WKS initial map."""
         a, b = self.state.a, self.state.b
-        init = self.state.config.initial.descriptor
-        t = run_trial(
-            self.state, "orient", Candidate("B to A", b, a, init, self.nested), self.progress
-        )
+        init = "wks" if label == "reverse_wks" else self.state.config.initial.descriptor
+        name = "B to A" + (" (wks)" if label == "reverse_wks" else "")
+        t = run_trial(self.state, "orient", Candidate(name, b, a, init, self.nested), self.progress)
         g = b.map_in(a, t.result.map)
         f = cKDTree(a.points[g]).query(a.points)[1].astype(np.int64)
-        return self.refine([self.candidate("reverse", f)])
+        return self.refine([self.candidate(label, f)])
 
 
 class OrientStage(Stage):
@@ -311,10 +314,26 @@ class OrientStage(Stage):
         # The maps derived from the stage's own first; then other starts (a swapped pair of
         # limbs comes back neither mirrored nor re-seeded), in the order of the hypotheses.
         tried = hyp.from_derived(f, share)
-        for start in (h for h in cfg.hypotheses if h in ("wks", "reverse")):
+        for start in (h for h in cfg.hypotheses if h in ("wks", "reverse", "reverse_wks")):
             if good_enough(tried):
                 break
-            new = hyp.reverse() if start == "reverse" else hyp.refine([hyp.candidate(start, start)])
+            if start == "wks":
+                new = hyp.refine([hyp.candidate(start, start)])
+            else:
+                new = hyp.reverse(start)
+            if start == "reverse_wks":
+                # The last resort, from the other shape's WKS map: it may replace the map only
+                # when it passes the stop rule, not merely by costing least, and is not
+                # derived from.
+                passed = [x for x in new if hyp.good_enough(x, min_score)]
+                tried += passed
+                hyp.notes += [
+                    f"{x.candidate.label}: {hyp.turned[x.candidate.label]:.0%} turned, cost "
+                    f"{-(x.score or 0.0):.3f}, not kept (fails the stop rule)"
+                    for x in new
+                    if x not in passed
+                ]
+                continue
             tried += new
             # Derived again from this start's own map, not from the best so far: a start that
             # came back nearer may still carry a swapped limb the derived maps set right.
