@@ -16,6 +16,7 @@ from hope_rs.evaluation.evaluate import geodesic_errors
 from hope_rs.evaluation.resolution import write_resolution_sets
 from hope_rs.geometry.coarsen import coarse_to_count
 from hope_rs.geometry.subdivide import subdivide
+from hope_rs.pipeline import orientation_repair
 from hope_rs.pipeline.config import ResolutionConfig
 from hope_rs.pipeline.options import check_config
 from hope_rs.pipeline.resolution import subdivisions
@@ -127,9 +128,9 @@ def test_the_lifted_map_of_a_subdivided_copy(faust_pair):
 @pytest.mark.slow
 def test_a_much_denser_a_is_judged_at_the_common_resolution(faust_pair):
     """A body subdivided twice (16x the vertices) against itself: the lifted map is many-to-one,
-    so at full resolution it keeps few 2-rings' distances however right it is. The pair takes
-    the verdict of the match at the common resolution, and the orient stage, which would rerun
-    the pipeline at full resolution on a flagged map, is not started."""
+    so at full resolution it keeps few 2-rings' distances however right it is. The pair is
+    judged on the confidence of the match at the common resolution, and the orient stage, which
+    would rerun the pipeline at full resolution on a flagged map, is not started."""
     a, _ = faust_pair
     dense = subdivide(a, 2)
     n = a.n_vertices
@@ -140,6 +141,29 @@ def test_a_much_denser_a_is_judged_at_the_common_resolution(faust_pair):
     assert not res.quality.likely_failed
     e = geodesic_errors(hope_rs.Shape(a), res.map, a_idx=np.arange(n), b_idx=np.arange(n))
     assert e.mean() < 0.02
+
+
+def test_a_map_the_orient_stage_adopts_after_a_lift_has_its_confidence_measured(monkeypatch):
+    # The orient stage forced to replace a lifted map (every turned-over share triggers it, and
+    # the best hypothesis replaces the map whatever it costs): the confidence carried over
+    # from the common resolution belonged to the map replaced, so the confidence stage
+    # measures the new one.
+    real = orientation_repair.choose
+    monkeypatch.setattr(
+        orientation_repair, "choose", lambda state, stage, tried, **_: real(state, stage, tried)
+    )
+    sphere = hope_rs.Mesh(*bumpy_sphere(400, 3))
+    dense = subdivide(sphere, 2)
+    forced = dataclasses.replace(MatchConfig().orient, min_turned=0.0, hypotheses=("reverse",))
+    cfg = dataclasses.replace(MatchConfig(), orient=forced)
+    res = hope_rs.match(dense, sphere, config=cfg)
+    assert "A clustered to" in res.stage("resolution").reason
+    orient, confidence = res.stage("orient"), res.stage("confidence")
+    assert orient.ran and [t.label for t in orient.trials if t.kept] == ["reverse"]
+    assert confidence.ran, confidence.reason
+    carried = hope_rs.match(dense, sphere)
+    assert not carried.stage("confidence").ran
+    assert "carried over" in carried.stage("confidence").reason
 
 
 def test_subdivisions_come_nearest_the_denser_count():

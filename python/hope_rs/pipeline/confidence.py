@@ -117,11 +117,10 @@ def map_quality(
 
 def state_quality(state: MatchState) -> MatchQuality | None:
     """The :class:`MatchQuality` of the state's map and confidence (``None`` without a
-    confidence), or the one a nested match judged the map with (``state.quality``); a whole's
-    vertices without a counterpart on the part (the partial stage's ``counterpart``) have no
-    right match to find, and the pair is judged on the others."""
-    if state.quality is not None:
-        return state.quality
+    confidence; a map lifted from a common resolution has that match's confidence, carried
+    to each vertex); a whole's vertices without a counterpart on the part (the partial
+    stage's ``counterpart``) have no right match to find, and the pair is judged on the
+    others."""
     if state.confidence is None:
         return None
     assert state.f is not None  # a confidence comes with a map

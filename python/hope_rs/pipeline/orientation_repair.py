@@ -50,7 +50,7 @@ from scipy.spatial import cKDTree
 from ..geometry.mesh import Mesh, boundary_edges
 from ..shape import Shape
 from .anchors import anchor_step, firm_regions
-from .confidence import map_quality
+from .confidence import map_quality, state_quality
 from .lmd import local_map_distortion
 from .progress import ProgressEvent
 from .state import QUIET, MatchState, Stage
@@ -144,6 +144,10 @@ class _Hypotheses:
         self.turned: dict[str, float] = {}
         #: Per trial label, whether the confidence's rule flags the map (``on_failed`` only).
         self.failed: dict[str, bool] = {}
+        #: Whether a refined map is judged by the confidence's rule: not after a lift from a
+        #: common resolution (a confidence carried over), whose many-to-one maps it flags
+        #: however right.
+        self.judged = self.cfg.on_failed and state.confidence is None
         self.notes: list[str] = []
         self.sym: np.ndarray | None = None
 
@@ -156,7 +160,7 @@ class _Hypotheses:
         f = self.internal(t)
         label = t.candidate.label
         self.turned[label] = self.tf.share(f)
-        if self.cfg.on_failed:
+        if self.judged:
             c = t.candidate
             hope = None if t.result.hope_map is None else c.a.map_in(c.b, t.result.hope_map)
             q = map_quality(a, b, f, hope, t.zoomout, self.state.config)
@@ -282,11 +286,14 @@ class OrientStage(Stage):
         if share <= cfg.min_turned and cfg.on_failed:
             # A map wrong on a whole region can turn little over (a swapped pair of limbs,
             # or a mirror image whose seams tear) yet fail the confidence's rule.
-            # A map lifted from a match at a common resolution has that match's verdict: a
-            # dense A's many-to-one map keeps few of its 2-rings' distances however right.
-            q = state.quality or map_quality(
-                state.a, state.b, state.f, state.hope_map, state.zoomout, state.config
-            )
+            # A map lifted from a match at a common resolution carries that match's
+            # confidence: a dense A's many-to-one map keeps few of its 2-rings' distances
+            # however right, so it is not measured again here.
+            q = state_quality(state) if state.confidence is not None else None
+            if q is None:
+                q = map_quality(
+                    state.a, state.b, state.f, state.hope_map, state.zoomout, state.config
+                )
             flagged = q.likely_failed
             self._why += f", flagged likely failed (mean confidence {q.mean_confidence:.2f})"
         state.timings["orient"] = time.perf_counter() - t
@@ -314,7 +321,10 @@ class OrientStage(Stage):
         # The maps derived from the stage's own first; then other starts (a swapped pair of
         # limbs comes back neither mirrored nor re-seeded), in the order of the hypotheses.
         tried = hyp.from_derived(f, share)
-        for start in (h for h in cfg.hypotheses if h in ("wks", "reverse", "reverse_wks")):
+        starts = [h for h in cfg.hypotheses if h in ("wks", "reverse", "reverse_wks")]
+        if state.config.initial.descriptor == "wks":
+            starts = [h for h in starts if h != "reverse_wks"]  # the same as "reverse"
+        for start in starts:
             if good_enough(tried):
                 break
             if start == "wks":
@@ -353,9 +363,9 @@ class OrientStage(Stage):
             # The refinement the caller's callback saw stays the state's history.
             adopt(state, kept, maps_only=True)
             state.zoomout = kept.zoomout
-            # A verdict carried over from a match at a common resolution judged the map
-            # replaced here; the pair is judged on the new map at the end.
-            state.quality = None
+            # A confidence carried over from a match at a common resolution belongs to the
+            # map replaced here; the confidence stage measures the new one.
+            state.confidence = None
         state.timings["orient"] += time.perf_counter() - t
         scored = "; ".join(
             f"{x.candidate.label}: {hyp.turned[x.candidate.label]:.0%} turned, "

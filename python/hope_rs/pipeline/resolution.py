@@ -30,12 +30,12 @@ vertices, the "resolution" stage
    vertex is itself). Kept only when the finish ran: shapes remeshed independently share no
    faces, and there the HOPE steps alone did worse than the lift.
 
-The map is final, and its confidence and the pair's verdict (``MatchResult.quality``) are the
-coarse match's (each dense vertex of A takes its coarse vertex's): a dense A's many-to-one map
-to a sparse B keeps few of its 2-rings' distances however right it is. The stages after it do
-not run, but for the orient stage, which measures the share of A the lifted map turns over
-at full resolution (the lift can turn over a region the coarse map did not) and takes the
-verdict carried over (docs/decisions.md#resolution).
+The map is final, and its confidence is the coarse match's (each dense vertex of A takes its
+coarse vertex's): a dense A's many-to-one map to a sparse B keeps few of its 2-rings'
+distances however right it is. The pair is judged (``MatchResult.quality``) on that
+confidence and the share of A the lifted map turns over at full resolution. The stages after
+it do not run, but for the orient stage, which runs on that judgement; a map it adopts
+instead has its confidence measured at full resolution (docs/decisions.md#resolution).
 """
 
 from __future__ import annotations
@@ -190,7 +190,6 @@ class ResolutionStage(Stage):
             # few of its 2-rings' distances however right it is.
             c = res.confidence
             state.confidence = c[coarse.owner] if self.side == "a" else c[a.order]
-        state.quality = res.quality
         state.timings.update({f"resolution.{k}": v for k, v in res.timings.items()})
         state.timings["resolution"] = time.perf_counter() - t
         state.log.ran(

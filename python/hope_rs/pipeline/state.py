@@ -28,7 +28,7 @@ from .config import MatchConfig
 from .iteration import Iteration, StepClock
 from .part_info import PartialInfo
 from .progress import StageLog
-from .result import MatchQuality, MatchResult
+from .result import MatchResult
 
 __all__ = [
     "EVENTS",
@@ -147,9 +147,6 @@ class MatchState:
         The spectral pass's ZoomOut map, when it computed one.
     confidence : ndarray or None
         Per vertex of A, the confidence in the final map (the confidence stage).
-    quality : MatchQuality or None
-        The pair's verdict when a nested match made the map and judged it (the resolution
-        stage's); ``None``: judged from the confidence and the map at the end.
     landmarks : (m, 2) ndarray of int or None
         The caller's landmarks (vertex of A, vertex of B), rows sorted by A's vertex; ``None``
         when there are none.
@@ -174,7 +171,6 @@ class MatchState:
     coarse: MatchResult | None = None
     zoomout: np.ndarray | None = None
     confidence: np.ndarray | None = None
-    quality: MatchQuality | None = None
     landmarks: np.ndarray | None = None
     partial: PartialInfo | None = None
 
