@@ -95,11 +95,14 @@ def map_quality(
     hope: np.ndarray | None,
     zoomout: np.ndarray | None,
     config: MatchConfig,
+    *,
+    flipped: float | None = None,
 ) -> MatchQuality:
     """The :class:`MatchQuality` the confidence stage would give the map ``f`` of two whole
     shapes, with HOPE's and ZoomOut's maps ``hope`` and ``zoomout`` (internal numbering;
     ``None``: not available), under ``config``'s confidence and refinement settings (whether
-    or not ``config`` asks for a confidence)."""
+    or not ``config`` asks for a confidence); ``flipped``: the map's :func:`flipped_share`
+    when the caller has measured it."""
     cfg = config.confidence
     x = confidence_features(
         a,
@@ -112,7 +115,9 @@ def map_quality(
         repair=config.refine.repair,
     )
     confidence = vertex_confidence(a, b, f, x, cfg)
-    return match_quality(confidence, cfg, flipped=flipped_share(a, b, f))
+    if flipped is None:
+        flipped = flipped_share(a, b, f)
+    return match_quality(confidence, cfg, flipped=flipped)
 
 
 def state_quality(state: MatchState) -> MatchQuality | None:

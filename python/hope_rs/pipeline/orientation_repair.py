@@ -50,7 +50,7 @@ from scipy.spatial import cKDTree
 from ..geometry.mesh import Mesh, boundary_edges
 from ..shape import Shape
 from .anchors import anchor_step, firm_regions
-from .confidence import map_quality, state_quality
+from .confidence import map_quality, match_quality
 from .lmd import local_map_distortion
 from .progress import ProgressEvent
 from .state import QUIET, MatchState, Stage
@@ -163,7 +163,7 @@ class _Hypotheses:
         if self.judged:
             c = t.candidate
             hope = None if t.result.hope_map is None else c.a.map_in(c.b, t.result.hope_map)
-            q = map_quality(a, b, f, hope, t.zoomout, self.state.config)
+            q = map_quality(a, b, f, hope, t.zoomout, self.state.config, flipped=self.turned[label])
             self.failed[label] = q.likely_failed
         return -map_cost(a, b, f, self.tf, self.cfg.distortion_weight)
 
@@ -289,11 +289,11 @@ class OrientStage(Stage):
             # A map lifted from a match at a common resolution carries that match's
             # confidence: a dense A's many-to-one map keeps few of its 2-rings' distances
             # however right, so it is not measured again here.
-            q = state_quality(state) if state.confidence is not None else None
-            if q is None:
-                q = map_quality(
-                    state.a, state.b, state.f, state.hope_map, state.zoomout, state.config
-                )
+            if state.confidence is not None:
+                q = match_quality(state.confidence, state.config.confidence, flipped=share)
+            else:
+                a, b, f = state.a, state.b, state.f
+                q = map_quality(a, b, f, state.hope_map, state.zoomout, state.config, flipped=share)
             flagged = q.likely_failed
             self._why += f", flagged likely failed (mean confidence {q.mean_confidence:.2f})"
         state.timings["orient"] = time.perf_counter() - t
