@@ -10,6 +10,7 @@ from meshes import bumpy_sphere
 import hope_rs
 from hope_rs.evaluation.datasets import pairs_of
 from hope_rs.evaluation.evaluate import geodesic_errors
+from hope_rs.evaluation.perturbed import Welded, clean_errors, weld_shortcuts
 from hope_rs.geometry.mesh import load_mesh
 from hope_rs.pipeline.confidence import turned_factor
 from hope_rs.pipeline.config import ConfidenceConfig, MatchConfig, OrientConfig
@@ -58,6 +59,8 @@ def test_confidence_is_lowered_where_the_map_turns_over():
 def test_config_checks_the_hypotheses():
     with pytest.raises(ValueError, match="hypotheses"):
         OrientConfig(hypotheses=("mirror", "spin"))
+    with pytest.raises(ValueError, match="topology_hypotheses"):
+        OrientConfig(topology_hypotheses="reverse")
     with pytest.raises(ValueError, match="min_turned"):
         OrientConfig(min_turned=1.5)
     with pytest.raises(ValueError, match="turned_weight"):
@@ -198,3 +201,48 @@ def test_a_flagged_map_that_turns_little_over_is_repaired(mirrored_start):
     assert "chose kept" not in info.reason
     assert not res.quality.likely_failed
     assert geodesic_errors(b, res.map).mean() < 0.01
+
+
+def test_a_weld_lowers_the_euler_characteristic():
+    m = hope_rs.Mesh(*bumpy_sphere(400, 5))
+    assert hope_rs.Shape(m).euler_characteristic == 2
+    far = int(np.argmax(np.linalg.norm(m.vertices - m.vertices[0], axis=1)))
+    assert hope_rs.Shape(Welded(m, np.array([[0, far]])).mesh).euler_characteristic == 1
+
+
+def test_shapes_of_different_topology_run_the_stage_with_its_topology_hypotheses():
+    # A sphere onto itself with two far-apart vertices welded: the map keeps the orientation
+    # and is not flagged, so only the topology calls for the stage.
+    m = hope_rs.Mesh(*bumpy_sphere(400, 6))
+    far = int(np.argmax(np.linalg.norm(m.vertices - m.vertices[0], axis=1)))
+    welded = Welded(m, np.array([[0, far]])).mesh
+    cfg = dataclasses.replace(MatchConfig(), orient=OrientConfig(topology_hypotheses=("reverse",)))
+    info = hope_rs.match(m, welded, config=cfg, max_passes=1).stage("orient")
+    assert info.ran and "differ in topology (Euler characteristics 2 and 1)" in info.reason
+    assert [t.label for t in info.trials] == ["kept", "B to A", "reverse"]
+    off = dataclasses.replace(cfg, orient=OrientConfig(on_topology=False))
+    info = hope_rs.match(m, welded, config=off, max_passes=1).stage("orient")
+    assert not info.ran and "at most 20%" in info.reason
+
+
+@pytest.mark.slow
+def test_a_map_misled_by_topological_shortcuts_is_repaired():
+    # FAUST remeshed 002 -> 007 with B welded where it nearly touches itself (the shortcuts
+    # set's rule): without the stage a region next to a weld lands on the wrong side; the
+    # stage runs because the topologies differ and keeps a cheaper map.
+    ma, mb, ai, bi = shared_pair("faust_r", "tr_reg_002->tr_reg_007")
+    w = weld_shortcuts(mb)
+    assert w.welds.shape[0] >= 3
+    off = dataclasses.replace(MatchConfig(), orient=OrientConfig(on_topology=False))
+    before = hope_rs.match(ma, w.mesh, config=off)
+    res = hope_rs.match(ma, w.mesh)
+    info = res.stage("orient")
+    assert info.ran and "differ in topology" in info.reason
+    scores = {t.label: t.score for t in info.trials if t.score is not None}
+    (kept,) = [t for t in info.trials if t.kept]
+    assert kept.score == max(scores.values())
+
+    def err(m):
+        return clean_errors(mb, m, w.origin, w.welds, ai, bi, method="graph").mean()
+
+    assert err(res.map) < 0.045 and err(res.map) <= err(before.map)

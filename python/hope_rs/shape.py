@@ -117,6 +117,12 @@ class Shape:
             self._edges = unique_edges(self.internal.faces)
         return self._edges
 
+    @property
+    def euler_characteristic(self) -> int:
+        """V - E + F of the mesh: 2 for a closed surface of genus 0, 2 less for each handle,
+        1 less for each boundary loop and for each vertex where two sheets are welded."""
+        return self.n_vertices - self.edges.shape[0] + self.internal.faces.shape[0]
+
     def ring_average(self) -> sp.csr_matrix:
         """The operator averaging a vertex function over each closed 1-ring of the internal
         mesh (rows sum to 1), built once."""

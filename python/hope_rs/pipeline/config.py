@@ -837,6 +837,13 @@ class OrientConfig:
         inverted; "wks": the pipeline from WKS; "reverse_wks": from the match of B to A from
         WKS, inverted, kept only when it passes the stop rule), the derived ones first, then
         the others in the order given, until one turns at most ``min_turned`` over.
+    on_topology : bool
+        The stage also tries other maps when neither rule above calls for it but the two
+        shapes differ in topology (their Euler characteristics: a topological shortcut, as
+        where a hand touches a thigh in a scan, or a handle), which misleads the k-hop balls
+        and the geodesic distances near it ...
+    topology_hypotheses : tuple of str
+        ... with these hypotheses (as ``hypotheses``) and the same stop rule.
     seam_rings : int
         1-rings added around the turned-over vertices for the regional hypotheses.
     distortion_weight : float
@@ -861,6 +868,8 @@ class OrientConfig:
         "wks",
         "reverse_wks",
     )
+    on_topology: bool = True
+    topology_hypotheses: tuple[str, ...] = ("reseed", "reverse")
     seam_rings: int = 2
     distortion_weight: float = field(default=1.0, metadata={"finite": True})
     min_gain: float = field(default=0.02, metadata={"finite": True})
@@ -868,12 +877,14 @@ class OrientConfig:
 
     def __post_init__(self):
         known = ("mirror", "mirror_turned", "reseed", "wks", "reverse", "reverse_wks")
-        bad = [h for h in self.hypotheses if h not in known]
-        if isinstance(self.hypotheses, str) or bad:
-            raise ValueError(
-                f"OrientConfig.hypotheses must be a tuple of {', '.join(known)}, "
-                f"got {self.hypotheses!r}"
-            )
+        for name in ("hypotheses", "topology_hypotheses"):
+            value = getattr(self, name)
+            bad = [h for h in value if h not in known]
+            if isinstance(value, str) or bad:
+                raise ValueError(
+                    f"OrientConfig.{name} must be a tuple of {', '.join(known)}, got {value!r}"
+                )
+            object.__setattr__(self, name, tuple(value))
         if not (_is_number(self.min_turned) and 0.0 <= self.min_turned <= 1.0):
             raise ValueError(
                 f"OrientConfig.min_turned must be a number in [0, 1], got {self.min_turned!r}"
@@ -881,7 +892,6 @@ class OrientConfig:
         r = self.seam_rings
         if isinstance(r, bool) or not isinstance(r, numbers.Integral) or r < 0:
             raise ValueError(f"OrientConfig.seam_rings must be an integer >= 0, got {r!r}")
-        object.__setattr__(self, "hypotheses", tuple(self.hypotheses))
 
 
 @dataclass(frozen=True)

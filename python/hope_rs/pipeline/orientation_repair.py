@@ -6,14 +6,17 @@ image (a left leg onto the right one, a whole body onto its mirror image) keeps 
 distance, so the refinement and LMD cannot see it, but it turns that region's triangles over.
 When the final map turns more than ``OrientConfig.min_turned`` of A's area over, or turns
 less over but the confidence's rule flags it (``OrientConfig.on_failed``,
-:func:`~hope_rs.pipeline.confidence.map_quality`), this stage
+:func:`~hope_rs.pipeline.confidence.map_quality`), or the two shapes differ in topology
+(``OrientConfig.on_topology``: a topological shortcut leads the k-hop balls and geodesic
+distances across it, and the map can put a region near it on the wrong side), this stage
 builds alternative maps (hypotheses), refines them through the rest of the pipeline and keeps
 whichever of them and the map it started from scores best (:func:`map_cost`: turned-over
 share plus LMD inconsistency). Each refined hypothesis is a trial of
 :mod:`hope_rs.pipeline.trials` (recorded in ``res.stage("orient").trials`` with minus its
 cost as score, the kept one marked); the kept one becomes the state's map.
 
-The hypotheses (``OrientConfig.hypotheses``):
+The hypotheses (``OrientConfig.hypotheses``; ``topology_hypotheses`` when only the topology
+calls for the stage):
 
 * ``"mirror"``: the map composed with B's intrinsic left/right symmetry, everywhere;
 * ``"mirror_turned"``: the same, on the turned-over regions only;
@@ -135,9 +138,11 @@ class _Hypotheses:
     """The stage's candidates: the maps derived from the state's map and the other starts,
     each refined as a trial; scored by minus :func:`map_cost`."""
 
-    def __init__(self, state: MatchState, tf: TurnedFaces):
+    def __init__(self, state: MatchState, tf: TurnedFaces, names: tuple[str, ...]):
         self.state, self.tf = state, tf
         self.cfg = state.config.orient
+        #: The hypotheses tried (``OrientConfig.hypotheses`` or ``.topology_hypotheses``).
+        self.names = names
         self.nested = _nested_config(state)
         self.progress: Callable = _Relay(state)
         #: Turned-over share per trial label (the notes of the stage's reason).
@@ -203,11 +208,11 @@ class _Hypotheses:
 
     def derived(self, f: np.ndarray) -> dict[str, np.ndarray]:
         """The unrefined maps derived from ``f`` (internal numbering) by the derived
-        hypotheses of ``OrientConfig.hypotheses`` ("mirror", "mirror_turned", "reseed")."""
+        hypotheses tried ("mirror", "mirror_turned", "reseed")."""
         cfg, a, b = self.cfg, self.state.a, self.state.b
         region = turned_regions(a, self.tf.vertices(f, 0.5), cfg.seam_rings)
         out = {}
-        for name in cfg.hypotheses:
+        for name in self.names:
             if name in ("mirror", "mirror_turned"):
                 sym = self.symmetry()
                 out[name] = sym[f] if name == "mirror" else np.where(region, sym[f], f)
@@ -251,8 +256,8 @@ class _Hypotheses:
 
 class OrientStage(Stage):
     """The "orient" stage (see the module notes); runs when the map turns more than
-    ``OrientConfig.min_turned`` of A's area over or is flagged likely failed, on whole closed
-    shapes without landmarks."""
+    ``OrientConfig.min_turned`` of A's area over, is flagged likely failed or the shapes
+    differ in topology, on whole closed shapes without landmarks."""
 
     name = "orient"
     #: A map another stage found final can still be a mirror image (LMD trusts it everywhere).
@@ -263,6 +268,8 @@ class OrientStage(Stage):
         self._turned: TurnedFaces | None = None
         #: Why the stage runs (its log line).
         self._why = ""
+        #: The hypotheses it tries.
+        self._names: tuple[str, ...] = ()
 
     def skip_reason(self, state: MatchState):
         cfg = state.config.orient
@@ -282,6 +289,7 @@ class OrientStage(Stage):
         self._turned = TurnedFaces(state.a, state.b)
         share = self._turned.share(state.f)
         self._why = f"{share:.0%} of A turned over"
+        self._names = cfg.hypotheses
         flagged = False
         if share <= cfg.min_turned and cfg.on_failed:
             # A map wrong on a whole region can turn little over (a swapped pair of limbs,
@@ -295,13 +303,20 @@ class OrientStage(Stage):
                 a, b, f = state.a, state.b, state.f
                 q = map_quality(a, b, f, state.hope_map, state.zoomout, state.config, flipped=share)
             flagged = q.likely_failed
-            self._why += f", flagged likely failed (mean confidence {q.mean_confidence:.2f})"
-        state.timings["orient"] = time.perf_counter() - t
-        if share <= cfg.min_turned and not flagged:
-            return f"{share:.0%} of A's area turned over (at most {cfg.min_turned:.0%})" + (
-                ", not flagged" if cfg.on_failed else ""
+            self._why += (", flagged likely failed" if flagged else ", not flagged") + (
+                f" (mean confidence {q.mean_confidence:.2f})"
             )
-        return None
+        state.timings["orient"] = time.perf_counter() - t
+        if share > cfg.min_turned or flagged:
+            return None
+        ea, eb = state.a.euler_characteristic, state.b.euler_characteristic
+        if cfg.on_topology and ea != eb:
+            self._why += f"; the shapes differ in topology (Euler characteristics {ea} and {eb})"
+            self._names = cfg.topology_hypotheses
+            return None
+        return f"{share:.0%} of A's area turned over (at most {cfg.min_turned:.0%})" + (
+            ", not flagged" if cfg.on_failed else ""
+        )
 
     def run(self, state: MatchState) -> None:
         cfg = state.config.orient
@@ -310,7 +325,7 @@ class OrientStage(Stage):
         assert tf is not None and f is not None  # skip_reason measured the final map
         share = tf.share(f)
         state.log.start("orient", detail=f"{self._why}: trying other maps")
-        hyp = _Hypotheses(state, tf)
+        hyp = _Hypotheses(state, tf, self._names)
         own = current(state, "orient", "kept")
         own.score = own.record.score = hyp.score(own)
         min_score = own.score + cfg.min_gain
@@ -321,7 +336,7 @@ class OrientStage(Stage):
         # The maps derived from the stage's own first; then other starts (a swapped pair of
         # limbs comes back neither mirrored nor re-seeded), in the order of the hypotheses.
         tried = hyp.from_derived(f, share)
-        starts = [h for h in cfg.hypotheses if h in ("wks", "reverse", "reverse_wks")]
+        starts = [h for h in self._names if h in ("wks", "reverse", "reverse_wks")]
         if state.config.initial.descriptor == "wks":
             starts = [h for h in starts if h != "reverse_wks"]  # the same as "reverse"
         for start in starts:
