@@ -208,6 +208,11 @@ def test_a_weld_lowers_the_euler_characteristic():
     assert hope_rs.Shape(m).euler_characteristic == 2
     far = int(np.argmax(np.linalg.norm(m.vertices - m.vertices[0], axis=1)))
     assert hope_rs.Shape(Welded(m, np.array([[0, far]])).mesh).euler_characteristic == 1
+    # A vertex no face uses and a repeated face change nothing.
+    stray = hope_rs.Mesh(np.vstack([m.vertices, [[9.0, 9.0, 9.0]]]), m.faces)
+    assert hope_rs.Shape(stray).euler_characteristic == 2
+    twice = hope_rs.Mesh(m.vertices, np.vstack([m.faces, m.faces[:1, ::-1]]))
+    assert hope_rs.Shape(twice).euler_characteristic == 2
 
 
 def test_shapes_of_different_topology_run_the_stage_with_its_topology_hypotheses():

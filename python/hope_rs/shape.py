@@ -119,9 +119,13 @@ class Shape:
 
     @property
     def euler_characteristic(self) -> int:
-        """V - E + F of the mesh: 2 for a closed surface of genus 0, 2 less for each handle,
-        1 less for each boundary loop and for each vertex where two sheets are welded."""
-        return self.n_vertices - self.edges.shape[0] + self.internal.faces.shape[0]
+        """V - E + F of the mesh's faces (vertices no face uses and repeated faces not
+        counted): 2 for a closed surface of genus 0, 2 less for each handle, 1 less for each
+        boundary loop and for each vertex where two sheets are welded, 2 more for each
+        further component."""
+        faces = self.internal.faces
+        n_faces = np.unique(np.sort(faces, axis=1), axis=0).shape[0]
+        return int(np.unique(faces).size - self.edges.shape[0] + n_faces)
 
     def ring_average(self) -> sp.csr_matrix:
         """The operator averaging a vertex function over each closed 1-ring of the internal

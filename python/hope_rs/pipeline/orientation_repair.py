@@ -30,7 +30,7 @@ calls for the stage):
   keeps the orientation); kept only when it passes the stop rule below, never derived from.
 
 The derived hypotheses are unrefined maps; the one turning the least over is refined. The
-other starts follow in the order of ``OrientConfig.hypotheses``; after each, while no refined
+other starts follow in the order of the hypotheses tried; after each, while no refined
 map turns at most ``min_turned`` over, the maps derived from that start's refined map (if it
 beats the stage's own) are tried too (``OrientConfig.again``). The
 stage stops at the first refined map that turns at most ``min_turned`` over, costs less and
@@ -306,13 +306,17 @@ class OrientStage(Stage):
             self._why += (", flagged likely failed" if flagged else ", not flagged") + (
                 f" (mean confidence {q.mean_confidence:.2f})"
             )
+        differ = False
+        if share <= cfg.min_turned and not flagged and cfg.on_topology:
+            ea, eb = state.a.euler_characteristic, state.b.euler_characteristic
+            if ea != eb:
+                differ = True
+                self._why += (
+                    f"; the shapes differ in topology (Euler characteristics {ea} and {eb})"
+                )
+                self._names = cfg.topology_hypotheses
         state.timings["orient"] = time.perf_counter() - t
-        if share > cfg.min_turned or flagged:
-            return None
-        ea, eb = state.a.euler_characteristic, state.b.euler_characteristic
-        if cfg.on_topology and ea != eb:
-            self._why += f"; the shapes differ in topology (Euler characteristics {ea} and {eb})"
-            self._names = cfg.topology_hypotheses
+        if share > cfg.min_turned or flagged or differ:
             return None
         return f"{share:.0%} of A's area turned over (at most {cfg.min_turned:.0%})" + (
             ", not flagged" if cfg.on_failed else ""
@@ -388,9 +392,5 @@ class OrientStage(Stage):
             + (", flagged" if hyp.failed.get(x.candidate.label) else "")
             for x in (own, *tried)
         )
-        notes = "; ".join(hyp.notes)
-        state.log.ran(
-            "orient",
-            state.timings["orient"],
-            f"{self._why}; {notes}; {scored}; chose {kept.candidate.label}",
-        )
+        parts = [self._why, *hyp.notes, scored, f"chose {kept.candidate.label}"]
+        state.log.ran("orient", state.timings["orient"], "; ".join(parts))
