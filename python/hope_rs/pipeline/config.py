@@ -486,6 +486,12 @@ class ResolutionConfig:
         The pass runs only when this share of the vertices are handles of the lifted map
         (:func:`~hope_rs.pipeline.handles.face_handles`): shapes remeshed independently have
         almost none, and there the pass would cost time for nothing.
+    follow_density : bool
+        When A is the denser shape, match again (from the descriptors) at a copy of A whose
+        vertices lie as B's do: for each vertex of B, the vertex of A nearest the centroid of
+        those the first lifted map sends there, every other vertex collapsed into its nearest
+        such site; the lift of that match is kept. A template denser at its hands and face
+        than a uniform copy of a scan then meets like neighbourhoods there.
     """
 
     enabled: bool = True
@@ -494,6 +500,7 @@ class ResolutionConfig:
     refine: bool = True
     refine_schedule: tuple[int, ...] = (3, 2, 1)
     refine_min_handles: float = field(default=0.04, metadata={"range": (0.0, 1.0)})
+    follow_density: bool = True
 
     def __post_init__(self):
         _set_radii(self, "refine_schedule", "ResolutionConfig.refine_schedule must be")

@@ -48,14 +48,17 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..geometry.coarsen import Coarse
-from ..geometry.collapse import collapse_to_count
+from ..geometry.collapse import collapse_to_count, collapse_to_sites
 from ..geometry.subdivide import subdivide
 from ..shape import Shape
+from .confidence import match_quality
 from .handles import face_handles
 from .landmarks import coarse_landmarks
 from .multiscale import lift_map
+from .result import MatchResult
 from .shared_faces import qualifies
 from .state import QUIET, Halt, MatchState, Stage
+from .turned import TurnedFaces
 
 __all__ = ["ResolutionStage", "denser_side", "density", "subdivisions"]
 
@@ -90,6 +93,25 @@ def subdivided_copy(shape: Shape, times: int) -> Shape:
     return Shape(mesh, k_max=shape.k_max, orient=False, config=shape.config)
 
 
+def sites_like(f: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Vertices of a dense A placed as B's vertices lie under the many-to-one map ``f`` (A →
+    B, internal numberings): for each vertex of B that ``f`` reaches, the vertex sent there
+    nearest the centroid of those sent there (sorted)."""
+    order = np.argsort(f, kind="stable")
+    fs = f[order]
+    starts = np.flatnonzero(np.r_[True, fs[1:] != fs[:-1]])
+    counts = np.diff(np.r_[starts, fs.size])
+    cluster = np.repeat(np.arange(starts.size), counts)
+    centroid = np.zeros((starts.size, 3))
+    np.add.at(centroid, cluster, points[order])
+    centroid /= counts[:, None]
+    d = np.linalg.norm(points[order] - centroid[cluster], axis=1)
+    # The nearest member of each cluster: sort by (cluster, distance), take each first.
+    by = np.lexsort((d, cluster))
+    first = np.r_[True, cluster[by][1:] != cluster[by][:-1]]
+    return np.sort(order[by[first]])
+
+
 def coarse_copy(shape: Shape, n_target: int, tolerance: float) -> tuple[Coarse, Shape] | None:
     """(Coarse, its Shape) of ``shape``'s internal mesh with about ``n_target`` vertices, by
     manifold-keeping edge collapses (:func:`hope_rs.geometry.collapse.collapse_to_count`), or
@@ -112,6 +134,7 @@ class ResolutionStage(Stage):
     def __init__(self):
         self.side: str | None = None
         self.start_handles = 0.0  # share of handles of the refinement's start
+        self._turned: TurnedFaces | None = None
 
     def skip_reason(self, state: MatchState):
         cfg = state.config.resolution
@@ -134,6 +157,7 @@ class ResolutionStage(Stage):
             f"times denser than the other ({sparse.n_vertices})"
         )
         t = state.log.start("resolution", detail=detail)
+        self._turned = None  # A's turned-over triangles on B, built when first asked
         level = coarse_copy(dense, sparse.n_vertices, cfg.resolution.count_tolerance)
         if level is None:
             state.timings["resolution"] = time.perf_counter() - t
@@ -141,40 +165,32 @@ class ResolutionStage(Stage):
             state.log.ran("resolution", state.timings["resolution"], why)
             return None
         coarse, cs = level
-        ident_a = np.arange(a.n_vertices)
-        ident_b = np.arange(b.n_vertices)
-        lm = None
-        if state.landmarks is not None:
-            owner_a = coarse.owner if self.side == "a" else ident_a
-            owner_b = coarse.owner if self.side == "b" else ident_b
-            lm = coarse_landmarks(state.landmarks, owner_a, owner_b)
-            if lm is not None and self.side != "a":
-                lm[:, 0] = a.order[lm[:, 0]]  # A keeps its own input numbering
-            if lm is not None and self.side != "b":
-                lm[:, 1] = b.order[lm[:, 1]]
         nested = dataclasses.replace(
             cfg,
             resolution=dataclasses.replace(cfg.resolution, enabled=False),
             multiscale=dataclasses.replace(cfg.multiscale, enabled=False),
         )
-        pa, pb = (cs, b) if self.side == "a" else (a, cs)
-        assert state.run is not None  # the runner gives every state its nested runner
-        res = state.run(pa, pb, state.init, nested, callback=state.callback, landmarks=lm)
-        ridge = cfg.multiscale.lift_ridge
-        if self.side == "b":
-            # Each vertex of A is its own coarse vertex; its image a vertex of the coarse B.
-            g = res.map[a.order]
-            ident = np.arange(a.n_vertices)
-            f = lift_map(a.internal, coarse.mesh, g, a.points, ident, b.points, ridge, True)
-        else:
-            g = b.rank[res.map]  # coarse vertex (the copy's input numbering) -> B internal
-
-            def lift(points_b: np.ndarray) -> np.ndarray:
-                return lift_map(
-                    coarse.mesh, b.internal, g, a.points, coarse.owner, points_b, ridge, True
-                )
-
-            f = lift(b.points)
+        res, f, lift = self.lifted(state, coarse, cs, nested)
+        counts = f"{cs.n_vertices} vertices"
+        if (
+            self.side == "a"
+            and cfg.resolution.follow_density
+            and self.trusted(state, res, coarse, f)
+        ):
+            # Again at a copy of A whose vertices lie as densely as B's do where the map sends
+            # them: a uniform copy against a template denser at its hands and face compares
+            # unlike k-hop balls there, and can put a hand on a thigh. Only from a map that
+            # passes (a wrong one places the density wrongly), and kept only if it passes too.
+            second = collapse_to_sites(dense.internal, sites_like(f, dense.points))
+            if len(second.mesh.faces):
+                cs2 = Shape(second.mesh, k_max=dense.k_max, orient=False, config=dense.config)
+                state.timings["resolution.first"] = time.perf_counter() - t
+                again = self.lifted(state, second, cs2, nested)
+                if self.trusted(state, again[0], second, again[1]):
+                    coarse, cs, (res, f, lift) = second, cs2, again
+                    counts += f", then at {cs.n_vertices} placed as densely as B's"
+                else:
+                    counts += f" (not at {cs2.n_vertices} placed as densely as B's: that map fails)"
         f = f.astype(np.int64)
         note = ""
         if cfg.resolution.refine and state.landmarks is None:
@@ -195,9 +211,60 @@ class ResolutionStage(Stage):
         state.log.ran(
             "resolution",
             state.timings["resolution"],
-            f"{detail}: {name} clustered to {cs.n_vertices} vertices, matched there, lifted{note}",
+            f"{detail}: {name} clustered to {counts}, matched there, lifted{note}",
         )
         return Halt(f"the map is lifted from the match at {cs.n_vertices} vertices of {name}")
+
+    def trusted(self, state: MatchState, res: MatchResult, coarse: Coarse, f: np.ndarray) -> bool:
+        """Whether the lifted map ``f`` of a dense A passes: it turns at most
+        ``OrientConfig.min_turned`` of A's area over and the confidence's rule, on the
+        confidence carried over from the match ``res`` at a common resolution, does not flag
+        it."""
+        if self._turned is None:
+            self._turned = TurnedFaces(state.a, state.b)
+        share = self._turned.share(f)
+        if share > state.config.orient.min_turned:
+            return False
+        if res.confidence is None:
+            return True
+        carried = res.confidence[coarse.owner]
+        return not match_quality(carried, state.config.confidence, flipped=share).likely_failed
+
+    def lifted(
+        self, state: MatchState, coarse: Coarse, cs: Shape, nested
+    ) -> tuple[MatchResult, np.ndarray, Callable[[np.ndarray], np.ndarray] | None]:
+        """The pair matched with the denser shape's copy ``cs`` (of ``coarse``) and the map
+        lifted to full resolution: ``(the nested result, the lifted map (internal
+        numbering), the lift onto given points of B when A is the denser shape)``."""
+        a, b, cfg = state.a, state.b, state.config
+        lm = None
+        if state.landmarks is not None:
+            ident_a, ident_b = np.arange(a.n_vertices), np.arange(b.n_vertices)
+            owner_a = coarse.owner if self.side == "a" else ident_a
+            owner_b = coarse.owner if self.side == "b" else ident_b
+            lm = coarse_landmarks(state.landmarks, owner_a, owner_b)
+            if lm is not None and self.side != "a":
+                lm[:, 0] = a.order[lm[:, 0]]  # A keeps its own input numbering
+            if lm is not None and self.side != "b":
+                lm[:, 1] = b.order[lm[:, 1]]
+        pa, pb = (cs, b) if self.side == "a" else (a, cs)
+        assert state.run is not None  # the runner gives every state its nested runner
+        res = state.run(pa, pb, state.init, nested, callback=state.callback, landmarks=lm)
+        ridge = cfg.multiscale.lift_ridge
+        if self.side == "b":
+            # Each vertex of A is its own coarse vertex; its image a vertex of the coarse B.
+            g = res.map[a.order]
+            ident = np.arange(a.n_vertices)
+            f = lift_map(a.internal, coarse.mesh, g, a.points, ident, b.points, ridge, True)
+            return res, f.astype(np.int64), None
+        g = b.rank[res.map]  # coarse vertex (the copy's input numbering) -> B internal
+
+        def lift(points_b: np.ndarray) -> np.ndarray:
+            return lift_map(
+                coarse.mesh, b.internal, g, a.points, coarse.owner, points_b, ridge, True
+            )
+
+        return res, lift(b.points).astype(np.int64), lift
 
     def refined(
         self,
