@@ -21,6 +21,14 @@ vertices, the "resolution" stage
    centroid of its images, and takes the vertex of B nearest that point: the coarse map's
    offsets of up to a coarse edge average out over the ring.
 
+   When A is the denser shape and its lifted map passes (at most ``OrientConfig.min_turned``
+   turned over, not flagged on the carried confidence), the pair is matched once more at a
+   copy of A collapsed to sites placed as B's vertices lie under that map (for each vertex of
+   B it reaches, the dense vertex sent there nearest their centroid:
+   :func:`sites_like`), and that lift is kept when it passes too
+   (``ResolutionConfig.follow_density``): a uniform copy against a template denser at its
+   hands and face compares k-hop balls of unlike areas there.
+
 4. refines the lifted map at full resolution (``ResolutionConfig.refine``): the sparser
    shape is subdivided (:func:`hope_rs.geometry.subdivide.subdivide`, each face into four)
    to about the denser one's count, so that k-hop balls on both cover like patches; the pair
