@@ -103,6 +103,7 @@ class Shape:
         self._coarse: tuple[Coarse, Shape] | None | Literal[False] = False
         self._basis: tuple[np.ndarray, np.ndarray] | None = None
         self._edges: np.ndarray | None = None
+        self._euler: int | None = None
         self._ring: sp.csr_matrix | None = None
 
     @property
@@ -123,9 +124,12 @@ class Shape:
         counted): 2 for a closed surface of genus 0, 2 less for each handle, 1 less for each
         boundary loop and for each vertex where two sheets are welded, 2 more for each
         further component."""
-        faces = self.internal.faces
-        n_faces = np.unique(np.sort(faces, axis=1), axis=0).shape[0]
-        return int(np.unique(faces).size - self.edges.shape[0] + n_faces)
+        if self._euler is None:
+            faces = np.sort(self.internal.faces, axis=1)
+            rows = faces[np.lexsort(faces.T[::-1])]  # a 1-D sort per column, not unique(axis=0)
+            n_faces = int(rows.shape[0] > 0) + int(np.any(np.diff(rows, axis=0), axis=1).sum())
+            self._euler = int(np.unique(faces).size - self.edges.shape[0] + n_faces)
+        return self._euler
 
     def ring_average(self) -> sp.csr_matrix:
         """The operator averaging a vertex function over each closed 1-ring of the internal

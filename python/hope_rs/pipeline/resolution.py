@@ -57,6 +57,7 @@ from scipy.spatial import cKDTree
 
 from ..geometry.coarsen import Coarse
 from ..geometry.collapse import collapse_to_count, collapse_to_sites
+from ..geometry.sites import cell_sites
 from ..geometry.subdivide import subdivide
 from ..shape import Shape
 from .confidence import match_quality
@@ -104,20 +105,9 @@ def subdivided_copy(shape: Shape, times: int) -> Shape:
 def sites_like(f: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Vertices of a dense A placed as B's vertices lie under the many-to-one map ``f`` (A →
     B, internal numberings): for each vertex of B that ``f`` reaches, the vertex sent there
-    nearest the centroid of those sent there (sorted)."""
-    order = np.argsort(f, kind="stable")
-    fs = f[order]
-    starts = np.flatnonzero(np.r_[True, fs[1:] != fs[:-1]])
-    counts = np.diff(np.r_[starts, fs.size])
-    cluster = np.repeat(np.arange(starts.size), counts)
-    centroid = np.zeros((starts.size, 3))
-    np.add.at(centroid, cluster, points[order])
-    centroid /= counts[:, None]
-    d = np.linalg.norm(points[order] - centroid[cluster], axis=1)
-    # The nearest member of each cluster: sort by (cluster, distance), take each first.
-    by = np.lexsort((d, cluster))
-    first = np.r_[True, cluster[by][1:] != cluster[by][:-1]]
-    return np.sort(order[by[first]])
+    nearest the centroid of those sent there (:func:`~hope_rs.geometry.sites.cell_sites`
+    with B's vertices as the cells), sorted."""
+    return np.sort(cell_sites(points, f)[0])
 
 
 def coarse_copy(shape: Shape, n_target: int, tolerance: float) -> tuple[Coarse, Shape] | None:
