@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from conftest import data_path
 from meshes import bumpy_sphere, euler_characteristic, mesh_defects
+from scipy.spatial import cKDTree
 
 import hope_rs
 from hope_rs import MatchConfig
@@ -145,11 +146,12 @@ def test_a_much_denser_a_is_judged_at_the_common_resolution(faust_pair):
     assert e.mean() < 0.02
 
 
-def test_a_map_the_orient_stage_adopts_after_a_lift_has_its_confidence_measured(monkeypatch):
+def test_a_map_the_orient_stage_adopts_after_a_lift_carries_its_own_confidence(monkeypatch):
     # The orient stage forced to replace a lifted map (every turned-over share triggers it, and
-    # the best hypothesis replaces the map whatever it costs): the confidence carried over
-    # from the common resolution belonged to the map replaced, so the confidence stage
-    # measures the new one.
+    # the best hypothesis replaces the map whatever it costs). Its hypothesis is matched through
+    # the resolution stage too, from its map carried to the common resolution, and the map it
+    # adopts carries that match's confidence: measured on the many-to-one map at full
+    # resolution the confidence would flag it however right.
     real = orientation_repair.choose
     monkeypatch.setattr(
         orientation_repair, "choose", lambda state, stage, tried, **_: real(state, stage, tried)
@@ -162,10 +164,42 @@ def test_a_map_the_orient_stage_adopts_after_a_lift_has_its_confidence_measured(
     assert "A clustered to" in res.stage("resolution").reason
     orient, confidence = res.stage("orient"), res.stage("confidence")
     assert orient.ran and [t.label for t in orient.trials if t.kept] == ["reverse"]
-    assert confidence.ran, confidence.reason
-    carried = hope_rs.match(dense, sphere)
-    assert not carried.stage("confidence").ran
-    assert "carried over" in carried.stage("confidence").reason
+    assert not confidence.ran and "carried over" in confidence.reason
+    assert res.confidence is not None and res.confidence.shape == (dense.n_vertices,)
+    # Every dense vertex takes its coarse vertex's confidence: the copy's values, repeated.
+    assert np.unique(res.confidence).size <= 0.3 * dense.n_vertices
+    assert not res.quality.likely_failed and res.quality.mean_confidence > 0.5
+
+
+@pytest.mark.parametrize("dense_side", ["a", "b"])
+def test_a_given_initial_map_is_matched_at_the_common_resolution(dense_side):
+    # A start map given for a pair of unlike densities is carried to the coarse copy (each
+    # coarse vertex of a dense A takes its site's image; each vertex of A onto a dense B the
+    # coarse vertex owning its image) and the pair is matched there, then lifted; the
+    # result's init_map stays the map given.
+    sphere = hope_rs.Mesh(*bumpy_sphere(300, 5))
+    dense = subdivide(sphere, 1)
+    n = sphere.n_vertices
+    rng = np.random.default_rng(0)
+    if dense_side == "a":
+        a, b = dense, sphere
+        # Each dense vertex onto the nearest original vertex: right, up to an edge.
+        init = cKDTree(sphere.vertices).query(dense.vertices)[1]
+    else:
+        a, b = sphere, dense
+        init = np.arange(n)
+    # A tenth of the start scrambled: the match must repair it, not only carry it.
+    bad = rng.choice(a.n_vertices, a.n_vertices // 10, replace=False)
+    init = init.copy()
+    init[bad] = rng.integers(0, b.n_vertices, bad.size)
+    res = hope_rs.match(a, b, init=init)
+    stage = res.stage("resolution")
+    assert stage.ran and "clustered to" in stage.reason, stage.reason
+    assert not res.stage("descriptors").ran
+    np.testing.assert_array_equal(res.init_map, init)
+    idx = np.arange(n)
+    e = geodesic_errors(b, res.map[:n] if dense_side == "a" else res.map, a_idx=idx, b_idx=idx)
+    assert e.mean() < 0.03 and np.mean(e > 0.15) < 0.01
 
 
 def test_subdivisions_come_nearest_the_denser_count():
@@ -245,4 +279,27 @@ def test_a_dense_scan_meets_a_template_denser_at_its_hands(tmp_path):
     assert "placed as densely as B's" in res.stage("resolution").reason
     e = geodesic_errors(mb, res.map, a_idx=ai, b_idx=bi)
     assert e.mean() < 0.03 and np.mean(e > 0.15) < 0.005
+    assert not res.quality.likely_failed
+
+
+@pytest.mark.slow
+def test_a_lifted_map_that_turns_a_side_over_is_repaired_at_the_common_resolution():
+    """The same registration subdivided twice in memory (its uniform copy differs from the
+    benchmark set's, whose coordinates went through a file): the first lifted map is about a
+    half turn of the body (front onto back, left onto right), which turns 23% of A over. The
+    orient stage's hypotheses are matched at the common resolution from their maps, so the
+    repair takes seconds instead of full-resolution refinements, and the map it keeps carries
+    its own match's confidence (measured at full resolution, a right many-to-one map would be
+    flagged)."""
+    a, b = (
+        hope_rs.load_mesh(data_path("faust_reg", "tr_reg_020.off")),
+        hope_rs.load_mesh(data_path("faust_reg", "tr_reg_012.off")),
+    )
+    n = a.n_vertices
+    res = hope_rs.match(subdivide(a, 2), b)
+    assert "A clustered to" in res.stage("resolution").reason
+    assert "carried over" in res.stage("confidence").reason
+    idx = np.arange(n)
+    e = geodesic_errors(b, res.map[:n], a_idx=idx, b_idx=idx)
+    assert e.mean() < 0.04 and np.mean(e > 0.15) < 0.01
     assert not res.quality.likely_failed

@@ -36,6 +36,13 @@ beats the stage's own) are tried too (``OrientConfig.again``). The
 stage stops at the first refined map that turns at most ``min_turned`` over, costs less and
 (``on_failed``) is not flagged by the confidence's rule.
 
+After a lift from a common resolution (:mod:`hope_rs.pipeline.resolution`) every refined
+hypothesis is matched at that resolution too, from its map carried to the copy, and carries
+that match's confidence, on which the confidence's rule judges it and which the kept map
+keeps. For a dense A the LMD term of the cost and the turned regions the derived maps change
+are measured on the copy of A it was matched at (``state.common_a``): at full resolution a
+right many-to-one map keeps few 2-rings' distances and its turned triangles scatter.
+
 B's symmetry is the match of B's mirror image (coordinates reflected in a plane through its
 centroid) to B itself: vertex ``i`` of the mirror image is vertex ``i`` of B reflected, so the
 orientation-keeping match of the two sends each vertex to its mirror partner.
@@ -89,6 +96,47 @@ def turned_regions(a: Shape, turned: np.ndarray, rings: int) -> np.ndarray:
     return out
 
 
+class _Judge:
+    """How the stage judges a map of A: the share of A's area it turns over (triangles whose
+    image is degenerate count on neither side, so a dense A's many-to-one map is measured on
+    the others), and the LMD inconsistency on A, or for a dense A matched at a common
+    resolution (``state.common_a``) on the copy it was matched at, its vertices read off the
+    map: at full resolution a right many-to-one map keeps few 2-rings' distances. The turned
+    regions the derived maps change are found there too (:meth:`turned`)."""
+
+    def __init__(self, state: MatchState):
+        self.a, self.b = state.a, state.b
+        self.view = state.common_a
+        self.tf = TurnedFaces(self.a, self.b)
+        self._view_tf: TurnedFaces | None = None
+
+    def share(self, f: np.ndarray) -> float:
+        """The share of A's area ``f`` (internal numbering) turns over."""
+        return self.tf.share(f)
+
+    def cost(self, f: np.ndarray, weight: float) -> float:
+        """:func:`map_cost` of ``f``, its LMD measured where the map was made."""
+        if self.view is None:
+            return map_cost(self.a, self.b, f, self.tf, weight)
+        _, consistent = local_map_distortion(self.view.shape, self.b, self.view.of(f))
+        return self.share(f) + weight * float(1.0 - np.mean(consistent))
+
+    def turned(self, f: np.ndarray, rings: int) -> np.ndarray:
+        """Bool per vertex of A: in a region ``f`` turns over (more than half of a vertex's
+        triangles' area, grown by ``rings`` 1-rings: a region's seam turns over only in part).
+        For a dense A the regions are found on the copy, where the map is about one-to-one (at
+        full resolution most small triangles land degenerate and the turned ones scatter), and
+        each vertex of A takes its copy vertex's."""
+        if self.view is None:
+            return turned_regions(self.a, self.tf.vertices(f, 0.5), rings)
+        if self._view_tf is None:
+            self._view_tf = TurnedFaces(self.view.shape, self.b)
+        at = self.view.of(f)
+        return turned_regions(self.view.shape, self._view_tf.vertices(at, 0.5), rings)[
+            self.view.owner
+        ]
+
+
 def map_cost(a: Shape, b: Shape, f: np.ndarray, turned: TurnedFaces, weight: float) -> float:
     """What the stage minimises: the share of A's area ``f`` turns over plus ``weight`` times
     the share of A's vertices whose 2-ring LMD finds inconsistent (a right map keeps both
@@ -109,16 +157,18 @@ class _Relay:
         self._relay(dataclasses.replace(ev, iteration=None))
 
 
-def _nested_config(state: MatchState):
-    """The settings of a nested match: this stage, the confidence and the deformation pass
-    off (the pass runs once, on the map this stage keeps: its nearest-point maps turn more
-    triangles over than the maps it starts from)."""
+def _nested_config(state: MatchState, *, confidence: bool = False):
+    """The settings of a nested match: this stage and the deformation pass off (the pass runs
+    once, on the map this stage keeps: its nearest-point maps turn more triangles over than
+    the maps it starts from); the confidence only with ``confidence``."""
     cfg = state.config
     return dataclasses.replace(
         cfg,
         orient=dataclasses.replace(cfg.orient, enabled=False),
         deform=dataclasses.replace(cfg.deform, enabled=False),
-        confidence=dataclasses.replace(cfg.confidence, enabled=False),
+        confidence=dataclasses.replace(
+            cfg.confidence, enabled=confidence and cfg.confidence.enabled
+        ),
     )
 
 
@@ -138,21 +188,27 @@ class _Hypotheses:
     """The stage's candidates: the maps derived from the state's map and the other starts,
     each refined as a trial; scored by minus :func:`map_cost`."""
 
-    def __init__(self, state: MatchState, tf: TurnedFaces, names: tuple[str, ...]):
-        self.state, self.tf = state, tf
+    def __init__(self, state: MatchState, judge: _Judge, names: tuple[str, ...]):
+        self.state, self.judge = state, judge
         self.cfg = state.config.orient
         #: The hypotheses tried (``OrientConfig.hypotheses`` or ``.topology_hypotheses``).
         self.names = names
-        self.nested = _nested_config(state)
+        #: Whether the map was lifted from a match at a common resolution (its confidence
+        #: carried over): so is every refined hypothesis, each matched there through the
+        #: resolution stage, and each carries its own confidence the same way.
+        self.lifted = state.confidence is not None
+        self.nested = _nested_config(state, confidence=self.lifted)
+        #: The settings of the unscored matches (B to A), whose confidence nothing reads.
+        self.unscored = _nested_config(state)
         self.progress: Callable = _Relay(state)
         #: Turned-over share per trial label (the notes of the stage's reason).
         self.turned: dict[str, float] = {}
         #: Per trial label, whether the confidence's rule flags the map (``on_failed`` only).
         self.failed: dict[str, bool] = {}
-        #: Whether a refined map is judged by the confidence's rule: not after a lift from a
-        #: common resolution (a confidence carried over), whose many-to-one maps it flags
-        #: however right.
-        self.judged = self.cfg.on_failed and state.confidence is None
+        #: Whether a refined map is judged by the confidence's rule on its own confidence:
+        #: after a lift, on the one it carries over (measured on a dense A's many-to-one map,
+        #: the rule flags it however right).
+        self.judged = self.cfg.on_failed
         self.notes: list[str] = []
         self.sym: np.ndarray | None = None
 
@@ -164,13 +220,18 @@ class _Hypotheses:
         a, b = self.state.a, self.state.b
         f = self.internal(t)
         label = t.candidate.label
-        self.turned[label] = self.tf.share(f)
-        if self.judged:
+        self.turned[label] = self.judge.share(f)
+        if self.judged and self.lifted:
+            carried = t.result.confidence
+            if carried is not None:  # not the map the stage started from, judged before
+                q = match_quality(carried, self.state.config.confidence, flipped=self.turned[label])
+                self.failed[label] = q.likely_failed
+        elif self.judged:
             c = t.candidate
             hope = None if t.result.hope_map is None else c.a.map_in(c.b, t.result.hope_map)
             q = map_quality(a, b, f, hope, t.zoomout, self.state.config, flipped=self.turned[label])
             self.failed[label] = q.likely_failed
-        return -map_cost(a, b, f, self.tf, self.cfg.distortion_weight)
+        return -self.judge.cost(f, self.cfg.distortion_weight)
 
     def good_enough(self, t: Trial, min_score: float) -> bool:
         """Whether a scored trial turns at most ``min_turned`` over, scores above
@@ -210,7 +271,7 @@ class _Hypotheses:
         """The unrefined maps derived from ``f`` (internal numbering) by the derived
         hypotheses tried ("mirror", "mirror_turned", "reseed")."""
         cfg, a, b = self.cfg, self.state.a, self.state.b
-        region = turned_regions(a, self.tf.vertices(f, 0.5), cfg.seam_rings)
+        region = self.judge.turned(f, cfg.seam_rings)
         out = {}
         for name in self.names:
             if name in ("mirror", "mirror_turned"):
@@ -231,7 +292,7 @@ class _Hypotheses:
         raw = self.derived(f)
         if not raw:
             return []
-        shares = {k: self.tf.share(g) for k, g in raw.items()}
+        shares = {k: self.judge.share(g) for k, g in raw.items()}
         prefix = f"{base}+" if base else ""
         self.notes.append(
             f"{prefix}unrefined " + ", ".join(f"{k} {v:.0%}" for k, v in shares.items())
@@ -248,7 +309,8 @@ class _Hypotheses:
         a, b = self.state.a, self.state.b
         init = "wks" if label == "reverse_wks" else self.state.config.initial.descriptor
         name = "B to A" + (" (wks)" if label == "reverse_wks" else "")
-        t = run_trial(self.state, "orient", Candidate(name, b, a, init, self.nested), self.progress)
+        c = Candidate(name, b, a, init, self.unscored)
+        t = run_trial(self.state, "orient", c, self.progress)
         g = b.map_in(a, t.result.map)
         f = cKDTree(a.points[g]).query(a.points)[1].astype(np.int64)
         return self.refine([self.candidate(label, f)])
@@ -264,8 +326,9 @@ class OrientStage(Stage):
     runs_on_final_map = True
 
     def attach(self, state: MatchState) -> None:
-        #: The turned-over triangles of A on B, built when the stage decides whether to run.
-        self._turned: TurnedFaces | None = None
+        #: Where maps are judged (A's turned-over triangles on B), built when the stage
+        #: decides whether to run.
+        self._judge: _Judge | None = None
         #: Why the stage runs (its log line).
         self._why = ""
         #: The hypotheses it tries.
@@ -286,8 +349,8 @@ class OrientStage(Stage):
             # partial stage's nested matches of a part are open.
             return "an open surface"
         t = time.perf_counter()
-        self._turned = TurnedFaces(state.a, state.b)
-        share = self._turned.share(state.f)
+        self._judge = _Judge(state)
+        share = self._judge.share(state.f)
         self._why = f"{share:.0%} of A turned over"
         self._names = cfg.hypotheses
         flagged = False
@@ -325,11 +388,11 @@ class OrientStage(Stage):
     def run(self, state: MatchState) -> None:
         cfg = state.config.orient
         t = time.perf_counter()
-        tf, f = self._turned, state.f
-        assert tf is not None and f is not None  # skip_reason measured the final map
-        share = tf.share(f)
+        judge, f = self._judge, state.f
+        assert judge is not None and f is not None  # skip_reason measured the final map
+        share = judge.share(f)
         state.log.start("orient", detail=f"{self._why}: trying other maps")
-        hyp = _Hypotheses(state, tf, self._names)
+        hyp = _Hypotheses(state, judge, self._names)
         own = current(state, "orient", "kept")
         own.score = own.record.score = hyp.score(own)
         min_score = own.score + cfg.min_gain
@@ -383,8 +446,10 @@ class OrientStage(Stage):
             adopt(state, kept, maps_only=True)
             state.zoomout = kept.zoomout
             # A confidence carried over from a match at a common resolution belongs to the
-            # map replaced here; the confidence stage measures the new one.
-            state.confidence = None
+            # map replaced here: a lifted hypothesis carries its own; otherwise the confidence
+            # stage measures the new map.
+            carried = kept.result.confidence if hyp.lifted else None
+            state.confidence = None if carried is None else carried[state.a.order]
         state.timings["orient"] += time.perf_counter() - t
         scored = "; ".join(
             f"{x.candidate.label}: {hyp.turned[x.candidate.label]:.0%} turned, "

@@ -14,7 +14,8 @@ vertices, the "resolution" stage
    the dense mesh, and owns the dense vertices merged into it; plain clustering glues
    non-manifold edges and turns faces over, which misleads the coarse match);
 2. matches the pair at that common resolution with the whole stage list (descriptors,
-   refinement, spectral pass, finish);
+   refinement, spectral pass, finish), or from a given initial map carried to the copy
+   (:func:`coarse_start`; the orient stage's hypotheses after a lift are such maps);
 3. lifts the map (:func:`hope_rs.pipeline.multiscale.lift_map`, ``centred``): each vertex
    of A (when A is the dense shape, the coarse vertex of its cell) is carried by the local
    linear map of its ring's edges onto their images, anchored at the ring's centroid and the
@@ -42,8 +43,9 @@ The map is final, and its confidence is the coarse match's (each dense vertex of
 coarse vertex's): a dense A's many-to-one map to a sparse B keeps few of its 2-rings'
 distances however right it is. The pair is judged (``MatchResult.quality``) on that
 confidence and the share of A the lifted map turns over at full resolution. The stages after
-it do not run, but for the orient stage, which runs on that judgement; a map it adopts
-instead has its confidence measured at full resolution (docs/decisions.md#resolution).
+it do not run, but for the orient stage, which runs on that judgement; its hypotheses are
+matched through this stage too, each from its map carried to the common resolution, and a map
+it adopts carries its own match's confidence (docs/decisions.md#resolution).
 """
 
 from __future__ import annotations
@@ -66,10 +68,10 @@ from .landmarks import coarse_landmarks
 from .multiscale import lift_map
 from .result import MatchResult
 from .shared_faces import qualifies
-from .state import QUIET, Halt, MatchState, Stage
+from .state import QUIET, CommonView, Halt, MatchState, Stage
 from .turned import TurnedFaces
 
-__all__ = ["ResolutionStage", "denser_side", "density", "subdivisions"]
+__all__ = ["ResolutionStage", "coarse_start", "denser_side", "density", "subdivisions"]
 
 
 def density(s: Shape) -> float:
@@ -110,6 +112,20 @@ def sites_like(f: np.ndarray, points: np.ndarray) -> np.ndarray:
     return np.sort(cell_sites(points, f)[0])
 
 
+def coarse_start(state: MatchState, side: str, coarse: Coarse):
+    """The start of the match at the common resolution: the descriptor kind, or a given map
+    (``state.init``, internal numbering) in the input numbering of the copy's match: when A
+    is the denser shape each coarse vertex takes its site's image, else each vertex of A the
+    coarse vertex owning its image."""
+    init = state.init
+    if isinstance(init, str):
+        return init
+    f = np.asarray(init, dtype=np.int64)
+    if side == "a":
+        return state.b.order[f[coarse.sites]]
+    return coarse.owner[f[state.a.rank]]
+
+
 def coarse_copy(shape: Shape, n_target: int, tolerance: float) -> tuple[Coarse, Shape] | None:
     """(Coarse, its Shape) of ``shape``'s internal mesh with about ``n_target`` vertices, by
     manifold-keeping edge collapses (:func:`hope_rs.geometry.collapse.collapse_to_count`), or
@@ -123,8 +139,8 @@ def coarse_copy(shape: Shape, n_target: int, tolerance: float) -> tuple[Coarse, 
 
 class ResolutionStage(Stage):
     """The "resolution" stage (see the module notes): runs only when one shape is more than
-    ``ResolutionConfig.max_ratio`` times denser than the other, with a descriptor start (a
-    given initial map is refined at full resolution) and no part detected."""
+    ``ResolutionConfig.max_ratio`` times denser than the other and no part was detected. A
+    given initial map starts the match at the common resolution (:func:`coarse_start`)."""
 
     name = "resolution"
     runs_on_final_map = False
@@ -141,8 +157,6 @@ class ResolutionStage(Stage):
         self.side = denser_side(state.a, state.b, cfg.max_ratio)
         if self.side is None:
             return QUIET
-        if not isinstance(state.init, str):
-            return "an initial map was given (init=...): refined at full resolution"
         return None
 
     def run(self, state: MatchState) -> Halt | None:
@@ -198,7 +212,11 @@ class ResolutionStage(Stage):
                 note = f"; no shared faces to refine at full resolution ({h})"
             else:
                 f, note = fine, f", refined at full resolution ({h})"
-        state.f0 = state.f = state.hope_map = f
+        state.f = state.hope_map = f
+        if self.side == "a":
+            state.common_a = CommonView(cs, coarse.sites[cs.order], cs.rank[coarse.owner])
+        if isinstance(state.init, str):
+            state.f0 = f  # a given initial map stays the result's init_map
         if res.confidence is not None:
             # Measured where the map was made: a dense A's many-to-one map to a sparse B keeps
             # few of its 2-rings' distances however right it is.
@@ -246,8 +264,10 @@ class ResolutionStage(Stage):
             if lm is not None and self.side != "b":
                 lm[:, 1] = b.order[lm[:, 1]]
         pa, pb = (cs, b) if self.side == "a" else (a, cs)
+        assert self.side is not None  # skip_reason found the denser side
+        init = coarse_start(state, self.side, coarse)
         assert state.run is not None  # the runner gives every state its nested runner
-        res = state.run(pa, pb, state.init, nested, callback=state.callback, landmarks=lm)
+        res = state.run(pa, pb, init, nested, callback=state.callback, landmarks=lm)
         ridge = cfg.multiscale.lift_ridge
         if self.side == "b":
             # Each vertex of A is its own coarse vertex; its image a vertex of the coarse B.

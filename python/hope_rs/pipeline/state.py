@@ -34,6 +34,7 @@ __all__ = [
     "EVENTS",
     "QUIET",
     "Background",
+    "CommonView",
     "Halt",
     "Hooks",
     "Iteration",
@@ -111,6 +112,31 @@ class Hooks:
         return bool(self._subscribers[event])
 
 
+@dataclass(frozen=True)
+class CommonView:
+    """A dense A's copy at a common resolution (vertices of A, far fewer), where the local
+    distortion of its maps to a sparser B and their turned-over regions are measured: at full
+    resolution a right many-to-one map keeps few 2-rings' distances.
+
+    Attributes
+    ----------
+    shape : Shape
+        The copy.
+    sites : (n_copy,) int ndarray
+        Per internal vertex of the copy, the vertex of A (internal numbering) it is.
+    owner : (n_a,) int ndarray
+        Per internal vertex of A, the copy's internal vertex it was merged into.
+    """
+
+    shape: Shape
+    sites: np.ndarray
+    owner: np.ndarray
+
+    def of(self, f: np.ndarray) -> np.ndarray:
+        """A map of A (internal numbering) read at the copy's vertices."""
+        return np.asarray(f)[self.sites]
+
+
 @dataclass
 class MatchState:
     """A match in progress, in the shapes' internal numbering (see :class:`~hope_rs.Shape`).
@@ -152,6 +178,10 @@ class MatchState:
         when there are none.
     partial : PartialInfo or None
         Which shape is a part of the other, when the partial stage found one is.
+    common_a : CommonView or None
+        When A was matched at a common resolution with a sparser B (the resolution stage):
+        the copy of A it was matched at, where a lifted many-to-one map's local distortion
+        is measured.
     """
 
     a: Shape
@@ -173,6 +203,7 @@ class MatchState:
     confidence: np.ndarray | None = None
     landmarks: np.ndarray | None = None
     partial: PartialInfo | None = None
+    common_a: CommonView | None = None
 
 
 class Stage:
