@@ -303,3 +303,17 @@ def test_a_lifted_map_that_turns_a_side_over_is_repaired_at_the_common_resolutio
     e = geodesic_errors(b, res.map[:n], a_idx=idx, b_idx=idx)
     assert e.mean() < 0.04 and np.mean(e > 0.15) < 0.01
     assert not res.quality.likely_failed
+
+
+def test_with_the_confidence_off_a_lifted_map_is_not_judged_at_full_resolution():
+    # Without a confidence of the match at the common resolution there is nothing to judge a
+    # dense A's many-to-one map on: measured at full resolution the confidence's rule would
+    # flag it however right and send the orient stage through every hypothesis.
+    sphere = hope_rs.Mesh(*bumpy_sphere(400, 3))
+    dense = subdivide(sphere, 2)
+    res = hope_rs.match(dense, sphere, confidence=False)
+    assert "A clustered to" in res.stage("resolution").reason
+    orient = res.stage("orient")
+    assert not orient.ran and "turned over (at most" in orient.reason, orient.reason
+    assert "flagged" not in orient.reason
+    assert res.confidence is None

@@ -39,7 +39,7 @@ stage stops at the first refined map that turns at most ``min_turned`` over, cos
 After a lift from a common resolution (:mod:`hope_rs.pipeline.resolution`) every refined
 hypothesis is matched at that resolution too, from its map carried to the copy, and carries
 that match's confidence, on which the confidence's rule judges it and which the kept map
-keeps. For a dense A the LMD term of the cost and the turned regions the derived maps change
+keeps (with the confidence turned off, the rule judges no map of a dense A). For a dense A the LMD term of the cost and the turned regions the derived maps change
 are measured on the copy of A it was matched at (``state.common_a``): at full resolution a
 right many-to-one map keeps few 2-rings' distances and its turned triangles scatter.
 
@@ -145,6 +145,15 @@ def map_cost(a: Shape, b: Shape, f: np.ndarray, turned: TurnedFaces, weight: flo
     return float(turned.share(f)) + weight * float(1.0 - np.mean(consistent))
 
 
+def _judged_by_confidence(state: MatchState) -> bool:
+    """Whether the confidence's rule judges the maps (``OrientConfig.on_failed``): not for a
+    dense A matched at a common resolution when that match measured no confidence (the
+    confidence turned off): measured on the many-to-one map at full resolution, the rule
+    flags it however right."""
+    lifted_without = state.common_a is not None and state.confidence is None
+    return state.config.orient.on_failed and not lifted_without
+
+
 class _Relay:
     """A nested match's progress as steps of the "orient" stage (logged under its prefix);
     its refinement steps are not the outer match's, so their iterations are not passed on."""
@@ -206,9 +215,8 @@ class _Hypotheses:
         #: Per trial label, whether the confidence's rule flags the map (``on_failed`` only).
         self.failed: dict[str, bool] = {}
         #: Whether a refined map is judged by the confidence's rule on its own confidence:
-        #: after a lift, on the one it carries over (measured on a dense A's many-to-one map,
-        #: the rule flags it however right).
-        self.judged = self.cfg.on_failed
+        #: after a lift, on the one it carries over.
+        self.judged = _judged_by_confidence(state)
         self.notes: list[str] = []
         self.sym: np.ndarray | None = None
 
@@ -354,7 +362,7 @@ class OrientStage(Stage):
         self._why = f"{share:.0%} of A turned over"
         self._names = cfg.hypotheses
         flagged = False
-        if share <= cfg.min_turned and cfg.on_failed:
+        if share <= cfg.min_turned and _judged_by_confidence(state):
             # A map wrong on a whole region can turn little over (a swapped pair of limbs,
             # or a mirror image whose seams tear) yet fail the confidence's rule.
             # A map lifted from a match at a common resolution carries that match's
@@ -382,7 +390,7 @@ class OrientStage(Stage):
         if share > cfg.min_turned or flagged or differ:
             return None
         return f"{share:.0%} of A's area turned over (at most {cfg.min_turned:.0%})" + (
-            ", not flagged" if cfg.on_failed else ""
+            ", not flagged" if _judged_by_confidence(state) else ""
         )
 
     def run(self, state: MatchState) -> None:
