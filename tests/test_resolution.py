@@ -22,6 +22,7 @@ from hope_rs.pipeline import orientation_repair
 from hope_rs.pipeline.config import ResolutionConfig
 from hope_rs.pipeline.options import check_config
 from hope_rs.pipeline.resolution import sites_like, subdivisions
+from hope_rs.pipeline.runner import run_match
 
 
 def test_subdivision_keeps_the_original_vertices_first():
@@ -153,9 +154,13 @@ def test_a_map_the_orient_stage_adopts_after_a_lift_carries_its_own_confidence(m
     # adopts carries that match's confidence: measured on the many-to-one map at full
     # resolution the confidence would flag it however right.
     real = orientation_repair.choose
-    monkeypatch.setattr(
-        orientation_repair, "choose", lambda state, stage, tried, **_: real(state, stage, tried)
-    )
+    kept = []
+
+    def forced_choice(state, stage, tried, **_):
+        kept.append(real(state, stage, tried))
+        return kept[-1]
+
+    monkeypatch.setattr(orientation_repair, "choose", forced_choice)
     sphere = hope_rs.Mesh(*bumpy_sphere(400, 3))
     dense = subdivide(sphere, 2)
     forced = dataclasses.replace(MatchConfig().orient, min_turned=0.0, hypotheses=("reverse",))
@@ -165,7 +170,10 @@ def test_a_map_the_orient_stage_adopts_after_a_lift_carries_its_own_confidence(m
     orient, confidence = res.stage("orient"), res.stage("confidence")
     assert orient.ran and [t.label for t in orient.trials if t.kept] == ["reverse"]
     assert not confidence.ran and "carried over" in confidence.reason
-    assert res.confidence is not None and res.confidence.shape == (dense.n_vertices,)
+    # The kept trial's own confidence, vertex by vertex (both in A's input numbering).
+    trial = kept[-1]  # the stage's final choice
+    assert trial.result.confidence is not None
+    np.testing.assert_array_equal(res.confidence, trial.result.confidence)
     # Every dense vertex takes its coarse vertex's confidence: the copy's values, repeated.
     assert np.unique(res.confidence).size <= 0.3 * dense.n_vertices
     assert not res.quality.likely_failed and res.quality.mean_confidence > 0.5
@@ -195,11 +203,38 @@ def test_a_given_initial_map_is_matched_at_the_common_resolution(dense_side):
     res = hope_rs.match(a, b, init=init)
     stage = res.stage("resolution")
     assert stage.ran and "clustered to" in stage.reason, stage.reason
-    assert not res.stage("descriptors").ran
     np.testing.assert_array_equal(res.init_map, init)
     idx = np.arange(n)
     e = geodesic_errors(b, res.map[:n] if dense_side == "a" else res.map, a_idx=idx, b_idx=idx)
     assert e.mean() < 0.03 and np.mean(e > 0.15) < 0.01
+
+
+def test_the_copy_a_dense_a_is_judged_at_is_the_one_it_was_matched_at():
+    # state.common_a: per internal vertex of the copy, the vertex of A it is (the copy's own
+    # numbering differs from the coarse mesh's), and per vertex of A the copy vertex owning it.
+    sphere = hope_rs.Mesh(*bumpy_sphere(400, 3))
+    a, b = hope_rs.Shape(subdivide(sphere, 2)), hope_rs.Shape(sphere)
+    seen = {}
+
+    def grab(state, name):
+        if name == "resolution":
+            seen["view"] = state.common_a
+
+    run_match(a, b, "shot", MatchConfig(), on_stage=grab)
+    view = seen["view"]
+    assert view is not None and view.shape.n_vertices < a.n_vertices / 4
+    np.testing.assert_array_equal(view.shape.points, a.points[view.sites])
+    np.testing.assert_array_equal(view.owner[view.sites], np.arange(view.shape.n_vertices))
+    # Every vertex of A lies nearer its owner than most other copy vertices: a merged cell.
+    d_own = np.linalg.norm(a.points - view.shape.points[view.owner], axis=1)
+    assert np.median(d_own) < 2.0 * np.median(
+        np.linalg.norm(np.diff(a.points[a.edges], axis=1), axis=2)
+    )
+    # A pair of like densities has none.
+    run_match(
+        b, hope_rs.Shape(hope_rs.Mesh(*bumpy_sphere(420, 4))), "shot", MatchConfig(), on_stage=grab
+    )
+    assert seen["view"] is None
 
 
 def test_subdivisions_come_nearest_the_denser_count():

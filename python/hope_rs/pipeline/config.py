@@ -487,7 +487,8 @@ class ResolutionConfig:
         (:func:`~hope_rs.pipeline.handles.face_handles`): shapes remeshed independently have
         almost none, and there the pass would cost time for nothing.
     follow_density : bool
-        When A is the denser shape, match again (from the descriptors) at a copy of A whose
+        When A is the denser shape, match again (from the descriptors, or a given start map
+        carried there) at a copy of A whose
         vertices lie as B's do: for each vertex of B, the vertex of A nearest the centroid of
         those the first lifted map sends there, every other vertex collapsed into its nearest
         such site; the lift of that match is kept. A template denser at its hands and face
@@ -854,8 +855,9 @@ class OrientConfig:
     seam_rings : int
         1-rings added around the turned-over vertices for the regional hypotheses.
     distortion_weight : float
-        Weight of the LMD-inconsistent share of A's vertices against the turned-over share in
-        the cost the stage minimises.
+        Weight of the LMD-inconsistent share of A's vertices (of its copy at the common
+        resolution, for a dense A's lifted map) against the turned-over share in the cost the
+        stage minimises.
     min_gain : float
         The refined hypothesis replaces the map when it lowers that cost by more than this.
     again : bool

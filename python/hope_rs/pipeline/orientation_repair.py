@@ -39,9 +39,11 @@ stage stops at the first refined map that turns at most ``min_turned`` over, cos
 After a lift from a common resolution (:mod:`hope_rs.pipeline.resolution`) every refined
 hypothesis is matched at that resolution too, from its map carried to the copy, and carries
 that match's confidence, on which the confidence's rule judges it and which the kept map
-keeps (with the confidence turned off, the rule judges no map of a dense A). For a dense A the LMD term of the cost and the turned regions the derived maps change
-are measured on the copy of A it was matched at (``state.common_a``): at full resolution a
-right many-to-one map keeps few 2-rings' distances and its turned triangles scatter.
+keeps (with the confidence turned off, the rule judges no map of a dense A). For a dense A
+the LMD term of the cost and the turned regions the derived maps change are measured on the
+copy of A the stage's map was made at (``state.common_a``, the same copy for every
+hypothesis): at full resolution a right many-to-one map keeps few 2-rings' distances and its
+turned triangles scatter.
 
 B's symmetry is the match of B's mirror image (coordinates reflected in a plane through its
 centroid) to B itself: vertex ``i`` of the mirror image is vertex ``i`` of B reflected, so the
@@ -100,9 +102,10 @@ class _Judge:
     """How the stage judges a map of A: the share of A's area it turns over (triangles whose
     image is degenerate count on neither side, so a dense A's many-to-one map is measured on
     the others), and the LMD inconsistency on A, or for a dense A matched at a common
-    resolution (``state.common_a``) on the copy it was matched at, its vertices read off the
-    map: at full resolution a right many-to-one map keeps few 2-rings' distances. The turned
-    regions the derived maps change are found there too (:meth:`turned`)."""
+    resolution on the copy the stage's map was made at (``state.common_a``, the same for every
+    hypothesis), its vertices read off the map: at full resolution a right many-to-one map
+    keeps few 2-rings' distances. The turned regions the derived maps change are found there
+    too (:meth:`turned`)."""
 
     def __init__(self, state: MatchState):
         self.a, self.b = state.a, state.b
@@ -195,7 +198,7 @@ def _symmetry_config(state: MatchState):
 
 class _Hypotheses:
     """The stage's candidates: the maps derived from the state's map and the other starts,
-    each refined as a trial; scored by minus :func:`map_cost`."""
+    each refined as a trial; scored by minus :meth:`_Judge.cost`."""
 
     def __init__(self, state: MatchState, judge: _Judge, names: tuple[str, ...]):
         self.state, self.judge = state, judge
@@ -230,10 +233,13 @@ class _Hypotheses:
         label = t.candidate.label
         self.turned[label] = self.judge.share(f)
         if self.judged and self.lifted:
+            # The stage's own map (a trial not run, without a result's confidence) carries
+            # the state's.
             carried = t.result.confidence
-            if carried is not None:  # not the map the stage started from, judged before
-                q = match_quality(carried, self.state.config.confidence, flipped=self.turned[label])
-                self.failed[label] = q.likely_failed
+            carried = self.state.confidence if carried is None else carried
+            assert carried is not None  # lifted: the state's map carries one
+            q = match_quality(carried, self.state.config.confidence, flipped=self.turned[label])
+            self.failed[label] = q.likely_failed
         elif self.judged:
             c = t.candidate
             hope = None if t.result.hope_map is None else c.a.map_in(c.b, t.result.hope_map)

@@ -112,7 +112,7 @@ class Hooks:
         return bool(self._subscribers[event])
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class CommonView:
     """A dense A's copy at a common resolution (vertices of A, far fewer), where the local
     distortion of its maps to a sparser B and their turned-over regions are measured: at full
