@@ -22,6 +22,7 @@ from hope_rs.evaluation.partial import (
     submesh,
     write_partial_sets,
 )
+from hope_rs.geometry.subdivide import subdivide
 from hope_rs.pipeline import refine as refine_module
 from hope_rs.pipeline import runner
 from hope_rs.pipeline.config import (
@@ -169,6 +170,24 @@ def test_partial_stage_runs_only_on_a_part(sphere):
     off = MatchConfig(partial=PartialConfig(enabled=False))
     with pytest.raises(KeyError):
         match(part, sphere, config=off).stage("partial")
+
+
+def test_a_dense_part_keeps_the_confidence_of_its_match_at_the_common_resolution():
+    # A part of a mesh subdivided twice, matched to the sparse whole: the part's matches run at
+    # a common resolution and the kept one's confidence is carried over (measured on the
+    # many-to-one map at full resolution, it flags a right map).
+    sphere = hope_rs.Mesh(*bumpy_sphere(300, 0))
+    dense = subdivide(sphere, 2)
+    part = cut_by_plane(dense, plane_normal(2), 0.3).mesh
+    res = match(part, sphere, max_passes=1)
+    assert "A is a part" in res.stage("partial").reason
+    confidence = res.stage("confidence")
+    assert not confidence.ran and "carried over" in confidence.reason, confidence.reason
+    assert res.confidence is not None and res.confidence.shape == (part.n_vertices,)
+    # Each dense vertex takes its coarse vertex's value.
+    assert np.unique(res.confidence).size < 0.3 * part.n_vertices
+    off = match(part, sphere, max_passes=1, confidence=False)
+    assert off.confidence is None
 
 
 @pytest.mark.slow

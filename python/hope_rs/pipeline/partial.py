@@ -258,7 +258,18 @@ class PartialStage(Stage):
                 info = dataclasses.replace(info, scale=float(scale))
         # The stages of the kept nested match count as seconds within "partial".
         adopt(state, kept)
+        if state.config.confidence.enabled and _lifted(kept):
+            # Measured where the map was made: a dense part's many-to-one map to a sparser
+            # whole keeps few of its 2-rings' distances however right it is.
+            conf = kept.result.confidence
+            state.confidence = None if conf is None else conf[state.a.order]
         return info
+
+
+def _lifted(t: Trial) -> bool:
+    """Whether the trial's match was lifted from a common resolution (its confidence carried
+    over from there)."""
+    return any(s.name == "resolution" and s.ran for s in t.result.stages)
 
 
 def _confidence(t: Trial) -> np.ndarray:
