@@ -66,7 +66,16 @@ from .confidence import map_quality, match_quality
 from .lmd import local_map_distortion
 from .progress import ProgressEvent
 from .state import QUIET, MatchState, Stage
-from .trials import Candidate, Trial, adopt, choose, current, run_trial, run_trials
+from .trials import (
+    Candidate,
+    Trial,
+    adopt,
+    carried_confidence,
+    choose,
+    current,
+    run_trial,
+    run_trials,
+)
 from .turned import TurnedFaces
 
 __all__ = [
@@ -462,8 +471,7 @@ class OrientStage(Stage):
             # A confidence carried over from a match at a common resolution belongs to the
             # map replaced here: a lifted hypothesis carries its own; otherwise the confidence
             # stage measures the new map.
-            carried = kept.result.confidence if hyp.lifted else None
-            state.confidence = None if carried is None else carried[state.a.order]
+            state.confidence = carried_confidence(state, kept)
         state.timings["orient"] += time.perf_counter() - t
         scored = "; ".join(
             f"{x.candidate.label}: {hyp.turned[x.candidate.label]:.0%} turned, "

@@ -45,7 +45,15 @@ from .config import PartialConfig
 from .landmarks import input_landmarks
 from .part_info import PartialInfo
 from .state import QUIET, Halt, MatchState, Stage
-from .trials import Candidate, Trial, adopt, mean_confidence, run_trial, run_trials
+from .trials import (
+    Candidate,
+    Trial,
+    adopt,
+    carried_confidence,
+    mean_confidence,
+    run_trial,
+    run_trials,
+)
 
 __all__ = [
     "PartialInfo",
@@ -258,18 +266,8 @@ class PartialStage(Stage):
                 info = dataclasses.replace(info, scale=float(scale))
         # The stages of the kept nested match count as seconds within "partial".
         adopt(state, kept)
-        if state.config.confidence.enabled and _lifted(kept):
-            # Measured where the map was made: a dense part's many-to-one map to a sparser
-            # whole keeps few of its 2-rings' distances however right it is.
-            conf = kept.result.confidence
-            state.confidence = None if conf is None else conf[state.a.order]
+        state.confidence = carried_confidence(state, kept)
         return info
-
-
-def _lifted(t: Trial) -> bool:
-    """Whether the trial's match was lifted from a common resolution (its confidence carried
-    over from there)."""
-    return any(s.name == "resolution" and s.ran for s in t.result.stages)
 
 
 def _confidence(t: Trial) -> np.ndarray:

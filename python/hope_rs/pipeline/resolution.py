@@ -155,9 +155,7 @@ class ResolutionStage(Stage):
         if not cfg.enabled or state.partial is not None:
             return QUIET
         self.side = denser_side(state.a, state.b, cfg.max_ratio)
-        if self.side is None:
-            return QUIET
-        return None
+        return QUIET if self.side is None else None
 
     def run(self, state: MatchState) -> Halt | None:
         a, b, cfg = state.a, state.b, state.config

@@ -49,6 +49,7 @@ __all__ = [
     "Trial",
     "Trials",
     "adopt",
+    "carried_confidence",
     "choose",
     "current",
     "mean_confidence",
@@ -227,6 +228,19 @@ def adopt(state: MatchState, trial: Trial, *, maps_only: bool = False) -> None:
     state.f0 = c.a.map_in(c.b, r.init_map)
     state.history = r.history
     state.timings.update({k: v for k, v in r.timings.items() if k != "total"})
+
+
+def carried_confidence(state: MatchState, trial: Trial) -> np.ndarray | None:
+    """The confidence of ``trial``'s match in the state's internal numbering of A, when that
+    match was lifted from a common resolution (its confidence carried over from there:
+    measured on a dense shape's many-to-one map at full resolution, it flags right maps) and
+    the state's settings ask for a confidence; else ``None`` (the confidence stage measures
+    the adopted map). The trial's A is ``state.a`` or a view of it at another scale."""
+    conf = trial.result.confidence
+    lifted = any(s.name == "resolution" and s.ran for s in trial.result.stages)
+    if conf is None or not lifted or not state.config.confidence.enabled:
+        return None
+    return conf[state.a.order]
 
 
 def mean_confidence(trial: Trial) -> float:
