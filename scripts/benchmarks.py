@@ -14,6 +14,7 @@ four landmarks), then writes
     python scripts/benchmarks.py --resolution-only  # the mixed-resolution sets only, then rewrite
     python scripts/benchmarks.py --perturbed-only  # the noise and shortcut sets only, then rewrite
     python scripts/benchmarks.py --reversed-only  # the reversed pairs only, then rewrite
+    python scripts/benchmarks.py --partial-resolution-only  # parts at another resolution only
 
 Needs the eval extra (pyFM, potpourri3d) and ../shared/data (or HOPE_DATA).
 """
@@ -65,6 +66,11 @@ RESOLUTION = {
 RESOLUTION_SOURCES = ("faust_r", "faust_reg")
 RESOLUTION_PAIRS = 3
 RESOLUTION_METHODS = ["hope", "hope-fullres"]
+#: Parts at another resolution: ``hope-rs partial-set`` (PARTIAL_RESOLUTION_CONDITION, no
+#: whole -> part sets) of the RESOLUTION_PAIRS pairs of these mixed-resolution sets of
+#: faust_r (a part of A against a denser B, and a part of a denser A against B).
+PARTIAL_RESOLUTION = ("sub1", "sub1_rev", "sub2", "sub2_rev")
+PARTIAL_RESOLUTION_CONDITION = "cut30"
 #: Perturbed-target sets written by ``hope-rs perturb-set`` from every pair of the sources,
 #: in the order of their table (a shortcuts set scored on the clean B by ``hope-rs bench``).
 PERTURBED = {
@@ -208,6 +214,64 @@ def run_resolution() -> None:
         _resolution_sets(),
         RESOLUTION_PAIRS,
     )
+
+
+def _partial_resolution_sets() -> list[str]:
+    return [f"faust_r_{c}_{PARTIAL_RESOLUTION_CONDITION}" for c in PARTIAL_RESOLUTION]
+
+
+def run_partial_resolution() -> None:
+    """Parts at another resolution: the mixed-resolution sets of faust_r written afresh, then
+    cut by ``hope-rs partial-set``; HOPE on them, with the provenance."""
+    names = _partial_resolution_sets()
+    _remove([RUN / f"{n}.{ext}" for n in names for ext in ("csv", "md")])
+    folder, parts = RUN / "partial-resolution-src", RUN / "partial-resolution-data"
+    _remove([folder, parts])
+    start = header()
+    cli = [sys.executable, "-m", "hope_rs.cli"]
+    conditions = ",".join(dict.fromkeys(c.removesuffix("_rev") for c in PARTIAL_RESOLUTION))
+    subprocess.run(
+        [*cli, "resolution-set", str(folder), "--from", str(DATA / "faust_r"), "--conditions",
+         conditions, "--max-pairs", str(RESOLUTION_PAIRS)],
+        check=True,
+    )  # fmt: skip
+    sources = ",".join(str(folder / f"faust_r_{c}") for c in PARTIAL_RESOLUTION)
+    subprocess.run(
+        [*cli, "partial-set", str(parts), "--from", sources, "--conditions",
+         PARTIAL_RESOLUTION_CONDITION, "--max-pairs", str(RESOLUTION_PAIRS), "--no-reverse"],
+        check=True,
+    )  # fmt: skip
+    subprocess.run(
+        [*cli, "bench", str(parts), "--methods", "hope", "--sets", ",".join(names),
+         "--no-render", "--out", str(RUN)],
+        check=True,
+    )  # fmt: skip
+    _remove([folder])
+    (RUN / "provenance_partial_resolution.txt").write_text(start + f"{load()} at the end\n")
+
+
+def partial_resolution() -> str:
+    """The parts-at-another-resolution section's table: every pair (HOPE), with its flag."""
+    out = [
+        "| set | pair | vertices A → B | HOPE mean error | HOPE exact % "
+        "| HOPE confidence AUROC | flagged | HOPE s |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    names = _partial_resolution_sets()
+    for name in names:
+        for r in _rows(name):
+            if r["method"] != "hope" or r.get("failed"):
+                continue
+            auroc = r.get("confidence_auroc") or ""
+            auroc = f"{float(auroc):.3f}" if auroc and np.isfinite(float(auroc)) else "–"
+            flag = {"1": "yes", "0": "no"}.get(r.get("likely_failed", ""), "–")
+            out.append(
+                f"| {name} | {r['pair']} | {r['n_a']} → {r['n_b']} | {float(r['mean']):.4f} "
+                f"| {100 * float(r['exact']):.1f} | {auroc} | {flag} | {float(r['seconds']):.1f} |"
+            )
+    if len(out) == 2:
+        return _failures(names)
+    return "\n".join(out) + "\n" + _failures(names)
 
 
 def resolution() -> str:
@@ -464,6 +528,8 @@ def render() -> None:
     ]
     lm_table = landmarks()
     res_table = resolution()
+    part_res_table = partial_resolution()
+    prov_part_res = _provenance("provenance_partial_resolution.txt")
     pert_table = perturbed()
     doc = (
         "# Benchmarks\n\n"
@@ -540,6 +606,19 @@ def render() -> None:
             if res_table
             else ""
         )
+        + (
+            "\n## Parts at another resolution\n\n"
+            + "".join(f"- {line}\n" for line in prov_part_res)
+            + f"\n`hope-rs partial-set --conditions {PARTIAL_RESOLUTION_CONDITION}` of the "
+            f"mixed-resolution sets {', '.join(PARTIAL_RESOLUTION)} of faust_r (their "
+            f"{RESOLUTION_PAIRS} pairs, written by `hope-rs resolution-set`): a part of a "
+            "remeshed shape against a subdivided, denser whole, and a part of a subdivided shape "
+            "against a remeshed whole. `hope` is the default match (the part measured at the "
+            "whole's scale and matched at the common resolution). Errors ÷ sqrt(area) of B over "
+            "the ground-truth vertices; *flagged*: `quality.likely_failed`.\n\n" + part_res_table
+            if part_res_table
+            else ""
+        )
     )
     (ROOT / "docs" / "benchmarks.md").write_text(doc)
     readme = ROOT / "README.md"
@@ -581,6 +660,11 @@ def main() -> int:
         help="run the reversed pairs again, reuse the other results",
     )
     only.add_argument(
+        "--partial-resolution-only",
+        action="store_true",
+        help="run the parts at another resolution again, reuse the other results",
+    )
+    only.add_argument(
         "--landmarks-only",
         action="store_true",
         help="run the landmark bench again, reuse the other results",
@@ -593,6 +677,7 @@ def main() -> int:
         or args.resolution_only
         or args.perturbed_only
         or args.reversed_only
+        or args.partial_resolution_only
         or args.render_only
     )
     if only and not (RUN / "provenance.txt").exists():
@@ -605,6 +690,8 @@ def main() -> int:
         run_perturbed()
     elif args.reversed_only:
         run_reversed()
+    elif args.partial_resolution_only:
+        run_partial_resolution()
     elif not args.render_only:
         if not (args.partial_only or args.landmarks_only):
             run_shared()
@@ -616,6 +703,7 @@ def main() -> int:
             run_resolution()
             run_perturbed()
             run_reversed()
+            run_partial_resolution()
     render()
     return 0
 

@@ -227,6 +227,18 @@ def test_whole_to_part_inverts_the_part_match_and_says_which_vertices_have_a_par
     assert truth <= share < truth + 0.12
 
 
+def test_the_covered_share_of_a_denser_whole_closes_the_gaps_between_images(sphere):
+    # A part's vertices mapped onto a whole subdivided twice (16x denser): the images are the
+    # original vertices, about 4 edges apart. One ring leaves most faces between them
+    # uncovered; sqrt(16) / 2 rings cover the part's share of the area, and not much more.
+    part = cut_by_plane(sphere, plane_normal(3), 0.3)
+    dense = Shape(subdivide(sphere, 2))
+    f = dense.rank[part.origin]  # subdivision keeps the original vertices first
+    truth = part.mesh.area / sphere.area
+    assert covered_share(dense, f) < 0.5 * truth
+    assert truth <= covered_share(dense, f, rings=2) < truth + 0.06
+
+
 @pytest.mark.slow
 @settings(max_examples=4, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(data=st.data())

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -18,7 +19,7 @@ from .features.descriptors import (
     spectral_basis_of,
 )
 from .geometry.coarsen import Coarse, CoarsenConfig, coarse_mesh
-from .geometry.mesh import as_mesh, scale_exponent, unique_edges
+from .geometry.mesh import Mesh, as_mesh, scale_exponent, unique_edges
 from .geometry.numbering import canonical_mesh
 from .geometry.sites import shot_sites
 
@@ -196,7 +197,17 @@ class Shape:
         view.scale = float(scale)
         view._descriptors = {}
         view._sites = False
+        view._coarse = False
         return view
+
+    def derived(self, mesh: Mesh) -> Shape:
+        """A Shape of ``mesh``, a coarser or subdivided copy of this shape's internal mesh (in
+        its coordinates, its faces oriented as they come), with this shape's settings and
+        measured in its units: at this shape's scale when that is not its own sqrt(area)
+        (:meth:`at_scale`), so that a part's copy is matched at the whole's scale as the part
+        is."""
+        copy = Shape(mesh, k_max=self.k_max, orient=False, config=self.config)
+        return copy if self.scale == self.internal.scale else copy.at_scale(self.scale)
 
     def has_descriptors(self, kind: str) -> bool:
         """Whether descriptors of ``kind`` are computed or set already."""
@@ -204,17 +215,19 @@ class Shape:
 
     def coarse_level(self) -> tuple[Coarse, Shape] | None:
         """(:class:`~hope_rs.geometry.coarsen.Coarse`, its :class:`Shape`) of this shape's internal
-        mesh for multiscale matching, built once; ``None`` when the mesh is not dense enough
+        mesh for multiscale matching (cells ``CoarsenConfig.spacing`` × this shape's scale
+        wide, the copy measured at that scale: :meth:`derived`), built once per view; ``None`` when the mesh is not dense enough
         to coarsen (see :func:`hope_rs.geometry.coarsen.coarse_mesh`)."""
         if self._coarse is False:
-            c = coarse_mesh(self.internal, self.config.coarsen)
+            cfg = self.config.coarsen
+            if self.scale != self.internal.scale:
+                # Cells as wide in this shape's units as in its whole's (a part's view).
+                spacing = cfg.spacing * self.scale / self.internal.scale
+                cfg = dataclasses.replace(cfg, spacing=spacing)
+            c = coarse_mesh(self.internal, cfg)
             # The coarse copy keeps the faces of this oriented mesh as they come: vertex
             # clustering leaves non-manifold spots that a second orientation would flip.
-            self._coarse = (
-                None
-                if c is None
-                else (c, Shape(c.mesh, k_max=self.k_max, orient=False, config=self.config))
-            )
+            self._coarse = None if c is None else (c, self.derived(c.mesh))
         return self._coarse
 
     def spectral_basis(self, k: int) -> tuple[np.ndarray, np.ndarray]:

@@ -44,6 +44,7 @@ from ..shape import Shape
 from .config import PartialConfig
 from .landmarks import input_landmarks
 from .part_info import PartialInfo
+from .resolution import density
 from .state import QUIET, Halt, MatchState, Stage
 from .trials import (
     Candidate,
@@ -87,17 +88,20 @@ def invert_part_map(a: Shape, g: np.ndarray, radius: float) -> tuple[np.ndarray,
     return j.astype(np.int64), d <= radius
 
 
-def covered_share(b: Shape, f: np.ndarray) -> float:
+def covered_share(b: Shape, f: np.ndarray, rings: int = 1) -> float:
     """Share of B's area that the map ``f`` (into B, internal numbering) covers: the faces
-    of B whose corners are all images of ``f`` or their neighbours (one ring closes the gaps
-    that differing vertex densities leave)."""
+    of B whose corners are all images of ``f`` or within ``rings`` rings of one (one ring
+    closes the gaps that slightly differing vertex densities leave; on a B ``r`` times
+    denser than A the images lie about ``sqrt(r)`` edges apart, and ``sqrt(r) / 2`` rings
+    close the gaps)."""
     n = b.n_vertices
-    hit = np.zeros(n, dtype=bool)
-    hit[f] = True
+    grown = np.zeros(n, dtype=bool)
+    grown[f] = True
     e = b.edges
-    grown = hit.copy()
-    grown[e[hit[e[:, 0]], 1]] = True
-    grown[e[hit[e[:, 1]], 0]] = True
+    for _ in range(rings):
+        hit = grown.copy()
+        grown[e[hit[e[:, 0]], 1]] = True
+        grown[e[hit[e[:, 1]], 0]] = True
     faces = b.internal.faces
     return float(b.internal.face_areas[grown[faces].all(axis=1)].sum() / b.internal.area)
 
@@ -226,7 +230,10 @@ class PartialStage(Stage):
             return f"x{t:.3g}"
 
         first = run_trial(state, "partial", at(guess, times(1.0)))
-        share = covered_share(b, guess.map_in(b, first.result.map))
+        # The gaps between images on a denser B are about sqrt(density ratio) edges wide,
+        # closed from both sides.
+        rings = max(1, int(np.ceil(np.sqrt(density(b) / density(guess)) / 2)))
+        share = covered_share(b, guess.map_in(b, first.result.map), rings)
         scale = a.internal.scale / np.sqrt(max(share, cfg.partial.min_covered))
         kept = first
         rescale = abs(scale / info.scale - 1.0) > cfg.partial.rescale_tolerance

@@ -7,7 +7,8 @@ neighbourhoods. Each shape is measured in its own sqrt(area), so its vertex coun
 density: when one shape has more than ``ResolutionConfig.max_ratio`` times the other's
 vertices, the "resolution" stage
 
-1. coarsens the denser shape to the sparser one's count: the sites of a uniform grid sized
+1. coarsens the denser shape to the sparser one's density (its count for two whole shapes;
+   :func:`common_count`): the sites of a uniform grid sized
    for that count, every other vertex merged into the site nearest it along the surface by
    edge collapses that keep the copy a valid manifold
    (:func:`hope_rs.geometry.collapse.collapse_to_count`; each coarse vertex is a vertex of
@@ -71,13 +72,29 @@ from .shared_faces import qualifies
 from .state import QUIET, CommonView, Halt, MatchState, Stage
 from .turned import TurnedFaces
 
-__all__ = ["ResolutionStage", "coarse_start", "denser_side", "density", "subdivisions"]
+__all__ = [
+    "ResolutionStage",
+    "coarse_start",
+    "common_count",
+    "denser_side",
+    "density",
+    "subdivisions",
+]
 
 
 def density(s: Shape) -> float:
     """Vertices per unit area, in the units the shape is matched in (its own sqrt(area) for a
     whole shape; a part viewed at the whole's scale has less than unit area)."""
     return s.n_vertices / (s.internal.scale / s.scale) ** 2
+
+
+def common_count(dense: Shape, sparse: Shape) -> int:
+    """Vertices of a copy of ``dense`` at ``sparse``'s density (:func:`density`): the sparser
+    shape's count for two whole shapes; for a part (viewed at the whole's scale) against
+    its whole, scaled by the ratio of their areas, so that a whole coarsened to a part's
+    density keeps more vertices than the part has."""
+    area = (dense.internal.scale / dense.scale) ** 2
+    return max(3, int(round(density(sparse) * area)))
 
 
 def denser_side(a: Shape, b: Shape, max_ratio: float) -> str | None:
@@ -91,9 +108,9 @@ def denser_side(a: Shape, b: Shape, max_ratio: float) -> str | None:
     return None
 
 
-def subdivisions(n_sparse: int, n_dense: int) -> int:
+def subdivisions(n_sparse: float, n_dense: float) -> int:
     """How many times to subdivide a mesh of ``n_sparse`` vertices (each time about 4x) to
-    come nearest ``n_dense``: at least once."""
+    come nearest ``n_dense`` (or of one density to come nearest another): at least once."""
     return max(1, round(np.log(n_dense / n_sparse) / np.log(4.0)))
 
 
@@ -101,7 +118,7 @@ def subdivided_copy(shape: Shape, times: int) -> Shape:
     """``shape``'s internal mesh subdivided ``times`` (its vertices first, in the internal
     numbering), as a Shape of the same settings and orientation."""
     mesh = subdivide(shape.internal, times)
-    return Shape(mesh, k_max=shape.k_max, orient=False, config=shape.config)
+    return shape.derived(mesh)
 
 
 def sites_like(f: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -134,7 +151,7 @@ def coarse_copy(shape: Shape, n_target: int, tolerance: float) -> tuple[Coarse, 
     c = collapse_to_count(shape.internal, n_target, tolerance=tolerance)
     if c is None or len(c.mesh.faces) == 0:
         return None
-    return c, Shape(c.mesh, k_max=shape.k_max, orient=False, config=shape.config)
+    return c, shape.derived(c.mesh)
 
 
 class ResolutionStage(Stage):
@@ -168,7 +185,7 @@ class ResolutionStage(Stage):
         )
         t = state.log.start("resolution", detail=detail)
         self._turned = None  # A's turned-over triangles on B, built when first asked
-        level = coarse_copy(dense, sparse.n_vertices, cfg.resolution.count_tolerance)
+        level = coarse_copy(dense, common_count(dense, sparse), cfg.resolution.count_tolerance)
         if level is None:
             state.timings["resolution"] = time.perf_counter() - t
             why = f"{detail}, but clustering it leaves no face: matched at full resolution"
@@ -193,7 +210,7 @@ class ResolutionStage(Stage):
             # passes (a wrong one places the density wrongly), and kept only if it passes too.
             second = collapse_to_sites(dense.internal, sites_like(f, dense.points))
             if len(second.mesh.faces):
-                cs2 = Shape(second.mesh, k_max=dense.k_max, orient=False, config=dense.config)
+                cs2 = dense.derived(second.mesh)
                 state.timings["resolution.first"] = time.perf_counter() - t
                 again = self.lifted(state, second, cs2, nested)
                 if self.trusted(state, again[0], second, again[1]):
@@ -297,7 +314,7 @@ class ResolutionStage(Stage):
         ``lift``: the lift of the coarse match onto given points of B (used when B is the
         shape subdivided)."""
         a, b, cfg = state.a, state.b, state.config
-        times = subdivisions(sparse.n_vertices, dense.n_vertices)
+        times = subdivisions(density(sparse), density(dense))
         up = subdivided_copy(sparse, times)
         nested = dataclasses.replace(
             cfg,
