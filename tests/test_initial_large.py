@@ -1,3 +1,5 @@
+import warnings
+
 import numpy as np
 
 from hope_rs.kernels.search import (
@@ -59,3 +61,14 @@ def test_nearest_descriptor_without_tie_decision_is_the_search_own_nearest():
     one = nearest_descriptor(da, db, SearchConfig(decide_ties=False))
     np.testing.assert_array_equal(one, nearest_candidates(da, db, 1)[0][:, 0])
     np.testing.assert_array_equal(nearest_descriptor(da, db), one)  # no near ties here
+
+
+def test_inverted_file_search_with_empty_cells_warns_nothing():
+    # Many repeated rows leave k-means cells empty; such a cell has no members and the search
+    # stays right, so nothing reaches the user.
+    rng = np.random.default_rng(1)
+    db = np.repeat(rng.normal(size=(30, 8)), 100, axis=0).astype(np.float32)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        idx, _ = nearest_candidates(db[::7], db, 4, SearchConfig(exact_search_limit=100))
+    assert np.all(np.all(db[idx[:, 0]] == db[::7], axis=1))

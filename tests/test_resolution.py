@@ -337,6 +337,14 @@ def test_a_part_is_coarsened_to_the_density_not_the_count_of_the_other():
     assert own[1].scale == own[1].internal.scale and level[1].scale == big_view.scale
 
 
+def _matched(pair):
+    """The default match of a benchmark pair and its errors at the ground truth."""
+    a, b = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
+    ai, bi = pair.ground_truth(a.n_vertices, b.n_vertices)
+    res = hope_rs.match(a, b)
+    return res, geodesic_errors(b, res.map, a_idx=ai, b_idx=bi)
+
+
 @pytest.mark.slow
 def test_a_dense_cut_scan_is_matched_at_its_own_density_and_scale(tmp_path):
     """FAUST tr_reg_004 subdivided twice and cut by a plane (a 49k part), matched to tr_reg_000
@@ -351,11 +359,8 @@ def test_a_dense_cut_scan_is_matched_at_its_own_density_and_scale(tmp_path):
     )
     pair = pairs_of(out)[1]
     assert (pair.a.stem, pair.b.stem) == ("01_01_tr_reg_004_sub2_cut30", "01_01_tr_reg_000")
-    a, b = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
-    ai, bi = pair.ground_truth(a.n_vertices, b.n_vertices)
-    res = hope_rs.match(a, b)
+    res, e = _matched(pair)
     assert "A is a part" in res.stage("partial").reason
-    e = geodesic_errors(b, res.map, a_idx=ai, b_idx=bi)
     assert e.mean() < 0.06 and np.mean(e > 0.15) < 0.02
     assert not res.quality.likely_failed
 
@@ -370,11 +375,8 @@ def test_a_dense_scan_meets_a_template_denser_at_its_hands(tmp_path):
         data_path("faust_reg"), tmp_path, conditions=("sub2",), max_pairs=3
     )[1:]
     pair = [p for p in pairs_of(folder) if p.name == "02_tr_reg_020_sub2->02_tr_reg_012"][0]
-    ma, mb = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
-    ai, bi = pair.ground_truth(ma.n_vertices, mb.n_vertices)
-    res = hope_rs.match(ma, mb)
+    res, e = _matched(pair)
     assert "placed as densely as B's" in res.stage("resolution").reason
-    e = geodesic_errors(mb, res.map, a_idx=ai, b_idx=bi)
     assert e.mean() < 0.03 and np.mean(e > 0.15) < 0.005
     assert not res.quality.likely_failed
 

@@ -6,6 +6,7 @@ Used by the initial map (descriptors of A against B's) and by ZoomOut (spectral 
 from __future__ import annotations
 
 import os
+import warnings
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -168,7 +169,10 @@ def _inverted_file_candidates(da: np.ndarray, db: np.ndarray, n: int, config: Se
     n_cells = max(1, int(config.ivf_cells_per_root * np.sqrt(n_b)))
     rng = np.random.default_rng(0)
     sample = db[rng.choice(n_b, size=min(n_b, 50 * n_cells), replace=False)]
-    centroids, _ = kmeans2(sample.astype(np.float64), n_cells, iter=8, minit="points", seed=rng)
+    with warnings.catch_warnings():
+        # A cell left empty keeps its centroid and has no members: nothing to tell the user.
+        warnings.filterwarnings("ignore", "One of the clusters is empty", UserWarning)
+        centroids, _ = kmeans2(sample.astype(np.float64), n_cells, iter=8, minit="points", seed=rng)
     centroids = centroids.astype(np.float32)
     step = max(1, 4_000_000 // n_cells)
 

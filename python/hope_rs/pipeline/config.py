@@ -461,22 +461,24 @@ class ResolutionConfig:
     """Matching at a common resolution (:mod:`hope_rs.pipeline.resolution`,
     docs/decisions.md#resolution).
 
-    Each shape is measured in its own sqrt(area), so its vertex count is its vertex density:
-    when one shape has more than ``max_ratio`` times the other's vertices, the denser one is
-    coarsened to about the sparser one's count by manifold-keeping edge collapses, the whole
-    stage list matches the pair there, and the map is lifted to the dense mesh.
+    Each shape is measured in its own sqrt(area), so its vertex count is its vertex density
+    (a part, measured at its whole's scale, covers less than unit area): when one shape has
+    more than ``max_ratio`` times the other's density, the denser one is coarsened to about
+    the sparser one's density (for two whole shapes, its count) by manifold-keeping edge
+    collapses, the whole stage list matches the pair there, and the map is lifted to the
+    dense mesh.
 
     Attributes
     ----------
     enabled : bool
     max_ratio : float
-        Vertex-count ratio (denser / sparser) above which the denser shape is coarsened; at
+        Density ratio (denser / sparser) above which the denser shape is coarsened; at
         least 1.
     count_tolerance : float
-        The coarse copy's vertex count is within this share of the sparser shape's.
+        The coarse copy's vertex count is within this share of its target.
     refine : bool
         After the lift, refine at full resolution: the sparser shape is subdivided (each
-        face into four, as often as brings its vertex count nearest the denser one's), the
+        face into four, as often as brings its density nearest the denser one's), the
         pair matched from the lifted map with one pass of ``refine_schedule`` and the
         shared-face finish, and the map carried back to the sparser shape's own vertices.
         Not with landmarks.

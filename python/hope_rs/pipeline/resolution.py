@@ -4,12 +4,14 @@ vertex density, the pair matched there, the map lifted to the dense mesh.
 A k-hop ball is a number of edges, so on a mesh with edges five times shorter the same k
 covers a patch twenty-five times smaller, and the overlap cost compares unlike
 neighbourhoods. Each shape is measured in its own sqrt(area), so its vertex count is its
-density: when one shape has more than ``ResolutionConfig.max_ratio`` times the other's
-vertices, the "resolution" stage
+density (:func:`density`; a part measured at its whole's scale covers less than unit area):
+when one shape has more than ``ResolutionConfig.max_ratio`` times the other's density, the
+"resolution" stage
 
 1. coarsens the denser shape to the sparser one's density (its count for two whole shapes;
-   :func:`common_count`): the sites of a uniform grid sized
-   for that count, every other vertex merged into the site nearest it along the surface by
+   :func:`common_count`), the copies measured in the shape's units
+   (:meth:`hope_rs.Shape.derived`: a part's at its whole's scale): the sites of a uniform
+   grid sized for that count, every other vertex merged into the site nearest it along the surface by
    edge collapses that keep the copy a valid manifold
    (:func:`hope_rs.geometry.collapse.collapse_to_count`; each coarse vertex is a vertex of
    the dense mesh, and owns the dense vertices merged into it; plain clustering glues
