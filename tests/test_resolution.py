@@ -17,9 +17,10 @@ from hope_rs.evaluation.datasets import pairs_of
 from hope_rs.evaluation.evaluate import geodesic_errors
 from hope_rs.evaluation.partial import cut_by_plane, plane_normal, write_partial_sets
 from hope_rs.evaluation.resolution import write_resolution_sets
+from hope_rs.features.descriptors import shot_at
 from hope_rs.geometry.coarsen import coarse_to_count
 from hope_rs.geometry.subdivide import subdivide
-from hope_rs.pipeline import orientation_repair
+from hope_rs.pipeline import multiscale, orientation_repair
 from hope_rs.pipeline.config import ResolutionConfig
 from hope_rs.pipeline.options import check_config
 from hope_rs.pipeline.resolution import (
@@ -335,6 +336,13 @@ def test_a_part_is_coarsened_to_the_density_not_the_count_of_the_other():
     level = big_view.coarse_level()
     assert own is not None and level is not None
     assert own[1].scale == own[1].internal.scale and level[1].scale == big_view.scale
+    # Its SHOT (on the fine mesh at the coarse vertices) has the view's stretched radius.
+    c, cs = multiscale.coarse_level(big_view, "shot")
+    radius = big.config.descriptors.shot_radius * 1.2
+    assert big_view.shot_radius() == pytest.approx(radius)
+    # The copy's input numbering is its coarse vertices', in the order of ``c.sites``.
+    expected = shot_at(big.internal, c.sites, radius)
+    np.testing.assert_allclose(cs.descriptors("shot"), expected, atol=1e-6)
 
 
 def _matched(pair):

@@ -159,7 +159,7 @@ class Shape:
             # descriptors(self.mesh, kind)[self.order] bit for bit, without renumbering again.
             cfg = self.config.descriptors
             self._descriptors[kind] = (
-                shot_as_numbered(self.internal, self._shot_radius(), self.descriptor_sites("shot"))
+                shot_as_numbered(self.internal, self.shot_radius(), self.descriptor_sites("shot"))
                 if kind == "shot"
                 else descriptors_as_numbered(self.internal, kind, n_eigen=cfg.n_eigen)
             )
@@ -174,10 +174,10 @@ class Shape:
             return None
         if self._sites is False:
             cfg = self.config.descriptors
-            self._sites = shot_sites(self.internal, self._shot_radius(), cfg.sites)
+            self._sites = shot_sites(self.internal, self.shot_radius(), cfg.sites)
         return self._sites
 
-    def _shot_radius(self) -> float:
+    def shot_radius(self) -> float:
         """SHOT's support radius relative to the internal mesh's sqrt(area): the configured one,
         stretched when this shape is measured at another scale (:meth:`at_scale`)."""
         radius = self.config.descriptors.shot_radius

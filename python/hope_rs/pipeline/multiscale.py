@@ -132,7 +132,8 @@ def coarse_level(shape: Shape, kind: str | None):
         raise ValueError("the shape is not dense enough to coarsen (see coarse_mesh)")
     if kind == "shot" and not level[1].has_descriptors("shot"):
         # On the fine mesh, at the coarse vertices: the coarse surface would describe coarser.
-        radius = shape.config.descriptors.shot_radius
+        # The radius is the shape's (a part's view stretches it to the whole's scale).
+        radius = shape.shot_radius()
         level[1].set_descriptors("shot", shot_at(shape.internal, level[0].sites, radius))
     return level
 
