@@ -14,7 +14,7 @@ four landmarks), then writes
     python scripts/benchmarks.py --resolution-only  # the mixed-resolution sets only, then rewrite
     python scripts/benchmarks.py --perturbed-only  # the noise and shortcut sets only, then rewrite
     python scripts/benchmarks.py --reversed-only  # the reversed pairs only, then rewrite
-    python scripts/benchmarks.py --partial-resolution-only  # parts at another resolution only
+    python scripts/benchmarks.py --partial-resolution-only  # parts at another resolution only, then rewrite
 
 Needs the eval extra (pyFM, potpourri3d) and ../shared/data (or HOPE_DATA).
 """

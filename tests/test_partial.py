@@ -32,7 +32,12 @@ from hope_rs.pipeline.config import (
     RefineConfig,
     SpectralConfig,
 )
-from hope_rs.pipeline.partial import boundary_length, covered_share, detect_part
+from hope_rs.pipeline.partial import (
+    boundary_length,
+    covered_share,
+    covering_rings,
+    detect_part,
+)
 from hope_rs.pipeline.runner import run_match
 from hope_rs.pipeline.spectral import basis_slope
 
@@ -237,6 +242,12 @@ def test_the_covered_share_of_a_denser_whole_closes_the_gaps_between_images(sphe
     truth = part.mesh.area / sphere.area
     assert covered_share(dense, f) < 0.5 * truth
     assert truth <= covered_share(dense, f, rings=2) < truth + 0.06
+    # The stage's choice for the part at its whole's scale covers the part's share; one ring
+    # at equal densities.
+    view = Shape(part.mesh).at_scale(Shape(sphere).scale)
+    rings = covering_rings(view, dense)
+    assert rings >= 2 and truth <= covered_share(dense, f, rings) < truth + 0.1
+    assert covering_rings(view, Shape(sphere)) == 1
 
 
 @pytest.mark.slow

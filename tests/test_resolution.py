@@ -26,7 +26,6 @@ from hope_rs.pipeline.options import check_config
 from hope_rs.pipeline.resolution import (
     coarse_copy,
     common_count,
-    density,
     sites_like,
     subdivisions,
 )
@@ -318,7 +317,6 @@ def test_a_part_is_coarsened_to_the_density_not_the_count_of_the_other():
     view = part.at_scale(part.internal.scale * 1.2)
     n = common_count(dense, view)
     assert n == round(part.n_vertices * 1.2**2) and n > part.n_vertices
-    assert abs(density(view) - n) <= 0.5
     dense_part = hope_rs.Shape(cut_by_plane(subdivide(sphere, 2), plane_normal(2), 0.3).mesh)
     dense_view = dense_part.at_scale(dense_part.internal.scale * 1.2)
     n_part = common_count(dense_view, whole)
@@ -326,9 +324,8 @@ def test_a_part_is_coarsened_to_the_density_not_the_count_of_the_other():
     c, copy = coarse_copy(dense_view, n_part, 0.05)
     assert copy.scale == dense_view.scale and copy.scale != copy.internal.scale
     assert copy.n_vertices == pytest.approx(n_part, rel=0.2)
-    assert coarse_copy(dense, whole.n_vertices, 0.05)[1].scale == pytest.approx(
-        dense.internal.scale, rel=0.05
-    )
+    whole_copy = coarse_copy(dense, whole.n_vertices, 0.05)[1]
+    assert whole_copy.scale == whole_copy.internal.scale  # a whole's copy at its own scale
     # So is the multiscale path's copy of a part view, also when the shape built it first.
     big = hope_rs.Shape(cut_by_plane(subdivide(sphere, 3), plane_normal(2), 0.3).mesh)
     own = big.coarse_level()

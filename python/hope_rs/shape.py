@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import copy
-import dataclasses
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -102,6 +101,7 @@ class Shape:
         # False: not yet known.
         self._sites: tuple[np.ndarray, np.ndarray] | None | Literal[False] = False
         self._coarse: tuple[Coarse, Shape] | None | Literal[False] = False
+        self._coarse_view: tuple[Coarse, Shape] | None = None  # a view's, at its scale
         self._basis: tuple[np.ndarray, np.ndarray] | None = None
         self._edges: np.ndarray | None = None
         self._euler: int | None = None
@@ -190,14 +190,15 @@ class Shape:
         sharing the mesh, its numbering and neighbourhoods, with its own descriptor cache (the
         SHOT radius is ``shot_radius * scale``). A part of a shape is matched at the whole's
         scale (:mod:`hope_rs.pipeline.partial`): its own sqrt(area) is smaller, which would
-        shrink every distance it compares."""
+        shrink every distance it compares. Copies of the mesh a view makes (its multiscale
+        copy, :meth:`derived`) are measured at the view's scale too."""
         if not (np.isfinite(scale) and scale > 0):
             raise ValueError(f"a shape's scale must be a positive number, got {scale}")
         view = copy.copy(self)
         view.scale = float(scale)
         view._descriptors = {}
         view._sites = False
-        view._coarse = False
+        view._coarse_view = None
         return view
 
     def derived(self, mesh: Mesh) -> Shape:
@@ -206,8 +207,8 @@ class Shape:
         measured in its units: at this shape's scale when that is not its own sqrt(area)
         (:meth:`at_scale`), so that a part's copy is matched at the whole's scale as the part
         is."""
-        copy = Shape(mesh, k_max=self.k_max, orient=False, config=self.config)
-        return copy if self.scale == self.internal.scale else copy.at_scale(self.scale)
+        out = Shape(mesh, k_max=self.k_max, orient=False, config=self.config)
+        return out if self.scale == self.internal.scale else out.at_scale(self.scale)
 
     def has_descriptors(self, kind: str) -> bool:
         """Whether descriptors of ``kind`` are computed or set already."""
@@ -215,20 +216,26 @@ class Shape:
 
     def coarse_level(self) -> tuple[Coarse, Shape] | None:
         """(:class:`~hope_rs.geometry.coarsen.Coarse`, its :class:`Shape`) of this shape's internal
-        mesh for multiscale matching (cells ``CoarsenConfig.spacing`` × this shape's scale
-        wide, the copy measured at that scale: :meth:`derived`), built once per view; ``None`` when the mesh is not dense enough
+        mesh for multiscale matching (measured at this shape's scale, as :meth:`derived`),
+        built once; ``None`` when the mesh is not dense enough
         to coarsen (see :func:`hope_rs.geometry.coarsen.coarse_mesh`)."""
         if self._coarse is False:
-            cfg = self.config.coarsen
-            if self.scale != self.internal.scale:
-                # Cells as wide in this shape's units as in its whole's (a part's view).
-                spacing = cfg.spacing * self.scale / self.internal.scale
-                cfg = dataclasses.replace(cfg, spacing=spacing)
-            c = coarse_mesh(self.internal, cfg)
+            c = coarse_mesh(self.internal, self.config.coarsen)
             # The coarse copy keeps the faces of this oriented mesh as they come: vertex
             # clustering leaves non-manifold spots that a second orientation would flip.
-            self._coarse = None if c is None else (c, self.derived(c.mesh))
-        return self._coarse
+            self._coarse = (
+                None
+                if c is None
+                else (c, Shape(c.mesh, k_max=self.k_max, orient=False, config=self.config))
+            )
+        # The copy is built once at its own scale and shared with the views of this shape (it
+        # also seeds their eigenbasis); a view gets it measured at the view's scale, once.
+        if self._coarse is None or self.scale == self.internal.scale:
+            return self._coarse
+        if self._coarse_view is None:
+            c, s = self._coarse
+            self._coarse_view = (c, s.at_scale(self.scale))
+        return self._coarse_view
 
     def spectral_basis(self, k: int) -> tuple[np.ndarray, np.ndarray]:
         """The first ``k`` Laplace–Beltrami eigenvectors ``(n, k)`` of the mesh scaled to unit

@@ -88,10 +88,11 @@ __all__ = [
 
 def mirror_image(s: Shape) -> Shape:
     """``s``'s mesh reflected through the plane x = mean x (input numbering kept; the shape
-    orients its faces outward again)."""
+    orients its faces outward again), at ``s``'s scale (a reflection keeps the area)."""
     v = s.mesh.vertices.copy()
     v[:, 0] = 2.0 * v[:, 0].mean() - v[:, 0]
-    return Shape(Mesh(v, s.mesh.faces[:, ::-1]), k_max=s.k_max, config=s.config)
+    m = Shape(Mesh(v, s.mesh.faces[:, ::-1]), k_max=s.k_max, config=s.config)
+    return m if s.scale == s.internal.scale else m.at_scale(s.scale)
 
 
 def turned_regions(a: Shape, turned: np.ndarray, rings: int) -> np.ndarray:

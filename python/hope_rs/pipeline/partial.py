@@ -61,6 +61,7 @@ __all__ = [
     "PartialStage",
     "boundary_length",
     "covered_share",
+    "covering_rings",
     "detect_part",
     "invert_part_map",
     "mean_edge",
@@ -104,6 +105,13 @@ def covered_share(b: Shape, f: np.ndarray, rings: int = 1) -> float:
         grown[e[hit[e[:, 1]], 0]] = True
     faces = b.internal.faces
     return float(b.internal.face_areas[grown[faces].all(axis=1)].sum() / b.internal.area)
+
+
+def covering_rings(a: Shape, b: Shape) -> int:
+    """The rings :func:`covered_share` grows the images of A's vertices by on B: the images on
+    a B denser than A lie about sqrt(density ratio) edges apart, closed from both sides; at
+    least one (:func:`~hope_rs.pipeline.resolution.density`)."""
+    return max(1, int(np.ceil(np.sqrt(density(b) / density(a)) / 2)))
 
 
 def detect_part(a: Shape, b: Shape, config: PartialConfig | None = None) -> PartialInfo | None:
@@ -230,10 +238,7 @@ class PartialStage(Stage):
             return f"x{t:.3g}"
 
         first = run_trial(state, "partial", at(guess, times(1.0)))
-        # The gaps between images on a denser B are about sqrt(density ratio) edges wide,
-        # closed from both sides.
-        rings = max(1, int(np.ceil(np.sqrt(density(b) / density(guess)) / 2)))
-        share = covered_share(b, guess.map_in(b, first.result.map), rings)
+        share = covered_share(b, guess.map_in(b, first.result.map), covering_rings(guess, b))
         scale = a.internal.scale / np.sqrt(max(share, cfg.partial.min_covered))
         kept = first
         rescale = abs(scale / info.scale - 1.0) > cfg.partial.rescale_tolerance

@@ -35,7 +35,7 @@ when one shape has more than ``ResolutionConfig.max_ratio`` times the other's de
 
 4. refines the lifted map at full resolution (``ResolutionConfig.refine``): the sparser
    shape is subdivided (:func:`hope_rs.geometry.subdivide.subdivide`, each face into four)
-   to about the denser one's count, so that k-hop balls on both cover like patches; the pair
+   to about the denser one's density, so that k-hop balls on both cover like patches; the pair
    is matched from the lifted map with one short pass of HOPE steps and the shared-face
    finish (which makes a shape and its subdivided copy exact), and each vertex of the
    subdivided shape is carried back to the nearest vertex of the sparser one (an original
@@ -110,10 +110,10 @@ def denser_side(a: Shape, b: Shape, max_ratio: float) -> str | None:
     return None
 
 
-def subdivisions(n_sparse: float, n_dense: float) -> int:
-    """How many times to subdivide a mesh of ``n_sparse`` vertices (each time about 4x) to
-    come nearest ``n_dense`` (or of one density to come nearest another): at least once."""
-    return max(1, round(np.log(n_dense / n_sparse) / np.log(4.0)))
+def subdivisions(sparse: float, dense: float) -> int:
+    """How many times to subdivide a mesh of ``sparse`` vertices (each time about 4x) to come
+    nearest ``dense`` (or of one density to come nearest another): at least once."""
+    return max(1, round(np.log(dense / sparse) / np.log(4.0)))
 
 
 def subdivided_copy(shape: Shape, times: int) -> Shape:
@@ -185,6 +185,9 @@ class ResolutionStage(Stage):
             f"{name} ({dense.n_vertices} vertices) is more than {cfg.resolution.max_ratio:g} "
             f"times denser than the other ({sparse.n_vertices})"
         )
+        if dense.scale != dense.internal.scale or sparse.scale != sparse.internal.scale:
+            # A part: its count is not its density.
+            detail += f" per unit area ({density(dense):.0f} against {density(sparse):.0f})"
         t = state.log.start("resolution", detail=detail)
         self._turned = None  # A's turned-over triangles on B, built when first asked
         level = coarse_copy(dense, common_count(dense, sparse), cfg.resolution.count_tolerance)
