@@ -177,11 +177,23 @@ class Shape:
             self._sites = shot_sites(self.internal, self.shot_radius(), cfg.sites)
         return self._sites
 
+    @property
+    def at_own_scale(self) -> bool:
+        """Whether this shape is measured in its own sqrt(area) (not a view at another scale,
+        :meth:`at_scale`)."""
+        return self.scale == self.internal.scale
+
+    @property
+    def unit_area(self) -> float:
+        """The shape's area in the units it is measured in: 1 at its own scale, less for a
+        part viewed at its whole's scale."""
+        return (self.internal.scale / self.scale) ** 2
+
     def shot_radius(self) -> float:
         """SHOT's support radius relative to the internal mesh's sqrt(area): the configured one,
         stretched when this shape is measured at another scale (:meth:`at_scale`)."""
         radius = self.config.descriptors.shot_radius
-        if self.scale == self.internal.scale:
+        if self.at_own_scale:
             return radius
         return radius * (self.scale / self.internal.scale)
 
@@ -201,14 +213,14 @@ class Shape:
         view._coarse_view = None
         return view
 
-    def derived(self, mesh: Mesh) -> Shape:
-        """A Shape of ``mesh``, a coarser or subdivided copy of this shape's internal mesh (in
-        its coordinates, its faces oriented as they come), with this shape's settings and
-        measured in its units: at this shape's scale when that is not its own sqrt(area)
-        (:meth:`at_scale`), so that a part's copy is matched at the whole's scale as the part
-        is."""
-        out = Shape(mesh, k_max=self.k_max, orient=False, config=self.config)
-        return out if self.scale == self.internal.scale else out.at_scale(self.scale)
+    def derived(self, mesh: Mesh, *, orient: bool = False) -> Shape:
+        """A Shape of ``mesh``, a copy of this shape's mesh in its coordinates (coarser,
+        subdivided, reflected; its faces oriented as they come unless ``orient``), with this
+        shape's settings and measured in its units: at this shape's scale when that is not its
+        own sqrt(area) (:meth:`at_scale`), so that a part's copy is matched at the whole's
+        scale as the part is."""
+        out = Shape(mesh, k_max=self.k_max, orient=orient, config=self.config)
+        return out if self.at_own_scale else out.at_scale(self.scale)
 
     def has_descriptors(self, kind: str) -> bool:
         """Whether descriptors of ``kind`` are computed or set already."""
@@ -230,7 +242,7 @@ class Shape:
             )
         # The copy is built once at its own scale and shared with the views of this shape (it
         # also seeds their eigenbasis); a view gets it measured at the view's scale, once.
-        if self._coarse is None or self.scale == self.internal.scale:
+        if self._coarse is None or self.at_own_scale:
             return self._coarse
         if self._coarse_view is None:
             c, s = self._coarse

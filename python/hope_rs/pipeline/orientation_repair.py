@@ -91,8 +91,7 @@ def mirror_image(s: Shape) -> Shape:
     orients its faces outward again), at ``s``'s scale (a reflection keeps the area)."""
     v = s.mesh.vertices.copy()
     v[:, 0] = 2.0 * v[:, 0].mean() - v[:, 0]
-    m = Shape(Mesh(v, s.mesh.faces[:, ::-1]), k_max=s.k_max, config=s.config)
-    return m if s.scale == s.internal.scale else m.at_scale(s.scale)
+    return s.derived(Mesh(v, s.mesh.faces[:, ::-1]), orient=True)
 
 
 def turned_regions(a: Shape, turned: np.ndarray, rings: int) -> np.ndarray:

@@ -87,7 +87,7 @@ __all__ = [
 def density(s: Shape) -> float:
     """Vertices per unit area, in the units the shape is matched in (its own sqrt(area) for a
     whole shape; a part viewed at the whole's scale has less than unit area)."""
-    return s.n_vertices / (s.internal.scale / s.scale) ** 2
+    return s.n_vertices / s.unit_area
 
 
 def common_count(dense: Shape, sparse: Shape) -> int:
@@ -95,8 +95,7 @@ def common_count(dense: Shape, sparse: Shape) -> int:
     shape's count for two whole shapes; for a part (viewed at the whole's scale) against
     its whole, scaled by the ratio of their areas, so that a whole coarsened to a part's
     density keeps more vertices than the part has."""
-    area = (dense.internal.scale / dense.scale) ** 2
-    return max(3, int(round(density(sparse) * area)))
+    return max(3, int(round(density(sparse) * dense.unit_area)))
 
 
 def denser_side(a: Shape, b: Shape, max_ratio: float) -> str | None:
@@ -185,7 +184,7 @@ class ResolutionStage(Stage):
             f"{name} ({dense.n_vertices} vertices) is more than {cfg.resolution.max_ratio:g} "
             f"times denser than the other ({sparse.n_vertices})"
         )
-        if dense.scale != dense.internal.scale or sparse.scale != sparse.internal.scale:
+        if not (dense.at_own_scale and sparse.at_own_scale):
             # A part: its count is not its density.
             detail += f" per unit area ({density(dense):.0f} against {density(sparse):.0f})"
         t = state.log.start("resolution", detail=detail)

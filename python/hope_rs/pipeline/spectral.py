@@ -129,8 +129,7 @@ def basis_slope(a: Shape, b: Shape) -> tuple[float, float]:
     the whole's first k: the functional map between them is a slanted diagonal (partial
     functional maps, Rodolà et al. 2017), not a square one. Whole shapes, each in units of
     its own sqrt(area), get (1, 1)."""
-    area_a = (a.internal.scale / a.scale) ** 2
-    area_b = (b.internal.scale / b.scale) ** 2
+    area_a, area_b = a.unit_area, b.unit_area
     if area_a == area_b:
         return 1.0, 1.0
     return min(1.0, area_a / area_b), min(1.0, area_b / area_a)
