@@ -562,7 +562,7 @@ def render() -> None:
         + partial()
         + "\nThe confidence AUROC ranks the vertices with error above 0.05 below the others "
         "(`MatchResult.confidence`; 1 is perfect, 0.5 is chance), per pair, averaged over "
-        "pairs.\n"
+        "pairs; docs/confidence.md gives it with every set's vertices pooled.\n"
         + (
             "\n## Perturbed targets\n\n"
             + "".join(f"- {line}\n" for line in prov_perturbed)

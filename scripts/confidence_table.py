@@ -11,7 +11,8 @@ when its error is at most 0.05.
 
     python scripts/confidence_table.py                 # match (or reuse), write docs/confidence.md
     python scripts/confidence_table.py --max-pairs 4   # at most 4 pairs per set (faster)
-    python scripts/confidence_table.py --extra-sets DIR  # + the sets `hope-rs perturb-set` wrote
+    python scripts/confidence_table.py --extra-sets DIR  # + the sets `hope-rs perturb-set` or
+                                                         # `partial-set` wrote (repeatable)
 
 A shortcuts set is scored on the clean B, a welded vertex counting as either of its two
 (:func:`hope_rs.evaluation.perturbed.shortcut_errors`).
@@ -77,8 +78,11 @@ def errors_of(pair: Pair, mb, mapping, a_idx, b_idx) -> np.ndarray:
 def matched(pair: Pair, config: MatchConfig, init: str, cache: Path) -> dict:
     """The pair's cached maps (input numbering) and scored errors: keys ``map``, ``hope``,
     ``zoomout`` (all -1 without one), ``judged`` (the map when the confidence stage runs,
-    before the deformation pass), ``a_idx``, ``errors``, ``seconds``. The cache is keyed
-    by the settings that change the maps (the confidence's are not among them)."""
+    before the deformation pass), ``a_idx``, ``errors``, ``seconds``; for a part and its
+    whole also ``confidence`` and ``quality`` (the match's own ``MatchResult.confidence`` and
+    its mean confidence, confident share, likely-failed flag and turned-over share, see
+    :func:`part_pair`). The cache is keyed by the settings that change the maps (the
+    confidence's are not among them)."""
     cfg = dataclasses.replace(config, confidence=ConfidenceConfig(enabled=False))
     path = cache / cfg.key()[:16] / init / pair.dataset / f"{pair.name}.npz"
     if path.exists():
@@ -96,9 +100,20 @@ def matched(pair: Pair, config: MatchConfig, init: str, cache: Path) -> dict:
             seen["judged"] = a.map_out(b, state.f)
 
     t = time.perf_counter()
-    res = run_match(a, b, init, cfg, on_stage=grab)
+    # With the confidence as ``config`` sets it (the same maps either way): a part's
+    # confidence comes from its partial stage, not from the cached maps.
+    res = run_match(a, b, init, config, on_stage=grab)
     seconds = time.perf_counter() - t
     a_idx, b_idx = pair.ground_truth(ma.n_vertices, mb.n_vertices)
+    part = {}
+    if res.stage("partial").ran and res.confidence is not None and res.quality is not None:
+        q = res.quality
+        part = {
+            "confidence": res.confidence,
+            "quality": np.array(
+                [q.mean_confidence, q.share_confident, float(q.likely_failed), q.flipped_share]
+            ),
+        }
     out = {
         "map": res.map,
         "hope": res.hope_map,
@@ -107,6 +122,7 @@ def matched(pair: Pair, config: MatchConfig, init: str, cache: Path) -> dict:
         "a_idx": np.asarray(a_idx, dtype=np.int64),
         "errors": errors_of(pair, mb, res.map, a_idx, b_idx),
         "seconds": np.float64(seconds),
+        **part,
     }
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp.npz")
@@ -155,8 +171,20 @@ def auroc(score: np.ndarray, right: np.ndarray) -> float:
     return confidence_auroc(score, np.where(right, 0.0, 1.0), wrong_above=0.5)
 
 
+def part_pair(m: dict) -> bool:
+    """Whether the cached match is of a part and its whole (its partial stage ran). Its
+    confidence is the match's own: the partial stage carries it from the kept scale trial,
+    measured at the whole's scale and 0 where a whole's vertex has no counterpart on the
+    part, which the features of the maps at the shapes' own scales would not reproduce."""
+    return "confidence" in m
+
+
 def scored(pair: Pair, m: dict, config: MatchConfig) -> tuple[np.ndarray, np.ndarray, MatchQuality]:
     """(confidence at the scored vertices, right or not, the pair's :class:`MatchQuality`)."""
+    if part_pair(m):
+        mean, share, failed, flipped = (float(x) for x in m["quality"])
+        quality = MatchQuality(mean, share, bool(failed), flipped)
+        return m["confidence"][m["a_idx"]], m["errors"] <= WRONG_ABOVE, quality
     c, flipped = confidence_of(pair, m, config)
     quality = match_quality(c, config.confidence, flipped=flipped)
     return c[m["a_idx"]], m["errors"] <= WRONG_ABOVE, quality
@@ -207,10 +235,13 @@ def render(
         + ("(sampled: `--max-pairs`)" if sampled else "(all of them)")
         + "; none of them is a training pair of `scripts/confidence_fit.py`"
         + (
-            f"; and the sets {', '.join(extra)} that `hope-rs perturb-set` built from them "
-            "(B with vertex noise of 0.2% or 0.5% of sqrt(area), or welded by topological "
-            "shortcuts and scored on the clean B, a weld counting as either of its two; "
-            "`_reversed`: the pairs matched the other way)"
+            f"; and the sets {', '.join(extra)} that `hope-rs perturb-set` and `hope-rs "
+            "partial-set` built from them (B with vertex noise of 0.2% or 0.5% of sqrt(area), "
+            "or welded by topological shortcuts and scored on the clean B, a weld counting as "
+            "either of its two; `_reversed`: the pairs matched the other way; `cut30`, "
+            "`cut50`: A cut by a plane removing 30% or 50% of its vertices, `holes`: 3-5 "
+            "geodesic discs punched out of A, `_rev`: the whole A matched to the cut B, scored "
+            "where A has a counterpart; a part's confidence is the match's own)"
             if extra
             else ""
         ),
@@ -264,6 +295,9 @@ def render(
         "(`ConfidenceConfig.weights`, `.intercept`) was fitted by `scripts/confidence_fit.py` on",
         "remeshed FAUST pairs outside `pairs.txt`: default matches, and one-pass matches from",
         "SHOT and HKS initial maps (for examples of failing maps), each kind weighed equally.",
+        "A part's confidence is its partial stage's: the confidence stage of the kept scale",
+        "trial, on the part at the whole's scale; 0 on a whole's vertices without a counterpart",
+        "on the part.",
         "",
         "## Per pair",
         "",
@@ -317,8 +351,10 @@ def main(argv=None) -> int:
     p.add_argument(
         "--extra-sets",
         type=Path,
+        action="append",
+        default=[],
         help="a folder of derived sets (each a folder with a pairs.txt, as `hope-rs perturb-set` "
-        "writes them) to score beside the held-out ones",
+        "and `hope-rs partial-set` write them) to score beside the held-out ones; repeatable",
     )
     args = p.parse_args(argv)
     if not DATA.is_dir():
@@ -328,10 +364,10 @@ def main(argv=None) -> int:
     config = MatchConfig()
     rows, per_pair, matched_now, match_s = {}, [], 0, 0.0
     folders = [DATA / name for name in HELD_OUT]
-    extra = []
-    if args.extra_sets is not None:
-        extra = sorted(d for d in args.extra_sets.iterdir() if (d / "pairs.txt").is_file())
-        folders += extra
+    extra = [
+        d for top in args.extra_sets for d in sorted(top.iterdir()) if (d / "pairs.txt").is_file()
+    ]
+    folders += extra
     for name, ps in pairs(folders, args.max_pairs).items():
         confs, rights = [], []
         for pair in ps:
