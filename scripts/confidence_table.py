@@ -106,7 +106,9 @@ def matched(pair: Pair, config: MatchConfig, init: str, cache: Path) -> dict:
     seconds = time.perf_counter() - t
     a_idx, b_idx = pair.ground_truth(ma.n_vertices, mb.n_vertices)
     part = {}
-    if res.stage("partial").ran and res.confidence is not None and res.quality is not None:
+    # The "partial" stage is recorded only when one shape is a part of the other.
+    partial = any(s.name == "partial" and s.ran for s in res.stages)
+    if partial and res.confidence is not None and res.quality is not None:
         q = res.quality
         part = {
             "confidence": res.confidence,
