@@ -111,6 +111,19 @@ def run_shared() -> None:
     (RUN / "provenance.txt").write_text(start + f"{load()} at the end\n")
 
 
+def write_derived(
+    command: str, folder: Path, sources, conditions: str, max_pairs=None, **run_options
+) -> None:
+    """``hope-rs COMMAND FOLDER`` (``perturb-set``, ``partial-set``...) on the ``sources``
+    sets of DATA with ``conditions``, their first ``max_pairs`` pairs (``None``: all);
+    ``run_options`` go to ``subprocess.run``."""
+    cmd = [sys.executable, "-m", "hope_rs.cli", command, str(folder), "--from",
+           ",".join(str(DATA / s) for s in sources), "--conditions", conditions]  # fmt: skip
+    if max_pairs is not None:
+        cmd += ["--max-pairs", str(max_pairs)]
+    subprocess.run(cmd, check=True, **run_options)
+
+
 def run_derived(
     kind: str, command: str, sources, conditions: str, methods, names, max_pairs=None
 ) -> None:
@@ -121,11 +134,7 @@ def run_derived(
     folder = RUN / f"{kind}-data"
     _remove([folder])
     start = header()
-    cmd = [sys.executable, "-m", "hope_rs.cli", command, str(folder), "--from",
-           ",".join(str(DATA / s) for s in sources), "--conditions", conditions]  # fmt: skip
-    if max_pairs is not None:
-        cmd += ["--max-pairs", str(max_pairs)]
-    subprocess.run(cmd, check=True)
+    write_derived(command, folder, sources, conditions, max_pairs)
     subprocess.run(
         [sys.executable, "-m", "hope_rs.cli", "bench", str(folder), "--methods",
          ",".join(methods), "--sets", ",".join(names), "--no-render", "--out", str(RUN)],
@@ -136,14 +145,22 @@ def run_derived(
 
 def run_partial() -> None:
     """The partial-shape sets, written afresh from the source sets, with their provenance."""
-    names = [f"{s}_{c}" for s in PARTIAL_SOURCES for c in PARTIAL]
-    conditions = ",".join(c for c in PARTIAL if not c.endswith("_rev"))
     run_derived(
-        "partial", "partial-set", PARTIAL_SOURCES, conditions, PARTIAL_METHODS, names, PARTIAL_PAIRS
-    )
+        "partial", "partial-set", PARTIAL_SOURCES, partial_conditions(), PARTIAL_METHODS,
+        partial_sets(), PARTIAL_PAIRS,
+    )  # fmt: skip
 
 
-def _perturbed_sets() -> list[str]:
+def partial_sets() -> list[str]:
+    return [f"{s}_{c}" for s in PARTIAL_SOURCES for c in PARTIAL]
+
+
+def partial_conditions() -> str:
+    """``partial-set``'s conditions for PARTIAL (it writes each one's whole -> part set too)."""
+    return ",".join(c for c in PARTIAL if not c.endswith("_rev"))
+
+
+def perturbed_sets() -> list[str]:
     return [f"{s}_{c}" for c in PERTURBED for s in PERTURBED_SOURCES]
 
 
@@ -156,11 +173,11 @@ def run_perturbed() -> None:
         PERTURBED_SOURCES,
         ",".join(PERTURBED),
         PERTURBED_METHODS,
-        _perturbed_sets(),
+        perturbed_sets(),
     )
 
 
-def _reversed_sets() -> list[str]:
+def reversed_sets() -> list[str]:
     return [f"{s}_reversed" for s in REVERSED_SOURCES]
 
 
@@ -168,7 +185,7 @@ def run_reversed() -> None:
     """The pairs of REVERSED_SOURCES matched the other way, with their provenance."""
     run_derived(
         "reversed", "perturb-set", REVERSED_SOURCES, "reversed", PERTURBED_METHODS,
-        _reversed_sets(),
+        reversed_sets(),
     )  # fmt: skip
 
 
@@ -180,7 +197,7 @@ def perturbed() -> str:
         "| HOPE median s / pair |"
     )
     out = [head, "|---|---|---|---|---|---|---|---|---|"]
-    for name in _perturbed_sets() + _reversed_sets():
+    for name in perturbed_sets() + reversed_sets():
         rows = _rows(name)
         h, i = _stats(rows, "hope"), _stats(rows, "init")
         if h is None:

@@ -39,12 +39,16 @@ from pathlib import Path
 
 import numpy as np
 from benchmarks import (
-    PARTIAL,
     PARTIAL_PAIRS,
     PARTIAL_SOURCES,
     PERTURBED,
     PERTURBED_SOURCES,
     REVERSED_SOURCES,
+    partial_conditions,
+    partial_sets,
+    perturbed_sets,
+    reversed_sets,
+    write_derived,
 )
 
 import hope_rs
@@ -154,18 +158,9 @@ def derived_sets(folder: Path) -> list[Path]:
     jobs = [
         ("perturb-set", PERTURBED_SOURCES, ",".join(PERTURBED), None),
         ("perturb-set", REVERSED_SOURCES, "reversed", None),
-        (
-            "partial-set",
-            PARTIAL_SOURCES,
-            ",".join(c for c in PARTIAL if not c.endswith("_rev")),
-            PARTIAL_PAIRS,
-        ),
+        ("partial-set", PARTIAL_SOURCES, partial_conditions(), PARTIAL_PAIRS),
     ]
-    wanted = (
-        {f"{s}_{c}" for s in PERTURBED_SOURCES for c in PERTURBED}
-        | {f"{s}_reversed" for s in REVERSED_SOURCES}
-        | {f"{s}_{c}" for s in PARTIAL_SOURCES for c in PARTIAL}
-    )
+    wanted = set(perturbed_sets() + reversed_sets() + partial_sets())
     out = []
     for i, (command, sources, conditions, max_pairs) in enumerate(jobs):
         done = folder / f"{i}-{command}-{conditions.replace(',', '-')}"
@@ -174,11 +169,7 @@ def derived_sets(folder: Path) -> list[Path]:
             tmp = folder / f".{done.name}.tmp"
             if tmp.exists():
                 shutil.rmtree(tmp)
-            cmd = [sys.executable, "-m", "hope_rs.cli", command, str(tmp), "--from",
-                   ",".join(str(DATA / s) for s in sources), "--conditions", conditions]  # fmt: skip
-            if max_pairs is not None:
-                cmd += ["--max-pairs", str(max_pairs)]
-            subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+            write_derived(command, tmp, sources, conditions, max_pairs, stdout=subprocess.DEVNULL)
             os.replace(tmp, done)
         out += sorted(d for d in done.iterdir() if d.name in wanted and (d / "pairs.txt").is_file())
     return out

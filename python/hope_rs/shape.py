@@ -192,10 +192,8 @@ class Shape:
     def shot_radius(self) -> float:
         """SHOT's support radius relative to the internal mesh's sqrt(area): the configured one,
         stretched when this shape is measured at another scale (:meth:`at_scale`)."""
-        radius = self.config.descriptors.shot_radius
-        if self.at_own_scale:
-            return radius
-        return radius * (self.scale / self.internal.scale)
+        # At its own scale the factor is exactly 1.0, so the radius is the configured one.
+        return self.config.descriptors.shot_radius * (self.scale / self.internal.scale)
 
     def at_scale(self, scale: float) -> Shape:
         """This shape measured in units of ``scale`` instead of its own sqrt(area): a view
