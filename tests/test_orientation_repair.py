@@ -230,6 +230,24 @@ def test_shapes_of_different_topology_run_the_stage_with_its_topology_hypotheses
     assert not info.ran and "at most 20%" in info.reason
 
 
+def test_a_start_the_match_itself_used_is_not_tried_again():
+    # The welded sphere as above, with the WKS start and the reverse matches as the topology's
+    # hypotheses: started from SHOT the stage tries all three; started from WKS, "wks" would
+    # be its own match again and "reverse_wks" the same as "reverse", which matches B to A
+    # from WKS too.
+    m = hope_rs.Mesh(*bumpy_sphere(400, 6))
+    far = int(np.argmax(np.linalg.norm(m.vertices - m.vertices[0], axis=1)))
+    welded = Welded(m, np.array([[0, far]])).mesh
+    orient = OrientConfig(topology_hypotheses=("reverse", "wks", "reverse_wks"), min_gain=1.0)
+    cfg = dataclasses.replace(MatchConfig(), orient=orient)
+    shot = hope_rs.match(m, welded, config=cfg, max_passes=1).stage("orient")
+    assert [t.label for t in shot.trials] == [
+        "kept", "B to A", "reverse", "wks", "B to A (wks)", "reverse_wks"
+    ]  # fmt: skip
+    wks = hope_rs.match(m, welded, init="wks", config=cfg, max_passes=1).stage("orient")
+    assert [t.label for t in wks.trials] == ["kept", "B to A", "reverse"]
+
+
 @pytest.mark.slow
 def test_a_map_misled_by_topological_shortcuts_is_repaired():
     # FAUST remeshed 002 -> 007 with B welded where it nearly touches itself (the shortcuts

@@ -861,10 +861,11 @@ class OrientConfig:
         resolution, for a dense A's lifted map) against the turned-over share in the cost the
         stage minimises.
     min_gain : float
-        The refined hypothesis replaces the map when it lowers that cost by more than this.
+        The refined hypothesis replaces the map when it lowers that cost by at least this.
     again : bool
-        After each other start, while no refined hypothesis turns at most ``min_turned``
-        over, derive the maps from the best one too (when it beats the map the stage started
+        After each other start, while no refined hypothesis passes the stop rule (at most
+        ``min_turned`` turned over, ``min_gain`` cheaper, not flagged), derive the maps from
+        the best one too (when it beats the map the stage started
         from and was not derived from yet) and refine the least turned-over.
     """
 

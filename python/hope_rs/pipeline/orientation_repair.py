@@ -30,10 +30,11 @@ calls for the stage):
   keeps the orientation); kept only when it passes the stop rule below, never derived from.
 
 The derived hypotheses are unrefined maps; the one turning the least over is refined. The
-other starts follow in the order of the hypotheses tried; after each, while no refined
-map turns at most ``min_turned`` over, the maps derived from that start's refined map (if it
-beats the stage's own) are tried too (``OrientConfig.again``). The
-stage stops at the first refined map that turns at most ``min_turned`` over, costs less and
+other starts follow in the order of the hypotheses tried (a start the stage's own match
+used is not tried again); after each, while no refined map passes the stop rule, the maps
+derived from that start's refined map (if it beats the stage's own) are tried too
+(``OrientConfig.again``). The stop rule: the stage stops at the first refined map that turns
+at most ``min_turned`` over, costs at least ``min_gain`` less than the stage's own and
 (``on_failed``) is not flagged by the confidence's rule.
 
 After a lift from a common resolution (:mod:`hope_rs.pipeline.resolution`) every refined
@@ -130,8 +131,7 @@ class _Judge:
         """:func:`map_cost` of ``f``, its LMD measured where the map was made."""
         if self.view is None:
             return map_cost(self.a, self.b, f, self.tf, weight)
-        _, consistent = local_map_distortion(self.view.shape, self.b, self.view.of(f))
-        return self.share(f) + weight * float(1.0 - np.mean(consistent))
+        return map_cost(self.view.shape, self.b, self.view.of(f), self.tf, weight, turned_map=f)
 
     def turned(self, f: np.ndarray, rings: int) -> np.ndarray:
         """Bool per vertex of A: in a region ``f`` turns over (more than half of a vertex's
@@ -149,12 +149,23 @@ class _Judge:
         ]
 
 
-def map_cost(a: Shape, b: Shape, f: np.ndarray, turned: TurnedFaces, weight: float) -> float:
+def map_cost(
+    a: Shape,
+    b: Shape,
+    f: np.ndarray,
+    turned: TurnedFaces,
+    weight: float,
+    *,
+    turned_map: np.ndarray | None = None,
+) -> float:
     """What the stage minimises: the share of A's area ``f`` turns over plus ``weight`` times
     the share of A's vertices whose 2-ring LMD finds inconsistent (a right map keeps both
-    low; a mirror image keeps distances but turns over, a scrambled map does neither)."""
+    low; a mirror image keeps distances but turns over, a scrambled map does neither).
+    ``turned_map``: the map whose turned-over share counts, when the LMD is measured on
+    another copy of A (``f`` is then that copy's map)."""
     _, consistent = local_map_distortion(a, b, f)
-    return float(turned.share(f)) + weight * float(1.0 - np.mean(consistent))
+    share = turned.share(f if turned_map is None else turned_map)
+    return float(share) + weight * float(1.0 - np.mean(consistent))
 
 
 def _judged_by_confidence(state: MatchState) -> bool:
@@ -231,6 +242,9 @@ class _Hypotheses:
         self.judged = _judged_by_confidence(state)
         self.notes: list[str] = []
         self.sym: np.ndarray | None = None
+        #: The descriptor kind the stage's own match started from (the settings' when the
+        #: caller passed a map): "reverse" matches B to A from it too.
+        self.start = state.init if isinstance(state.init, str) else state.config.initial.descriptor
 
     def internal(self, t: Trial) -> np.ndarray:
         c = t.candidate
@@ -257,13 +271,13 @@ class _Hypotheses:
         return -self.judge.cost(f, self.cfg.distortion_weight)
 
     def good_enough(self, t: Trial, min_score: float) -> bool:
-        """Whether a scored trial turns at most ``min_turned`` over, scores above
+        """Whether a scored trial turns at most ``min_turned`` over, scores at least
         ``min_score`` and (``on_failed``) is not flagged by the confidence's rule."""
         label = t.candidate.label
         return (
             self.turned[label] <= self.cfg.min_turned
             and t.score is not None
-            and t.score > min_score
+            and t.score >= min_score
             and not self.failed.get(label, False)
         )
 
@@ -330,7 +344,7 @@ class _Hypotheses:
         A onto the vertex of B whose image lies nearest it in space; ``"reverse_wks"``: B to
         A from the WKS initial map."""
         a, b = self.state.a, self.state.b
-        init = "wks" if label == "reverse_wks" else self.state.config.initial.descriptor
+        init = "wks" if label == "reverse_wks" else self.start
         name = "B to A" + (" (wks)" if label == "reverse_wks" else "")
         c = Candidate(name, b, a, init, self.unscored)
         t = run_trial(self.state, "orient", c, self.progress)
@@ -427,8 +441,9 @@ class OrientStage(Stage):
         # limbs comes back neither mirrored nor re-seeded), in the order of the hypotheses.
         tried = hyp.from_derived(f, share)
         starts = [h for h in self._names if h in ("wks", "reverse", "reverse_wks")]
-        if state.config.initial.descriptor == "wks":
-            starts = [h for h in starts if h != "reverse_wks"]  # the same as "reverse"
+        if hyp.start == "wks":
+            # "wks" is the stage's own match again, "reverse_wks" the same as "reverse".
+            starts = [h for h in starts if h not in ("wks", "reverse_wks")]
         for start in starts:
             if good_enough(tried):
                 break
