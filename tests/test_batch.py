@@ -139,6 +139,12 @@ def test_cli_batch_exit_codes(folder, tmp_path, capsys):
     assert "pair failed: s0 -> bad" in err and "pair failed: bad -> s2" in err
     assert main(["batch", str(tmp_path / "missing.txt"), "--out", str(tmp_path)]) == 2
     assert "hope-rs: error: no such pairs file" in capsys.readouterr().err
+    # Names without a suffix and no --ext: their pairs fail, with a hint up front.
+    noext = ["batch", str(folder / "m" / "pairs.txt"), "--out", str(tmp_path / "o4")]
+    assert main(noext + cache[:2] + ["-j", "1"]) == 1
+    err = capsys.readouterr().err
+    assert "mesh file(s) of the pairs file do not exist" in err and "need --ext" in err
+    assert f"no such mesh file: {str(folder / 'm' / 's0')!r}" in err
     assert main(args + ["--no-cache", "--cache", str(tmp_path)]) == 2
     (tmp_path / "file").write_text("")
     assert main(["batch", str(folder / "m" / "pairs.txt"), "--out", str(tmp_path / "file")]) == 2

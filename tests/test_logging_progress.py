@@ -149,8 +149,12 @@ def test_hope_map_is_always_hopes_own_map(faust_pair):
         s = res.stage(name)
         assert not s.ran and s.seconds == 0 and "HOPE's map" in s.reason
     assert res.stage("refine").ran and res.stage("refine").seconds > 0
-    with pytest.raises(KeyError, match="no stage 'coarse'"):
-        res.stage("coarse")
+    # A stage this path does not include reads as not run; a name that is no stage raises.
+    coarse = res.stage("coarse")
+    assert not coarse.ran and coarse.seconds == 0 and "not on this match's path" in coarse.reason
+    assert "coarse" not in [s.name for s in res.stages]
+    with pytest.raises(KeyError, match="no stage 'corse'; the stages are shapes, partial"):
+        res.stage("corse")
 
 
 def test_stage_reasons_for_turned_off_stages_and_a_given_map(spheres):
@@ -223,6 +227,11 @@ def test_cli_verbose_logs_stages_and_restores_the_logger(tmp_path, capsys):
     assert main([*argv, "--json", "-q"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert [s["name"] for s in summary["stages"]] == DEFAULT_STAGES
+    assert "map" not in summary  # written to -o
+    # Without -o it holds the map, which standard output would otherwise have carried.
+    assert main([*argv[:3], "--json", "-q"]) == 0
+    alone = json.loads(capsys.readouterr().out)
+    assert alone["map"] == np.loadtxt(tmp_path / "m", dtype=np.int64).tolist()
     assert [it["polish"] for it in summary["iterations"]][-2:] == [False, True]
     # --multiscale that does not apply: a one-line note without -v.
     assert main([*argv, "--multiscale"]) == 0

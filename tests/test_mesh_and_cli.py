@@ -95,6 +95,7 @@ def test_cli_match_writes_the_map_atomically(tmp_path, capsys):
     assert np.mean(mapping == np.arange(6890)) > 0.95
     summary = json.loads(capsys.readouterr().out)
     assert summary["n_vertices"] == 6890 and "refine" in summary["timings"]
+    assert "map" not in summary  # written to -o
 
 
 def test_cli_errors_exit_2_and_write_nothing(tmp_path, capsys):

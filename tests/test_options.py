@@ -1,5 +1,6 @@
 """``match`` rejects bad options up front, with one line saying what is allowed."""
 
+import inspect
 import math
 
 import numpy as np
@@ -132,7 +133,9 @@ def test_cli_rejects_k_max_with_one_line(pair, tmp_path, capsys, k_max):
     [
         ({"max_passes": 0}, ValueError, "max_passes must be an integer >= 1"),
         ({"k_max": 1}, ValueError, "k_max must be an integer in"),
-        ({"bogus": 1}, TypeError, "not an option of hope_rs.match: .*'bogus'"),
+        ({"bogus": 1}, TypeError, "not an option of hope_rs.match_many: 'bogus'"),
+        # A mistyped batch option: the message lists the batch's own options too.
+        ({"jbos": 1}, TypeError, "'jbos'; its own options are out_dir, jobs, backend, cache"),
     ],
 )
 def test_a_batch_checks_match_options_before_any_work(
@@ -145,6 +148,12 @@ def test_a_batch_checks_match_options_before_any_work(
     with pytest.raises(exc, match=message):
         hope_rs.match_many(list(pair), out_dir=tmp_path / "maps", jobs=1, cache=False, **options)
     assert not (tmp_path / "maps").exists()
+
+
+def test_the_batch_options_listed_are_its_keyword_arguments():
+    params = inspect.signature(hope_rs.batch.driver.imatch_many).parameters.values()
+    own = {p.name for p in params if p.kind is inspect.Parameter.KEYWORD_ONLY}
+    assert set(hope_rs.batch.driver.BATCH_OPTIONS) == own
 
 
 def test_batch_cli_rejects_k_max_with_one_line(pair, tmp_path, capsys):

@@ -21,7 +21,7 @@ import numpy as np
 from ..geometry.map_io import check_writable_folder
 from ..geometry.mesh import as_mesh
 from ..matching import check_match_options
-from ..pipeline.config import INIT_KINDS, MatchConfig
+from ..pipeline.config import INIT_KINDS, KEYWORDS, MatchConfig
 from ..pipeline.landmarks import check_landmarks
 from ..shape import Shape
 from .backends import check_backend, cpu_count, default_jobs, die_with_parent, make_backend
@@ -161,6 +161,13 @@ def _pair_landmarks(landmarks, pairs, n_pairs: int) -> list:
     return marks
 
 
+#: :func:`match_many`'s own keyword options (besides those of :func:`hope_rs.match`).
+BATCH_OPTIONS = (
+    "out_dir", "jobs", "backend", "cache", "config", "init", "progress", "ray_options",
+    "map_format", "landmarks",
+)  # fmt: skip
+
+
 def batch_config(config: MatchConfig | None, init, options: dict) -> MatchConfig:
     """The MatchConfig of every pair: ``config`` with ``init`` (descriptors) and ``match``'s
     keyword ``options`` set through :meth:`MatchConfig.with_options`, as :func:`hope_rs.match`
@@ -170,6 +177,12 @@ def batch_config(config: MatchConfig | None, init, options: dict) -> MatchConfig
     for name in ("callback", "progress"):
         if name in options:
             raise TypeError(f"{name} is not an option of a batch's pairs")
+    unknown = sorted(set(options) - set(KEYWORDS))
+    if unknown:
+        raise TypeError(
+            f"not an option of hope_rs.match_many: {unknown[0]!r}; its own options are "
+            f"{', '.join(BATCH_OPTIONS)}, and hope_rs.match's {', '.join(KEYWORDS)}"
+        )
     cfg = check_match_options(config=config, init=init, **options)
     if init is not None:
         cfg = dataclasses.replace(cfg, initial=dataclasses.replace(cfg.initial, descriptor=init))

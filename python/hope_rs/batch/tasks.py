@@ -45,6 +45,8 @@ def prepare_task(
         cache = ShapeCache(cache_root)
         config = spec["config"]
         if spec["kind"] == "path":
+            if not os.path.isfile(spec["path"]):
+                raise FileNotFoundError(f"no such mesh file: {spec['path']!r}")
             digest = file_digest(spec["path"])
             mesh = cache.mesh(spec["path"], digest)
         else:

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
 import sys
 import textwrap
 import time
+from pathlib import Path
 
 from ..batch.driver import imatch_many, read_pairs
 from ..matching import check_match_options
@@ -170,6 +172,19 @@ def cmd_batch(args) -> int:
     config = config_from_args(args)
     pairs, landmarks = read_pairs(args.pairs, ext=args.ext, with_landmarks=True)
     shapes = list(dict.fromkeys(p for pair in pairs for p in pair))
+    missing = [p for p in shapes if not os.path.isfile(p)]
+    if missing and not args.quiet:
+        # Their pairs fail, the others run; a name without a suffix hints at the cause.
+        hint = (
+            "; names without a suffix need --ext (e.g. --ext .off)"
+            if not args.ext and any(not Path(p).suffix for p in missing)
+            else ""
+        )
+        print(
+            f"hope-rs: warning: {len(missing)} mesh file(s) of the pairs file do not exist "
+            f"(e.g. {os.fspath(missing[0])!r}); their pairs will fail{hint}",
+            file=sys.stderr,
+        )
     index = {p: i for i, p in enumerate(shapes)}
     t0 = time.perf_counter()
     counts = {"matched": 0, "skipped": 0, "failed": 0}

@@ -8,7 +8,7 @@ import numpy as np
 
 from .config import MatchConfig
 from .iteration import Iteration
-from .progress import StageInfo
+from .progress import STAGES, StageInfo
 
 __all__ = ["MatchQuality", "MatchResult"]
 
@@ -132,17 +132,21 @@ class MatchResult:
     def stage(self, name: str) -> StageInfo:
         """The :class:`~hope_rs.pipeline.progress.StageInfo` of the stage ``name`` (e.g. "spectral").
 
+        A stage of :data:`~hope_rs.pipeline.progress.STAGES` that this match's path does not
+        include ("coarse" on the full path, "partial" between two whole shapes) reads as not
+        run, with that reason.
+
         Raises
         ------
         KeyError
-            When the match did not consider that stage ("coarse" without ``multiscale``).
+            When ``name`` is not a stage of :data:`~hope_rs.pipeline.progress.STAGES`.
         """
         for s in self.stages:
             if s.name == name:
                 return s
-        raise KeyError(
-            f"no stage {name!r} in this match; it has {', '.join(s.name for s in self.stages)}"
-        )
+        if name in STAGES:
+            return StageInfo(name, ran=False, reason="not on this match's path")
+        raise KeyError(f"no stage {name!r}; the stages are {', '.join(STAGES)}")
 
     def to_pyfm(self) -> np.ndarray:
         """The map as pyFM's ``p2p_21`` for ``mesh1 = B`` and ``mesh2 = A``.
