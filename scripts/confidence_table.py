@@ -4,10 +4,12 @@ tosca_nonisometric_r).
 
 Each pair is matched once with the default settings; its maps (final, HOPE's, ZoomOut's) and
 per-vertex geodesic errors (edge-graph geodesics / sqrt(area), ``hope_rs.geodesic_errors``)
-are cached under ``--cache`` (default: a folder in the system's temp directory), so a rerun,
-or a rerun with other confidence coefficients, takes seconds. The confidence is computed from
-the cached maps by the same functions the pipeline's confidence stage runs. A match is "right"
-when its error is at most 0.05.
+are cached under ``--cache`` (default: a folder in the system's temp directory), keyed by
+every setting, so a rerun takes seconds (other confidence coefficients match again: the
+confidence's rule decides whether the orient stage runs, and a part's scale trial is chosen
+by its confidence). A whole pair's confidence is computed from the cached maps by the same
+functions the pipeline's confidence stage runs. A match is "right" when its error is at most
+0.05.
 
     python scripts/confidence_table.py                 # match (or reuse), write docs/confidence.md
     python scripts/confidence_table.py --max-pairs 4   # at most 4 pairs per set (faster)
@@ -26,8 +28,8 @@ training pairs with the same helpers.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import datetime
+import hashlib
 import os
 import platform
 import shutil
@@ -39,11 +41,13 @@ from pathlib import Path
 
 import numpy as np
 from benchmarks import (
+    DATA,
     PARTIAL_PAIRS,
     PARTIAL_SOURCES,
     PERTURBED,
     PERTURBED_SOURCES,
     REVERSED_SOURCES,
+    ROOT,
     partial_conditions,
     partial_sets,
     perturbed_sets,
@@ -63,11 +67,8 @@ from hope_rs.pipeline.confidence import (
     match_quality,
     vertex_confidence,
 )
-from hope_rs.pipeline.config import ConfidenceConfig
 from hope_rs.pipeline.runner import run_match
 
-ROOT = Path(__file__).resolve().parents[1]
-DATA = Path(os.environ.get("HOPE_DATA", ROOT.parent / "shared" / "data"))
 HELD_OUT = ["faust_r", "tosca_r", "tosca_nonisometric_r"]
 #: A match is right when its geodesic error (sqrt(area) units) is at most this.
 WRONG_ABOVE = 0.05
@@ -96,16 +97,15 @@ def matched(pair: Pair, config: MatchConfig, init: str, cache: Path) -> dict:
     before the deformation pass), ``a_idx``, ``errors``, ``seconds``; for a part and its
     whole also ``confidence`` and ``quality`` (the match's own ``MatchResult.confidence`` and
     its mean confidence, confident share, likely-failed flag and turned-over share, see
-    :func:`part_pair`). The cache is keyed by the settings that change the maps (the
-    confidence's are not among them)."""
-    cfg = dataclasses.replace(config, confidence=ConfidenceConfig(enabled=False))
-    path = cache / cfg.key()[:16] / init / pair.dataset / f"{pair.name}.npz"
+    :func:`part_pair`). The cache is keyed by every setting: the confidence's change maps too
+    (its rule triggers the orient stage; a part's scale trial is chosen by its confidence)."""
+    path = cache / config.key()[:16] / init / pair.dataset / f"{pair.name}.npz"
     if path.exists():
         with np.load(path) as z:
             return {**z, "cached": True}
     ma, mb = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
-    a = Shape(ma, k_max=cfg.k_max, config=cfg.shape)
-    b = Shape(mb, k_max=cfg.k_max, config=cfg.shape)
+    a = Shape(ma, k_max=config.k_max, config=config.shape)
+    b = Shape(mb, k_max=config.k_max, config=config.shape)
     seen = {}
 
     def grab(state, name):
@@ -115,8 +115,7 @@ def matched(pair: Pair, config: MatchConfig, init: str, cache: Path) -> dict:
             seen["judged"] = a.map_out(b, state.f)
 
     t = time.perf_counter()
-    # With the confidence as ``config`` sets it (the same maps either way): a part's
-    # confidence comes from its partial stage, not from the cached maps.
+    # A part's confidence is the match's own, not recomputed from the cached maps.
     res = run_match(a, b, init, config, on_stage=grab)
     seconds = time.perf_counter() - t
     a_idx, b_idx = pair.ground_truth(ma.n_vertices, mb.n_vertices)
@@ -153,8 +152,10 @@ def derived_sets(folder: Path) -> list[Path]:
     ``folder`` (each command's output once; kept for the next run): the perturbed targets and
     the reversed pairs (``hope-rs perturb-set``) and the partial sets (``hope-rs partial-set``,
     the first PARTIAL_PAIRS pairs, only the whole -> part sets the benchmark has). The set
-    folders, in table order. The maps' cache knows a pair by its set's and its own names, so
-    after a change to a set's rule remove the whole cache folder, not only these sets."""
+    folders, in table order. Each command's folder is named by a hash of its arguments, so
+    other sources, conditions or pair counts write new sets; the maps' cache knows a pair by
+    its set's and its own names, so after a change to a set's rule (its code) remove the
+    whole cache folder, not only these sets."""
     jobs = [
         ("perturb-set", PERTURBED_SOURCES, ",".join(PERTURBED), None),
         ("perturb-set", REVERSED_SOURCES, "reversed", None),
@@ -163,7 +164,8 @@ def derived_sets(folder: Path) -> list[Path]:
     wanted = set(perturbed_sets() + reversed_sets() + partial_sets())
     out = []
     for i, (command, sources, conditions, max_pairs) in enumerate(jobs):
-        done = folder / f"{i}-{command}-{conditions.replace(',', '-')}"
+        args = repr((command, tuple(sources), conditions, max_pairs)).encode()
+        done = folder / f"{i}-{command}-{hashlib.sha256(args).hexdigest()[:12]}"
         if not done.is_dir():
             # Written beside, then renamed: an interrupted run leaves no half-written set.
             tmp = folder / f".{done.name}.tmp"
@@ -172,6 +174,9 @@ def derived_sets(folder: Path) -> list[Path]:
             write_derived(command, tmp, sources, conditions, max_pairs, stdout=subprocess.DEVNULL)
             os.replace(tmp, done)
         out += sorted(d for d in done.iterdir() if d.name in wanted and (d / "pairs.txt").is_file())
+    missing = wanted - {d.name for d in out}
+    if missing:
+        raise RuntimeError(f"the derived sets {', '.join(sorted(missing))} were not written")
     return out
 
 
@@ -217,9 +222,10 @@ def auroc(score: np.ndarray, right: np.ndarray) -> float:
 
 def part_pair(m: dict) -> bool:
     """Whether the cached match is of a part and its whole (its partial stage ran). Its
-    confidence is the match's own: the partial stage carries it from the kept scale trial,
-    measured at the whole's scale and 0 where a whole's vertex has no counterpart on the
-    part, which the features of the maps at the shapes' own scales would not reproduce."""
+    confidence is the match's own: the confidence stage's on the map the partial stage
+    kept, with the part measured at the whole's scale, and 0 where a whole's vertex has no
+    counterpart on the part, which the features of the maps at the shapes' own scales would
+    not reproduce."""
     return "confidence" in m
 
 
@@ -235,9 +241,13 @@ def scored(pair: Pair, m: dict, config: MatchConfig) -> tuple[np.ndarray, np.nda
 
 
 def pairs(folders: list[Path], max_pairs: int | None) -> dict[str, list[Pair]]:
+    """The pairs of each set folder, by the folder's name (unique: the maps' cache knows a
+    pair by its set's name)."""
     out = {}
     for folder in folders:
         name = folder.name
+        if name in out:
+            raise ValueError(f"two sets named {name}: give each --extra-sets folder other names")
         ps = pairs_of(folder)
         if max_pairs is not None and len(ps) > max_pairs:
             # Evenly spaced, always the same ones.
@@ -279,17 +289,7 @@ def render(
         f"- data: the `pairs.txt` pairs of {', '.join(HELD_OUT)} "
         + ("(sampled: `--max-pairs`)" if sampled else "(all of them)")
         + "; none of them is a training pair of `scripts/confidence_fit.py`"
-        + (
-            f"; and the sets {', '.join(extra)} that `hope-rs perturb-set` and `hope-rs "
-            "partial-set` built from them (B with vertex noise of 0.2% or 0.5% of sqrt(area), "
-            "or welded by topological shortcuts and scored on the clean B, a weld counting as "
-            "either of its two; `_reversed`: the pairs matched the other way; `cut30`, "
-            "`cut50`: A cut by a plane removing 30% or 50% of its vertices, `holes`: 3-5 "
-            "geodesic discs punched out of A, `_rev`: the whole A matched to the cut B, scored "
-            "where A has a counterpart; a part's confidence is the match's own)"
-            if extra
-            else ""
-        ),
+        + (f"; and the sets {', '.join(extra)}{derived_note(extra)}" if extra else ""),
         (
             f"- a match is right when its geodesic error is at most {WRONG_ABOVE} sqrt(area) "
             "(edge-graph geodesics, at the vertices with ground truth)"
@@ -340,9 +340,9 @@ def render(
         "(`ConfidenceConfig.weights`, `.intercept`) was fitted by `scripts/confidence_fit.py` on",
         "remeshed FAUST pairs outside `pairs.txt`: default matches, and one-pass matches from",
         "SHOT and HKS initial maps (for examples of failing maps), each kind weighed equally.",
-        "A part's confidence is its partial stage's: the confidence stage of the kept scale",
-        "trial, on the part at the whole's scale; 0 on a whole's vertices without a counterpart",
-        "on the part.",
+        "A part's confidence is the match's own: the confidence stage on the map the partial",
+        "stage kept, the part measured at the whole's scale; 0 on a whole's vertices without a",
+        "counterpart on the part.",
         "",
         "## Per pair",
         "",
@@ -372,6 +372,35 @@ def render(
             + " |"
         )
     return "\n".join(lines) + "\n"
+
+
+#: What a derived set's name says about it, for the sets of ``perturb-set`` and
+#: ``partial-set`` (a name holding the key; "_rev" only at its end).
+DERIVED_NAMES = {
+    "_noise": "`_noise02`, `_noise05`: B with vertex noise of 0.2% or 0.5% of sqrt(area)",
+    "_shortcuts": (
+        "`_shortcuts`: B welded by topological shortcuts, scored on the clean B, a weld "
+        "counting as either of its two"
+    ),
+    "_reversed": "`_reversed`: the pairs matched the other way",
+    "_cut": "`_cut30`, `_cut50`: A cut by a plane removing 30% or 50% of its vertices",
+    "_holes": "`_holes`: 3-5 geodesic discs punched out of A",
+    "_rev": (
+        "`_rev` after a cut: the whole A matched to the cut B, scored where A has a "
+        "counterpart; a part's confidence is the match's own"
+    ),
+}
+
+
+def derived_note(extra: list[str]) -> str:
+    """What the derived sets ``extra`` (set names) are, from the parts of their names."""
+
+    def has(name: str, key: str) -> bool:
+        return name.endswith(key) if key == "_rev" else key in name
+
+    said = [text for key, text in DERIVED_NAMES.items() if any(has(n, key) for n in extra)]
+    built = "built by `hope-rs perturb-set` and `hope-rs partial-set` from the sets above"
+    return f" ({built}; " + "; ".join(said) + ")" if said else ""
 
 
 def flag_check(per_pair: list) -> str:
