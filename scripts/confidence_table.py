@@ -32,6 +32,7 @@ import datetime
 import hashlib
 import os
 import platform
+import re
 import shutil
 import subprocess
 import sys
@@ -375,17 +376,17 @@ def render(
 
 
 #: What a derived set's name says about it, for the sets of ``perturb-set`` and
-#: ``partial-set`` (a name holding the key; "_rev" only at its end).
+#: ``partial-set``: a pattern its name matches, and the words.
 DERIVED_NAMES = {
-    "_noise": "`_noise02`, `_noise05`: B with vertex noise of 0.2% or 0.5% of sqrt(area)",
-    "_shortcuts": (
+    r"_noise\d+$": "`_noise02`, `_noise05`: B with vertex noise of 0.2% or 0.5% of sqrt(area)",
+    r"_shortcuts$": (
         "`_shortcuts`: B welded by topological shortcuts, scored on the clean B, a weld "
         "counting as either of its two"
     ),
-    "_reversed": "`_reversed`: the pairs matched the other way",
-    "_cut": "`_cut30`, `_cut50`: A cut by a plane removing 30% or 50% of its vertices",
-    "_holes": "`_holes`: 3-5 geodesic discs punched out of A",
-    "_rev": (
+    r"_reversed$": "`_reversed`: the pairs matched the other way",
+    r"_cut\d+": "`_cut30`, `_cut50`: A cut by a plane removing 30% or 50% of its vertices",
+    r"_holes": "`_holes`: 3-5 geodesic discs punched out of A",
+    r"_rev$": (
         "`_rev` after a cut: the whole A matched to the cut B, scored where A has a "
         "counterpart; a part's confidence is the match's own"
     ),
@@ -393,12 +394,8 @@ DERIVED_NAMES = {
 
 
 def derived_note(extra: list[str]) -> str:
-    """What the derived sets ``extra`` (set names) are, from the parts of their names."""
-
-    def has(name: str, key: str) -> bool:
-        return name.endswith(key) if key == "_rev" else key in name
-
-    said = [text for key, text in DERIVED_NAMES.items() if any(has(n, key) for n in extra)]
+    """What the derived sets ``extra`` (set names) are, from the patterns of their names."""
+    said = [text for key, text in DERIVED_NAMES.items() if any(re.search(key, n) for n in extra)]
     built = "built by `hope-rs perturb-set` and `hope-rs partial-set` from the sets above"
     return f" ({built}; " + "; ".join(said) + ")" if said else ""
 

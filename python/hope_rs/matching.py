@@ -20,7 +20,7 @@ from .pipeline.result import MatchResult
 from .pipeline.runner import run_match
 from .shape import Shape
 
-__all__ = ["MatchConfig", "MatchResult", "check_match_options", "match"]
+__all__ = ["MatchConfig", "MatchResult", "check_match_options", "match", "unknown_options"]
 
 
 def _as_mesh(x, k_max: int, name: str) -> Shape | Mesh:
@@ -172,10 +172,15 @@ def _effective_config(config, init, options: dict, callback, progress) -> MatchC
     return config.with_options(**options) if options else config
 
 
+def unknown_options(options) -> list[str]:
+    """The names among ``options`` that are no keyword option of :func:`match` (sorted)."""
+    return sorted(set(options) - set(KEYWORDS))
+
+
 def _unknown_option(options: dict) -> str | None:
     """The first name of ``options`` that is no option of :func:`match`, with the list of
     options, or ``None``."""
-    unknown = sorted(set(options) - set(KEYWORDS))
+    unknown = unknown_options(options)
     if not unknown:
         return None
     return (

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..geometry.map_io import check_writable_folder
 from ..geometry.mesh import as_mesh
-from ..matching import check_match_options
+from ..matching import check_match_options, unknown_options
 from ..pipeline.config import INIT_KINDS, KEYWORDS, MatchConfig
 from ..pipeline.landmarks import check_landmarks
 from ..shape import Shape
@@ -177,7 +177,7 @@ def batch_config(config: MatchConfig | None, init, options: dict) -> MatchConfig
     for name in ("callback", "progress"):
         if name in options:
             raise TypeError(f"{name} is not an option of a batch's pairs")
-    unknown = sorted(set(options) - set(KEYWORDS))
+    unknown = unknown_options(options)
     if unknown:
         raise TypeError(
             f"not an option of hope_rs.match_many: {unknown[0]!r}; its own options are "

@@ -8,7 +8,6 @@ import os
 import sys
 import textwrap
 import time
-from pathlib import Path
 
 from ..batch.driver import imatch_many, read_pairs
 from ..matching import check_match_options
@@ -177,7 +176,7 @@ def cmd_batch(args) -> int:
         # Their pairs fail, the others run; a name without a suffix hints at the cause.
         hint = (
             "; names without a suffix need --ext (e.g. --ext .off)"
-            if not args.ext and any(not Path(p).suffix for p in missing)
+            if not args.ext and any(not p.suffix for p in missing)
             else ""
         )
         print(
