@@ -4,6 +4,8 @@ on Ctrl-C, existing map files and cache entries checked before they are reused."
 import os
 import shutil
 import stat
+import subprocess
+import sys
 import warnings
 
 import numpy as np
@@ -288,3 +290,22 @@ def test_a_damaged_map_among_missing_ones_is_redone(folder, reference, tmp_path,
     assert [r.ok and not r.skipped for r in res] == [True] * 3
     for r in res:
         np.testing.assert_array_equal(read_map(r.path, N, N), reference[r.path.name])
+
+
+def test_a_script_without_the_main_guard_fails_with_the_fix_instead_of_hanging(tmp_path):
+    # Workers are spawned: each imports the main script, which here starts the batch again.
+    script = tmp_path / "noguard.py"
+    script.write_text(
+        "import numpy as np, hope_rs\n"
+        "v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])\n"
+        "f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])\n"
+        "hope_rs.match_many({'a': (v, f), 'b': (v, f)}, [('a', 'b'), ('b', 'a')], jobs=2, "
+        "cache=False)\n"
+    )
+    res = subprocess.run(
+        [sys.executable, str(script)], capture_output=True, text=True, timeout=300, check=False
+    )
+    assert res.returncode != 0
+    last = res.stderr.strip().splitlines()[-1]
+    assert last.startswith("RuntimeError: the batch's worker processes died while starting")
+    assert 'if __name__ == "__main__":' in last and "jobs=1" in last

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import unwritable_folder
+from conftest import data_path, unwritable_folder
 from meshes import bumpy_sphere_files
 
 import hope_rs
@@ -184,3 +184,61 @@ def test_usage_errors_exit_2(meshes, tmp_path, capsys):
     pairs.write_text(f"{a} {a}\n")
     assert main(["batch", str(pairs), "--out", str(tmp_path / "o"), "-j", "0"]) == 2
     assert "--jobs must be a positive integer" in one_line_error(capsys.readouterr().err)
+
+
+def _cli(*args: str, stdout=subprocess.PIPE) -> subprocess.CompletedProcess:
+    code = "import sys; from hope_rs.cli.commands import main; sys.exit(main(sys.argv[1:]))"
+    return subprocess.run(
+        [sys.executable, "-c", code, *args], check=False, stdout=stdout, stderr=subprocess.PIPE
+    )
+
+
+def test_the_map_goes_to_dev_stdout_and_a_closed_pipe_ends_quietly(meshes, tmp_path):
+    a, b = meshes
+    res = _cli("match", a, b, "-q", "-o", "/dev/stdout")
+    assert res.returncode == 0, res.stderr
+    assert len(res.stdout.split()) == N  # the map, one index per line, on the pipe
+    # A reader gone before the output comes (`| head -c 0`): no error message, the status of
+    # SIGPIPE.
+    code = (
+        "import subprocess, sys\n"
+        "p = subprocess.Popen(sys.argv[1:], stdout=subprocess.PIPE, stderr=subprocess.PIPE)\n"
+        "p.stdout.close()\n"
+        "sys.stderr.buffer.write(p.stderr.read()); sys.exit(p.wait())\n"
+    )
+    cli = "import sys; from hope_rs.cli.commands import main; sys.exit(main(sys.argv[1:]))"
+    big = [sys.executable, "-c", cli, "match", a, b, "-q", "--json"]
+    res = subprocess.run([sys.executable, "-c", code, *big], capture_output=True, check=False)
+    assert res.returncode == 141 and b"Broken pipe" not in res.stderr, res.stderr
+
+
+def test_settings_files_a_folder_binary_or_with_a_byte_order_mark(meshes, tmp_path, capsys):
+    a, b = meshes
+    out = tmp_path / "m.txt"
+    assert main(["match", a, b, "-q", "-o", str(out), "--config", str(tmp_path)]) == 2
+    assert "is a folder" in one_line_error(capsys.readouterr().err)
+    binary = tmp_path / "s.toml"
+    binary.write_bytes(b"\x82\xff\x00\x93")
+    assert main(["match", a, b, "-q", "-o", str(out), "--config", str(binary)]) == 2
+    assert "s.toml' is not UTF-8 text" in one_line_error(capsys.readouterr().err)
+    bom = tmp_path / "bom.toml"
+    bom.write_bytes(b"\xef\xbb\xbf[refine]\nmax_passes = 1\n")
+    assert main(["match", a, b, "-q", "-o", str(out), "--config", str(bom)]) == 0
+    assert read_map(out).shape == (N,)
+    assert not list(tmp_path.glob(".hope-rs-*"))
+
+
+def test_a_folder_given_as_the_pairs_file(tmp_path, capsys):
+    assert main(["batch", str(tmp_path), "--out", str(tmp_path / "o")]) == 2
+    assert "is a folder; give the pairs file" in one_line_error(capsys.readouterr().err)
+
+
+def test_derived_set_commands_check_their_output_folder_first(tmp_path, capsys):
+    taken = tmp_path / "file.off"
+    taken.write_text("not a folder")
+    source = str(data_path("faust_r"))
+    for cmd in ("partial-set", "perturb-set", "resolution-set"):
+        assert main([cmd, str(taken), "--from", source, "--max-pairs", "1"]) == 2
+        assert "exists and is not a folder" in one_line_error(capsys.readouterr().err)
+    with pytest.raises(ValueError, match="not a regular file"):
+        hope_rs.load_mesh("/dev/null")

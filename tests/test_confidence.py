@@ -76,6 +76,9 @@ def test_map_or_unmatched(broken_and_good):
         assert np.all(m[low] == -1)
         np.testing.assert_array_equal(m[~low], broken.map[~low])
     assert np.any(broken.map_or_unmatched() == -1)
+    for bad in ("0.5", 1.5, True):
+        with pytest.raises(ValueError, match="threshold must be a number in"):
+            broken.map_or_unmatched(bad)
     np.testing.assert_array_equal(broken.map_or_unmatched(0.0), broken.map)
     m = broken.map_or_unmatched()
     m[:] = 0  # a new array: the result's map is untouched

@@ -13,10 +13,12 @@ from hope_rs import MatchConfig
 from hope_rs.batch.cache import basis_params, descriptor_params
 from hope_rs.evaluation.demo import demo_pair
 from hope_rs.features.descriptors import DescriptorConfig
+from hope_rs.kernels.search import SearchConfig
 from hope_rs.pipeline import overlap as overlap_module
 from hope_rs.pipeline import shared_faces as finish_module
 from hope_rs.pipeline.config import (
     KEYWORDS,
+    InitialConfig,
     LandmarkConfig,
     PartialConfig,
     RefineConfig,
@@ -148,7 +150,32 @@ def test_spectral_settings_reach_the_pass(bundled):
         (
             MatchConfig(spectral=SpectralConfig(k_end=-1)),
             ValueError,
-            r"spectral\.k_end must be an integer >= 0",
+            r"spectral\.k_end must be an integer >= 1",
+        ),
+        (
+            MatchConfig(spectral=SpectralConfig(k_step=0)),
+            ValueError,
+            r"spectral\.k_step must be an integer >= 1",
+        ),
+        (
+            MatchConfig(spectral=SpectralConfig(local_candidates=0)),
+            ValueError,
+            r"spectral\.local_candidates must be an integer >= 1",
+        ),
+        (
+            MatchConfig(initial=InitialConfig(search=SearchConfig(pca_dims=0))),
+            ValueError,
+            r"initial\.search\.pca_dims must be an integer >= 1",
+        ),
+        (
+            MatchConfig(refine=RefineConfig(auction_floor_div=0)),
+            ValueError,
+            r"refine\.auction_floor_div must be an integer >= 1",
+        ),
+        (
+            MatchConfig(refine=RefineConfig(polish_k=0)),
+            ValueError,
+            r"refine\.polish_k must be an integer in \[1, 64\]",
         ),
         (
             MatchConfig(spectral=SpectralConfig(margin=float("nan"))),
@@ -178,3 +205,23 @@ def test_a_bad_setting_in_a_config_is_refused_before_any_work(bundled, config, e
     a, b = bundled
     with pytest.raises(exc, match=message):
         hope_rs.match(a, b, config=config)
+
+
+@pytest.mark.parametrize(
+    "fields, message",
+    [
+        ({"k_start": 50, "k_end": 40}, r"k_start \(50\) must be at most k_end \(40\)"),
+        ({"max_samples": 119}, r"max_samples \(119\) must be at least k_end \(120\)"),
+    ],
+)
+def test_spectral_settings_that_contradict_each_other(fields, message):
+    with pytest.raises(ValueError, match=message):
+        SpectralConfig(**fields)
+    assert SpectralConfig(max_samples=120).max_samples == 120
+
+
+def test_a_shape_refuses_settings_that_are_not_its_own():
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
+    f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    with pytest.raises(TypeError, match="config must be a hope_rs.shape.ShapeConfig, got dict"):
+        hope_rs.Shape((v, f), config={"a": 1})

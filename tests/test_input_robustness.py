@@ -360,3 +360,18 @@ def test_mutated_files_load_or_fail_in_one_line(tmp_path, kind, data):
     if ext == "off":
         nv, nf, body = off_header_counts(blob)
         assert m.n_vertices == nv and body == nv + nf
+
+
+@pytest.mark.parametrize("init", ["shot", "wks", "hks"])
+def test_meshes_too_small_for_a_spectrum_match_without_warnings(init):
+    # A lone triangle has no non-constant eigenfunction; a regular tetrahedron one distinct
+    # eigenvalue: WKS and HKS describe every vertex alike there instead of failing.
+    tri = hope_rs.Mesh(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0.0]]), np.array([[0, 1, 2]]))
+    reg_v = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1.0]])
+    reg = hope_rs.Mesh(reg_v, np.array([[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for a, b in ((tri, TET_MESH), (reg, reg), (reg, TET_MESH)):
+            res = hope_rs.match(a, b, init=init)
+            assert res.map.shape == (a.n_vertices,)
+            assert ((res.map >= 0) & (res.map < b.n_vertices)).all()

@@ -2,13 +2,20 @@
 
 import os
 import stat
+import threading
 
 import numpy as np
 import pytest
 from conftest import unwritable_folder
 
 import hope_rs
-from hope_rs.geometry.map_io import atomic_write, check_writable_folder, read_map, write_map
+from hope_rs.geometry.map_io import (
+    atomic_write,
+    check_writable_folder,
+    read_landmarks,
+    read_map,
+    write_map,
+)
 
 MAP = np.array([3, 0, 2, 2, 1], dtype=np.int64)
 
@@ -119,3 +126,53 @@ def test_check_writable_folder(tmp_path):
     with pytest.raises(ValueError, match=f"cannot write to output folder '{ro}'"):
         check_writable_folder(ro)
     assert list((tmp_path / "new" / "sub").iterdir()) == []  # the probe is removed
+
+
+def test_a_link_is_followed_and_kept(tmp_path):
+    target = tmp_path / "real.txt"
+    target.write_text("old\n")
+    link = tmp_path / "link.txt"
+    link.symlink_to(target.name)
+    write_map(link, MAP)
+    assert link.is_symlink()  # the link stays a link ...
+    np.testing.assert_array_equal(read_map(target), MAP)  # ... and its target holds the map
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["link.txt", "real.txt"]
+
+
+def test_a_fifo_is_written_in_place_not_replaced(tmp_path):
+    fifo = tmp_path / "map.txt"
+    os.mkfifo(fifo)
+    got = []
+    reader = threading.Thread(target=lambda: got.append(fifo.read_text()))
+    reader.start()
+    write_map(fifo, MAP)
+    reader.join(timeout=30)
+    assert got == ["3\n0\n2\n2\n1\n"]
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode)  # still a FIFO, not a plain file
+
+
+def test_a_device_is_written_in_place(tmp_path):
+    # /dev/null is a device every system has: replacing it would need root and break it.
+    before = os.stat("/dev/null")
+    write_map("/dev/null", MAP)
+    after = os.stat("/dev/null")
+    assert stat.S_ISCHR(after.st_mode) and after.st_ino == before.st_ino
+
+
+@pytest.mark.parametrize("where", ["folder", "missing"])
+def test_a_folder_or_a_missing_folder_is_refused_without_temporary_names(tmp_path, where):
+    path = tmp_path if where == "folder" else tmp_path / "no" / "map.txt"
+    with pytest.raises(OSError) as e:
+        write_map(path, MAP)
+    assert "hope-rs" not in str(e.value) and ".tmp" not in str(e.value)
+    assert ("is a folder" if where == "folder" else "does not exist") in str(e.value)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_byte_order_mark_is_read_past(tmp_path):
+    path = tmp_path / "m.txt"
+    path.write_bytes(b"\xef\xbb\xbf3\n0\n2\n2\n1\n")
+    np.testing.assert_array_equal(read_map(path), MAP)
+    lm = tmp_path / "lm.txt"
+    lm.write_bytes(b"\xef\xbb\xbf0 5\n17 3\n")
+    np.testing.assert_array_equal(read_landmarks(lm), [[0, 5], [17, 3]])

@@ -18,6 +18,7 @@ from .pipeline.options import check_config, check_options
 from .pipeline.progress import ProgressBar, StageLog
 from .pipeline.result import MatchResult
 from .pipeline.runner import run_match
+from .pipeline.unreferenced import referenced
 from .shape import Shape
 
 __all__ = ["MatchConfig", "MatchResult", "check_match_options", "match", "unknown_options"]
@@ -30,6 +31,11 @@ def _as_mesh(x, k_max: int, name: str) -> Shape | Mesh:
             raise ValueError(f"{name} was built with k_max={x.k_max} < requested k_max={k_max}")
         return x
     return as_mesh(x, name)
+
+
+def _mesh_of(x: Shape | Mesh) -> Mesh:
+    """The mesh of ``x`` in its input numbering."""
+    return x.mesh if isinstance(x, Shape) else x
 
 
 def _as_shape(x: Shape | Mesh, config: MatchConfig) -> Shape:
@@ -136,6 +142,14 @@ def match(
     if not isinstance(init, str):
         init = as_index_map(init, ma.n_vertices, mb.n_vertices, name="init")
     landmarks = check_landmarks(landmarks, ma.n_vertices, mb.n_vertices)
+    # Vertices in no face have no surface to match by: the pair is matched without them.
+    ref = referenced(_mesh_of(ma), _mesh_of(mb))
+    if ref is not None:
+        ma = ma if ref.mesh_a is None else ref.mesh_a
+        mb = mb if ref.mesh_b is None else ref.mesh_b
+        if not isinstance(init, str):
+            init = ref.init_in(init)
+        landmarks = ref.landmarks_in(landmarks)
     sa, sb = _as_shape(ma, config), _as_shape(mb, config)
     timings = {"shapes": time.perf_counter() - t0}
     if isinstance(progress, (bool, np.bool_)):  # True: the bar; False: nothing
@@ -143,12 +157,14 @@ def match(
     else:
         bar = None
     log = StageLog(bar or progress, t0)
-    log.ran("shapes", timings["shapes"], f"A {sa.n_vertices} vertices, B {sb.n_vertices}")
+    shapes = f"A {sa.n_vertices} vertices, B {sb.n_vertices}"
+    log.ran("shapes", timings["shapes"], shapes + (f" ({ref.note()})" if ref else ""))
     # The bar's line ends on every exit (an error or Ctrl-C included).
     try:
-        return run_match(
+        res = run_match(
             sa, sb, init, config, callback=callback, log=log, timings=timings, landmarks=landmarks
         )
+        return res if ref is None else ref.expand(res)
     finally:
         if bar is not None:
             bar.close()

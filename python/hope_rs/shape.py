@@ -85,6 +85,11 @@ class Shape:
             or not 2 <= k_max <= 64
         ):
             raise ValueError(f"k_max must be an integer in [2, 64], got {k_max!r}")
+        if not isinstance(config, ShapeConfig):
+            raise TypeError(
+                f"config must be a hope_rs.shape.ShapeConfig, got {type(config).__name__}; the "
+                "settings of a match go to match(config=MatchConfig(...))"
+            )
         self.mesh = mesh
         self.k_max = int(k_max)
         self.config = config

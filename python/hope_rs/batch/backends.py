@@ -134,6 +134,14 @@ def _run_marked(marks: str, task_id: int, fn, *args) -> dict:
     return fn(*args)
 
 
+#: Why a batch stops when its worker processes die before running any pair.
+WORKERS_FAILED = (
+    "the batch's worker processes died while starting; they are spawned and import the main "
+    "script, so a script that calls match_many must do so under "
+    '`if __name__ == "__main__":` (or pass jobs=1)'
+)
+
+
 class _Job:
     """A task of the pool: its function, arguments and current future (None while it waits
     to be re-run alone)."""
@@ -207,6 +215,12 @@ class PoolBackend:
             if job is self.solo:
                 self.solo = None
         if broken:
+            if not os.listdir(self.marks):
+                # No task has started in any pool: the workers die while starting up, and a
+                # new pool would too (a script without the __main__ guard runs match_many
+                # again in every spawned worker).
+                self._kill(self.ex)
+                raise RuntimeError(WORKERS_FAILED)
             self._restart()
         return out
 
@@ -293,4 +307,7 @@ def make_backend(backend: str, jobs: int | None, ray_options: dict | None) -> Ba
     if backend == "ray":
         return RayBackend(**(ray_options or {}))
     threads = max(1, cpu_count() // jobs)
+    if jobs > 1 and getattr(mp.current_process(), "_inheriting", False):
+        # This is a spawned worker importing a main script that starts a batch at import.
+        raise RuntimeError(WORKERS_FAILED)
     return SerialBackend(None) if jobs == 1 else PoolBackend(jobs, threads)

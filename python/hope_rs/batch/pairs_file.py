@@ -81,13 +81,15 @@ def read_pairs(path: str | os.PathLike, *, ext: str = "", with_landmarks: bool =
     ([('template.off', 'scan.off'), ('template.off', 'scan#2.off')], [[0, 5], [17, 3]], None)
     """
     path = Path(path)
+    if path.is_dir():
+        raise ValueError(f"{str(path)!r} is a folder; give the pairs file (one 'A B' per line)")
     if not path.is_file():
         raise FileNotFoundError(f"no such pairs file: {str(path)!r}")
     if ext and not ext.startswith("."):
         ext = "." + ext
     folder = path.resolve().parent
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError:
         raise ValueError(f"{path} is not a text file of mesh paths") from None
     out, marks = [], []

@@ -229,6 +229,12 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("hope-rs: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # The reader closed the pipe (`| head`): stop quietly, as other tools do; the output
+        # goes nowhere from here, so the flush at exit cannot fail again.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 141  # 128 + SIGPIPE
     except MemoryError as e:  # a run too large for this machine: not the input's fault
         if debug:
             traceback.print_exc()

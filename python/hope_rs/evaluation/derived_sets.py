@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..geometry.map_io import check_writable_folder
 from ..geometry.mesh import Mesh
 from .datasets import Pair, pairs_of
 
@@ -68,7 +69,7 @@ def write_sets(
     (replacing an older one): an error or an interrupt leaves no half-written set. ``write``
     returns False when the condition kept no pair: then nothing is written. Returns the
     folders written."""
-    out = Path(out)
+    out = check_writable_folder(out, create=True)
     written = []
     for src, pairs in jobs:
         for cond in conditions:

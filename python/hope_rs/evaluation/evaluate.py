@@ -40,7 +40,7 @@ GEODESIC_METHODS = ("graph", "surface")
 def load_vts(path: str | os.PathLike) -> np.ndarray:
     """Read a ``.vts`` correspondence file (one 1-based vertex index per line) as 0-based."""
     try:
-        rows = np.loadtxt(path, dtype=np.int64, ndmin=2)
+        rows = np.loadtxt(path, dtype=np.int64, ndmin=2, encoding="utf-8-sig")
     except (OSError, ValueError) as e:
         raise ValueError(f"cannot read {os.fspath(path)!r} as a .vts file: {e}") from None
     idx = rows[:, 0] - 1

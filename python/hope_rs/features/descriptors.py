@@ -276,6 +276,9 @@ def _spectral_basis_of(
 def hks(evals: np.ndarray, evecs: np.ndarray, n_scales: int = 100) -> np.ndarray:
     """Heat kernel signature at log-spaced times (Sun et al. 2009), each scale normalised."""
     lam = evals[1:] if evals[0] < 1e-10 else evals
+    if lam.size == 0:
+        # A mesh too small to have a non-constant eigenfunction: every vertex alike.
+        return np.full((evecs.shape[0], n_scales), 1.0 / np.sqrt(evecs.shape[0]))
     t = np.geomspace(4 * np.log(10) / lam[-1], 4 * np.log(10) / lam[0], n_scales)
     weights = np.exp(-np.outer(evals, t))  # (k, T)
     d = (evecs**2) @ weights
@@ -286,9 +289,16 @@ def wks(evals: np.ndarray, evecs: np.ndarray, n_energies: int = 100) -> np.ndarr
     """Wave kernel signature (Aubry et al. 2011) with the usual log-energy Gaussian bands."""
     lam = np.maximum(evals, 1e-12)
     log_e = np.log(lam[1:] if evals[0] < 1e-10 else lam)
+    if log_e.size == 0:
+        # A mesh too small to have a non-constant eigenfunction: every vertex alike.
+        return np.full((evecs.shape[0], n_energies), 1.0 / np.sqrt(evecs.shape[0]))
     e_min, e_max = log_e[0], log_e[-1]
     sigma = 7 * (e_max - e_min) / n_energies
-    e_min, e_max = e_min + 2 * sigma, e_max - 2 * sigma
+    if sigma > 0:
+        e_min, e_max = e_min + 2 * sigma, e_max - 2 * sigma
+    else:
+        # One distinct eigenvalue (a regular tetrahedron): bands of unit width around it.
+        sigma, e_min, e_max = 1.0, e_min - 1.0, e_max + 1.0
     energies = np.linspace(e_min, e_max, n_energies)
     coefs = np.exp(-((energies[None, :] - np.log(lam)[:, None]) ** 2) / (2 * sigma**2))
     if evals[0] < 1e-10:

@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .readers import without_bom
+
 __all__ = [
     "MAP_SUFFIXES",
     "atomic_write",
@@ -68,15 +70,34 @@ def _umask() -> int:
     return mask
 
 
+def _special(path: str | os.PathLike) -> bool:
+    """Whether ``path`` (links followed) exists and is neither a plain file nor a folder: a
+    FIFO, a socket or a device such as ``/dev/stdout``."""
+    return os.path.exists(path) and not (os.path.isfile(path) or os.path.isdir(path))
+
+
 def atomic_write(path: str | os.PathLike, write: Callable[[io.BufferedWriter], object]) -> None:
     """Write a file through ``write(binary_file)`` so that it appears whole or not at all.
 
     The data go to a temporary file in the same folder, are flushed to disk, get the mode a
     plain ``open`` would give (0666 minus the umask; ``mkstemp`` makes 0600) and are renamed
     over ``path``. On any error the temporary file is removed and ``path`` is left as it was.
+    A symbolic link is followed (the file it names is replaced, the link kept); a FIFO or a
+    device (``/dev/stdout``) is written in place, since it cannot be replaced. A folder or a
+    missing folder is refused with a one-line error naming ``path``.
     """
-    path = os.fspath(path)
-    folder = os.path.dirname(os.path.abspath(path))
+    shown = os.fspath(path)
+    if os.path.isdir(shown):
+        raise IsADirectoryError(f"{shown!r} is a folder; give a file name")
+    if _special(shown):
+        # A FIFO, a socket or a device: renaming over it would replace it with a plain file.
+        with open(shown, "wb") as fh:
+            write(fh)
+        return
+    path = os.path.realpath(shown)
+    folder = os.path.dirname(path)
+    if not os.path.isdir(folder):
+        raise FileNotFoundError(f"cannot write {shown!r}: folder {folder!r} does not exist")
     fd, tmp = tempfile.mkstemp(dir=folder, prefix=TEMP_PREFIX, suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as fh:
@@ -143,10 +164,16 @@ def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
 
 def check_output_file(path: str | os.PathLike, option: str) -> None:
     """Fail early, with a one-line ValueError naming the ``option``, when the file ``path``
-    cannot be written: it is a folder, or its folder does not take new files."""
+    cannot be written: it is a folder, or its folder (a link's target's) does not take new
+    files, or it is a FIFO or device that is not writable."""
     if os.path.isdir(path):
         raise ValueError(f"{option} {os.fspath(path)!r} is a folder; give a file name")
-    check_writable_folder(os.path.dirname(os.path.abspath(path)))
+    if _special(path):
+        # A FIFO or a device (/dev/stdout) is written in place (see atomic_write).
+        if not os.access(path, os.W_OK):
+            raise ValueError(f"{option} {os.fspath(path)!r} is not writable")
+        return
+    check_writable_folder(os.path.dirname(os.path.realpath(path)))
 
 
 def write_map(path: str | os.PathLike, mapping) -> None:
@@ -216,7 +243,7 @@ def read_map(
         arr = arr.astype(np.int64)
     else:
         try:
-            tokens = data.decode("ascii").split()
+            tokens = without_bom(data).decode("ascii").split()
             arr = np.array([int(t) for t in tokens], dtype=np.int64)
         except (UnicodeDecodeError, ValueError, OverflowError):
             raise ValueError(
@@ -256,11 +283,16 @@ def read_landmarks(path: str | os.PathLike) -> np.ndarray:
     """
     name = os.fspath(path)
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = Path(path).read_text(encoding="utf-8-sig")
     except FileNotFoundError:
         raise FileNotFoundError(f"no such landmark file: {name!r}") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise ValueError(f"cannot read landmark file {name!r}: {e}") from None
+    except UnicodeDecodeError:
+        raise ValueError(
+            f"landmark file {name!r} is not text; it lists one 'A_VERTEX B_VERTEX' pair of "
+            "0-based indices per line"
+        ) from None
+    except OSError as e:
+        raise ValueError(f"cannot read landmark file {name!r}: {e.strerror or e}") from None
     rows = []
     for n, line in enumerate(text.splitlines(), 1):
         words = line.split("#", 1)[0].replace(",", " ").split()

@@ -48,7 +48,9 @@ class Mesh:
     """A triangle mesh given by ``vertices`` (N, 3) and ``faces`` (M, 3, 0-based).
 
     Vertex order is kept exactly as given: ground-truth correspondences index into it.
-    Degenerate faces, duplicate or unreferenced vertices and several components are allowed;
+    Degenerate faces, duplicate or unreferenced vertices and several components are allowed
+    (:func:`~hope_rs.match` leaves vertices in no face out of the match: never a target on
+    B, on A the image of the nearest vertex faces use, with confidence 0);
     so is any face orientation (:class:`~hope_rs.Shape` orients its own copy, see
     :mod:`hope_rs.geometry.orientation`). The arrays are copied: the mesh holds read-only copies, and
     later changes to the caller's arrays do not reach it.
@@ -256,6 +258,8 @@ def load_mesh(path: str | os.PathLike, *, merge_duplicates: bool | None = None) 
     if not os.path.isfile(path):
         if os.path.isdir(path):
             raise ValueError(f"cannot read {path!r}: it is a folder, not a mesh file")
+        if os.path.exists(path):
+            raise ValueError(f"cannot read {path!r}: not a regular file (a device or a pipe)")
         raise FileNotFoundError(f"no such mesh file: {path!r}")
     ext = os.path.splitext(path)[1].lower()
     if ext not in READERS:

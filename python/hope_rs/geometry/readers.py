@@ -32,9 +32,17 @@ def _show(tokens) -> str:
     return repr(s if len(s) <= 40 else s[:37] + "...")
 
 
+#: The UTF-8 byte-order mark some editors put at the start of a text file.
+BOM = b"\xef\xbb\xbf"
+
+
+def without_bom(data: bytes) -> bytes:
+    """``data`` without a leading UTF-8 byte-order mark."""
+    return data[len(BOM) :] if data.startswith(BOM) else data
+
+
 def _text(data: bytes) -> str:
-    if data.startswith(b"\xef\xbb\xbf"):
-        data = data[3:]
+    data = without_bom(data)
     nul = data.find(b"\x00")
     if nul >= 0:
         raise ValueError(f"binary data in a text format (a NUL byte at offset {nul})")
@@ -284,6 +292,7 @@ _PLY_TYPES = {
 
 
 def read_ply(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+    data = without_bom(data)
     end = re.search(rb"end_header[ \t]*\r?\n", data)
     if not data.startswith(b"ply") or end is None:
         raise ValueError("not a PLY file (it must start with 'ply' and have an 'end_header')")

@@ -8,7 +8,7 @@ from __future__ import annotations
 import os
 import warnings
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.cluster.vq import kmeans2
@@ -43,11 +43,11 @@ class SearchConfig:
         nearest.
     """
 
-    pca_dims: int = 64
+    pca_dims: int = field(default=64, metadata={"range": (1, None)})
     exact_search_limit: int = 60_000
-    max_threads: int = 8
-    ivf_cells_per_root: int = 2
-    ivf_probes: int = 12
+    max_threads: int = field(default=8, metadata={"range": (1, None)})
+    ivf_cells_per_root: int = field(default=2, metadata={"range": (1, None)})
+    ivf_probes: int = field(default=12, metadata={"range": (1, None)})
     decide_ties: bool = True
 
 

@@ -243,7 +243,7 @@ class RefineConfig:
     # Column counts are 32-bit in the Rust core.
     top_k: int = field(default=48, metadata={"range": (1, 2**31 - 1)})
     min_witness_fraction: float = 0.1
-    polish_k: int | None = 3
+    polish_k: int | None = field(default=3, metadata={"range": (1, 64)})
     global_step: bool = True
     converged_fraction: float = 0.01
     min_untrusted_drop: float = 0.1
@@ -252,8 +252,8 @@ class RefineConfig:
     region_check_pass: int = 1
     stay_pass: int = 2
     stay_counts: int = 1
-    auction_floor_div: int = 16
-    nearest_unused_k: int = 16
+    auction_floor_div: int = field(default=16, metadata={"range": (1, None)})
+    nearest_unused_k: int = field(default=16, metadata={"range": (1, None)})
     max_turned: float | None = None
     repair: RepairConfig = field(default_factory=RepairConfig)
 
@@ -319,13 +319,13 @@ class SpectralConfig:
     """
 
     enabled: bool = True
-    k_start: int = 20
-    k_end: int = 120
-    k_step: int = 5
-    max_samples: int = 8000
-    candidates: int = 32
+    k_start: int = field(default=20, metadata={"range": (1, None)})
+    k_end: int = field(default=120, metadata={"range": (1, None)})
+    k_step: int = field(default=5, metadata={"range": (1, None)})
+    max_samples: int = field(default=8000, metadata={"range": (1, None)})
+    candidates: int = field(default=32, metadata={"range": (1, None)})
     local_from: int = 60
-    local_candidates: int = 64
+    local_candidates: int = field(default=64, metadata={"range": (1, None)})
     max_vertices: int = 60_000
     max_discrepancy_ratio: float = 1.1
     max_zoomout_discrepancy_ratio: float = 1.2
@@ -333,6 +333,21 @@ class SpectralConfig:
     smoothing_steps: int = 32
     margin: float = 0.05
     slanted: bool = True
+
+    def __post_init__(self):
+        # Between fields; each field's own range is checked with the others (check_config).
+        if not all(_is_count(x) and x >= 1 for x in (self.k_start, self.k_end, self.max_samples)):
+            return
+        if self.k_start > self.k_end:
+            raise ValueError(
+                f"SpectralConfig.k_start ({self.k_start}) must be at most k_end ({self.k_end})"
+            )
+        if self.max_samples < self.k_end:
+            # ZoomOut's least-squares fits need at least one sample per basis function.
+            raise ValueError(
+                f"SpectralConfig.max_samples ({self.max_samples}) must be at least k_end "
+                f"({self.k_end})"
+            )
 
 
 @dataclass(frozen=True)
@@ -577,9 +592,15 @@ def read_config(path) -> MatchConfig:
         )
     try:
         with open(path, "rb") as fh:
-            data = tomllib.load(fh)
+            raw = fh.read()
+        # A byte-order mark some editors write is not TOML.
+        data = tomllib.loads(raw.decode("utf-8-sig"))
     except FileNotFoundError:
         raise FileNotFoundError(f"no such settings file: {str(path)!r}") from None
+    except IsADirectoryError:
+        raise ValueError(f"settings file {str(path)!r} is a folder; give a .toml file") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"settings file {str(path)!r} is not UTF-8 text (TOML)") from None
     except tomllib.TOMLDecodeError as e:
         raise ValueError(f"settings file {str(path)!r} is not valid TOML: {e}") from None
     try:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -123,7 +124,11 @@ class MatchResult:
                 "this match has no confidence (it ran with confidence=False); "
                 "match again with confidence=True"
             )
-        if isinstance(threshold, bool) or not (0.0 <= float(threshold) <= 1.0):
+        if (
+            isinstance(threshold, bool)
+            or not isinstance(threshold, numbers.Real)
+            or not (0.0 <= float(threshold) <= 1.0)
+        ):
             raise ValueError(f"threshold must be a number in [0, 1], got {threshold!r}")
         out = np.array(self.map, dtype=np.int64)
         out[self.confidence < threshold] = -1

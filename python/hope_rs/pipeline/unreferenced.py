@@ -1,0 +1,147 @@
+"""Vertices that no face uses: left out of the match, given a map afterwards.
+
+A mesh may carry vertices in no face (a part cut out of a scan with the removed faces'
+vertices kept, points left over from cleaning). They have no surface around them to match
+by, so the pair is matched on the vertices that faces use (:func:`referenced`), and the
+result is expanded to the meshes' own numbering (:meth:`Referenced.expand`): a vertex of B
+in no face is never a target, and a vertex of A in no face takes the image of the nearest
+(in space) vertex of A that faces use, with confidence 0.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..geometry.mesh import Mesh
+from .result import MatchResult
+
+__all__ = ["Referenced", "referenced"]
+
+
+def _compact(mesh: Mesh) -> tuple[Mesh, np.ndarray] | None:
+    """``mesh`` without the vertices no face uses and the indices of those it keeps, or
+    ``None`` when faces use every vertex."""
+    used = np.zeros(mesh.n_vertices, dtype=bool)
+    used[mesh.faces.ravel()] = True
+    if used.all():
+        return None
+    keep = np.flatnonzero(used)
+    new = np.full(mesh.n_vertices, -1, dtype=np.int64)
+    new[keep] = np.arange(keep.size)
+    return Mesh(mesh.vertices[keep], new[mesh.faces]), keep
+
+
+@dataclasses.dataclass(frozen=True)
+class Referenced:
+    """Where the vertices of A and B that faces use sit in the meshes' own numbering:
+    ``keep_a[j]`` is vertex ``j`` of the compact A (``None``: every vertex of A)."""
+
+    n_a: int
+    n_b: int
+    keep_a: np.ndarray | None
+    keep_b: np.ndarray | None
+    points_a: np.ndarray  # A's vertices, to give its unused ones the nearest used one's image
+    points_b: np.ndarray
+    #: The compact meshes (``None``: that mesh as it was).
+    mesh_a: Mesh | None = None
+    mesh_b: Mesh | None = None
+
+    def note(self) -> str:
+        """What was left out, for the shapes' log line ("" when nothing)."""
+        parts = [
+            f"{n - keep.size} of {name}'s vertices in no face left out"
+            for name, keep, n in (("A", self.keep_a, self.n_a), ("B", self.keep_b, self.n_b))
+            if keep is not None
+        ]
+        return "; ".join(parts)
+
+    def _index_b(self) -> np.ndarray:
+        """Per vertex of B (own numbering), its index in the compact B (-1: in no face)."""
+        out = np.full(self.n_b, -1, dtype=np.int64)
+        keep = np.arange(self.n_b) if self.keep_b is None else self.keep_b
+        out[keep] = np.arange(keep.size)
+        return out
+
+    def init_in(self, init: np.ndarray) -> np.ndarray:
+        """A given initial map in the compact numbering: a vertex of A in no face is dropped,
+        an image in no face moves to the nearest vertex of B that faces use."""
+        f = init if self.keep_a is None else init[self.keep_a]
+        idx = self._index_b()[f]
+        off = idx < 0
+        if off.any():
+            assert self.keep_b is not None  # only B's unused vertices have no index
+            near = cKDTree(self.points_b[self.keep_b]).query(self.points_b[f[off]])[1]
+            idx[off] = near
+        return idx
+
+    def landmarks_in(self, landmarks: np.ndarray | None) -> np.ndarray | None:
+        """Landmarks in the compact numbering; one on a vertex in no face is refused."""
+        if landmarks is None:
+            return None
+        out = landmarks.copy()
+        for col, keep, n, name in (
+            (0, self.keep_a, self.n_a, "A"),
+            (1, self.keep_b, self.n_b, "B"),
+        ):
+            if keep is None:
+                continue
+            idx = np.full(n, -1, dtype=np.int64)
+            idx[keep] = np.arange(keep.size)
+            mapped = idx[landmarks[:, col]]
+            if (mapped < 0).any():
+                v = int(landmarks[np.argmax(mapped < 0), col])
+                raise ValueError(
+                    f"landmark vertex {v} of {name} is in no face; give a vertex of the surface"
+                )
+            out[:, col] = mapped
+        return out
+
+    def _map_out(self, f: np.ndarray | None) -> np.ndarray | None:
+        """A compact map in the meshes' own numbering."""
+        if f is None:
+            return None
+        g = f if self.keep_b is None else self.keep_b[f]
+        if self.keep_a is None:
+            return g.astype(np.int64)
+        out = np.empty(self.n_a, dtype=np.int64)
+        out[self.keep_a] = g
+        unused = np.setdiff1d(np.arange(self.n_a), self.keep_a, assume_unique=True)
+        near = cKDTree(self.points_a[self.keep_a]).query(self.points_a[unused])[1]
+        out[unused] = g[near]
+        return out
+
+    def expand(self, res: MatchResult) -> MatchResult:
+        """``res`` (of the compact shapes) in the meshes' own numbering."""
+        conf = res.confidence
+        if conf is not None and self.keep_a is not None:
+            full = np.zeros(self.n_a)
+            full[self.keep_a] = conf
+            conf = full
+        return dataclasses.replace(
+            res,
+            map=self._map_out(res.map),
+            init_map=self._map_out(res.init_map),
+            hope_map=self._map_out(res.hope_map),
+            confidence=conf,
+        )
+
+
+def referenced(ma: Mesh, mb: Mesh) -> Referenced | None:
+    """The two meshes without their vertices in no face (``mesh_a``, ``mesh_b``) and how to
+    carry maps between the numberings; ``None`` when faces use every vertex of both."""
+    ca, cb = _compact(ma), _compact(mb)
+    if ca is None and cb is None:
+        return None
+    return Referenced(
+        ma.n_vertices,
+        mb.n_vertices,
+        None if ca is None else ca[1],
+        None if cb is None else cb[1],
+        ma.vertices,
+        mb.vertices,
+        None if ca is None else ca[0],
+        None if cb is None else cb[0],
+    )
