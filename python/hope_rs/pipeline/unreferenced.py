@@ -99,10 +99,8 @@ class Referenced:
             out[:, col] = mapped
         return out
 
-    def _map_out(self, f: np.ndarray | None) -> np.ndarray | None:
+    def _map_out(self, f: np.ndarray) -> np.ndarray:
         """A compact map in the meshes' own numbering."""
-        if f is None:
-            return None
         g = f if self.keep_b is None else self.keep_b[f]
         if self.keep_a is None:
             return g.astype(np.int64)
@@ -124,7 +122,7 @@ class Referenced:
             res,
             map=self._map_out(res.map),
             init_map=self._map_out(res.init_map),
-            hope_map=self._map_out(res.hope_map),
+            hope_map=None if res.hope_map is None else self._map_out(res.hope_map),
             confidence=conf,
         )
 
