@@ -510,6 +510,13 @@ class ResolutionConfig:
         those the first lifted map sends there, every other vertex collapsed into its nearest
         such site; the lift of that match is kept. A template denser at its hands and face
         than a uniform copy of a scan then meets like neighbourhoods there.
+    smooth_rougher : float
+        The coarse copy's vertices move to the mean of the dense vertices each owns when the
+        copy is more than this many times as rough along its normals as the sparser shape
+        (:func:`~hope_rs.geometry.roughness.normal_roughness`): the noise of a noisy dense
+        scan stays at the vertices a copy keeps, no longer small against its edges. A copy of
+        a clean surface is about as rough as the other shape or smoother, and keeps its
+        vertices on the surface. ``inf``: never.
     """
 
     enabled: bool = True
@@ -519,6 +526,7 @@ class ResolutionConfig:
     refine_schedule: tuple[int, ...] = (3, 2, 1)
     refine_min_handles: float = field(default=0.04, metadata={"range": (0.0, 1.0)})
     follow_density: bool = True
+    smooth_rougher: float = field(default=1.5, metadata={"range": (1.0, None)})
 
     def __post_init__(self):
         _set_radii(self, "refine_schedule", "ResolutionConfig.refine_schedule must be")

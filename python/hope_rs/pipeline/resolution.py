@@ -15,7 +15,10 @@ when one shape has more than ``ResolutionConfig.max_ratio`` times the other's de
    edge collapses that keep the copy a valid manifold
    (:func:`hope_rs.geometry.collapse.collapse_to_count`; each coarse vertex is a vertex of
    the dense mesh, and owns the dense vertices merged into it; plain clustering glues
-   non-manifold edges and turns faces over, which misleads the coarse match);
+   non-manifold edges and turns faces over, which misleads the coarse match); when the copy
+   is much rougher along its normals than the sparser shape (a noisy scan:
+   ``ResolutionConfig.smooth_rougher``, :func:`rougher_than`), each of its vertices moves to
+   the mean of the dense vertices it owns (:func:`smoothed`);
 2. matches the pair at that common resolution with the whole stage list (descriptors,
    refinement, spectral pass, finish), or from a given initial map carried to the copy
    (:func:`coarse_start`; the orient stage's hypotheses after a lift are such maps);
@@ -54,6 +57,7 @@ it adopts carries its own match's confidence (docs/decisions.md#resolution).
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from typing import Callable
 
@@ -62,6 +66,7 @@ from scipy.spatial import cKDTree
 
 from ..geometry.coarsen import Coarse
 from ..geometry.collapse import collapse_to_count, collapse_to_sites
+from ..geometry.roughness import at_owner_means, normal_roughness
 from ..geometry.sites import cell_sites
 from ..geometry.subdivide import subdivide
 from ..shape import Shape
@@ -155,6 +160,25 @@ def coarse_copy(shape: Shape, n_target: int, tolerance: float) -> tuple[Coarse, 
     return c, shape.derived(c.mesh)
 
 
+def rougher_than(coarse: Coarse, like: Shape, rougher: float) -> float | None:
+    """How many times as rough along its normals as ``like`` the copy ``coarse`` is
+    (:func:`~hope_rs.geometry.roughness.normal_roughness`), when more than ``rougher`` times
+    (``ResolutionConfig.smooth_rougher``); else ``None``. A noisy dense scan keeps its noise at
+    the vertices a copy keeps, where it is no longer small against the edges; a copy of a
+    clean dense surface is about as rough as the sparser shape or smoother."""
+    if not math.isfinite(rougher):
+        return None
+    ratio = normal_roughness(coarse.mesh) / max(normal_roughness(like.internal), 1e-12)
+    return ratio if ratio > rougher else None
+
+
+def smoothed(coarse: Coarse, dense: Shape) -> Coarse:
+    """``coarse`` (a copy of ``dense``) with each vertex at the mean of the dense vertices it
+    owns: the mean takes most of a noisy scan's noise out."""
+    mesh = at_owner_means(coarse.mesh, dense.internal.vertices, coarse.owner)
+    return dataclasses.replace(coarse, mesh=mesh)
+
+
 class ResolutionStage(Stage):
     """The "resolution" stage (see the module notes): runs only when one shape is more than
     ``ResolutionConfig.max_ratio`` times denser than the other and no part was detected. A
@@ -196,13 +220,22 @@ class ResolutionStage(Stage):
             state.log.ran("resolution", state.timings["resolution"], why)
             return None
         coarse, cs = level
+        rougher = cfg.resolution.smooth_rougher
+        ratio = rougher_than(coarse, sparse, rougher)
+        if ratio is not None:
+            coarse = smoothed(coarse, dense)
+            cs = dense.derived(coarse.mesh)
         nested = dataclasses.replace(
             cfg,
             resolution=dataclasses.replace(cfg.resolution, enabled=False),
             multiscale=dataclasses.replace(cfg.multiscale, enabled=False),
         )
         res, f, lift = self.lifted(state, coarse, cs, nested)
-        counts = f"{cs.n_vertices} vertices"
+        counts = f"{cs.n_vertices} vertices" + (
+            f" (smoothed: {ratio:.1f} times as rough as {'B' if self.side == 'a' else 'A'})"
+            if ratio is not None
+            else ""
+        )
         if (
             self.side == "a"
             and cfg.resolution.follow_density
@@ -213,6 +246,8 @@ class ResolutionStage(Stage):
             # unlike k-hop balls there, and can put a hand on a thigh. Only from a map that
             # passes (a wrong one places the density wrongly), and kept only if it passes too.
             second = collapse_to_sites(dense.internal, sites_like(f, dense.points))
+            if rougher_than(second, sparse, rougher) is not None:
+                second = smoothed(second, dense)
             if len(second.mesh.faces):
                 cs2 = dense.derived(second.mesh)
                 state.timings["resolution.first"] = time.perf_counter() - t
