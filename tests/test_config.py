@@ -13,7 +13,6 @@ from hope_rs import MatchConfig
 from hope_rs.batch.cache import basis_params, descriptor_params
 from hope_rs.evaluation.demo import demo_pair
 from hope_rs.features.descriptors import DescriptorConfig
-from hope_rs.kernels.search import SearchConfig
 from hope_rs.pipeline import overlap as overlap_module
 from hope_rs.pipeline import shared_faces as finish_module
 from hope_rs.pipeline.config import (
@@ -153,31 +152,6 @@ def test_spectral_settings_reach_the_pass(bundled):
             r"spectral\.k_end must be an integer >= 1",
         ),
         (
-            MatchConfig(spectral=SpectralConfig(k_step=0)),
-            ValueError,
-            r"spectral\.k_step must be an integer >= 1",
-        ),
-        (
-            MatchConfig(spectral=SpectralConfig(local_candidates=0)),
-            ValueError,
-            r"spectral\.local_candidates must be an integer >= 1",
-        ),
-        (
-            MatchConfig(initial=InitialConfig(search=SearchConfig(pca_dims=0))),
-            ValueError,
-            r"initial\.search\.pca_dims must be an integer >= 1",
-        ),
-        (
-            MatchConfig(refine=RefineConfig(auction_floor_div=0)),
-            ValueError,
-            r"refine\.auction_floor_div must be an integer >= 1",
-        ),
-        (
-            MatchConfig(refine=RefineConfig(polish_k=0)),
-            ValueError,
-            r"refine\.polish_k must be an integer in \[1, 64\]",
-        ),
-        (
             MatchConfig(spectral=SpectralConfig(margin=float("nan"))),
             ValueError,
             r"spectral\.margin must be a number >= 0",
@@ -225,3 +199,26 @@ def test_a_shape_refuses_settings_that_are_not_its_own():
     f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
     with pytest.raises(TypeError, match="config must be a hope_rs.shape.ShapeConfig, got dict"):
         hope_rs.Shape((v, f), config={"a": 1})
+
+
+@pytest.mark.parametrize(
+    "stage, name, value, allowed",
+    [
+        ("spectral", "k_step", 0, ">= 1"),
+        ("spectral", "local_candidates", 0, ">= 1"),
+        ("refine", "auction_floor_div", 0, ">= 1"),
+        ("refine", "nearest_unused_k", 0, ">= 1"),
+        ("refine", "polish_k", 0, r"in \[1, 64\]"),
+    ],
+)
+def test_counts_that_cannot_run_are_refused_before_any_work(bundled, stage, name, value, allowed):
+    a, b = bundled
+    base = MatchConfig()
+    config = dataclasses.replace(
+        base, **{stage: dataclasses.replace(getattr(base, stage), **{name: value})}
+    )
+    with pytest.raises(ValueError, match=rf"{stage}\.{name} must be an integer {allowed}"):
+        hope_rs.match(a, b, config=config)
+    search = dataclasses.replace(base.initial.search, pca_dims=0)
+    with pytest.raises(ValueError, match=r"initial\.search\.pca_dims must be an integer >= 1"):
+        hope_rs.match(a, b, config=MatchConfig(initial=InitialConfig(search=search)))
