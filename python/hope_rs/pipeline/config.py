@@ -511,12 +511,13 @@ class ResolutionConfig:
         such site; the lift of that match is kept. A template denser at its hands and face
         than a uniform copy of a scan then meets like neighbourhoods there.
     smooth_rougher : float
-        The coarse copy's vertices move to the mean of the dense vertices each owns when the
-        copy is more than this many times as rough along its normals as the sparser shape
-        (:func:`~hope_rs.geometry.roughness.normal_roughness`): the noise of a noisy dense
-        scan stays at the vertices a copy keeps, no longer small against its edges. A copy of
-        a clean surface is about as rough as the other shape or smoother, and keeps its
-        vertices on the surface. ``inf``: never.
+        When B is the denser shape, its copy's vertices move to the mean of the dense
+        vertices each owns when the copy is more than this many times as rough along its
+        normals as A (:func:`~hope_rs.geometry.roughness.normal_roughness`): the noise of a
+        noisy dense scan stays at the vertices a copy keeps, no longer small against its
+        edges. A copy of a clean surface is about as rough as the other shape or smoother,
+        and keeps its vertices on the surface. ``inf``: never. (A dense A is not smoothed:
+        measured worse, docs/decisions.md#smooth-rougher.)
     """
 
     enabled: bool = True

@@ -15,10 +15,10 @@ when one shape has more than ``ResolutionConfig.max_ratio`` times the other's de
    edge collapses that keep the copy a valid manifold
    (:func:`hope_rs.geometry.collapse.collapse_to_count`; each coarse vertex is a vertex of
    the dense mesh, and owns the dense vertices merged into it; plain clustering glues
-   non-manifold edges and turns faces over, which misleads the coarse match); when the copy
-   is much rougher along its normals than the sparser shape (a noisy scan:
-   ``ResolutionConfig.smooth_rougher``, :func:`rougher_than`), each of its vertices moves to
-   the mean of the dense vertices it owns (:func:`smoothed`);
+   non-manifold edges and turns faces over, which misleads the coarse match); when B is the
+   denser shape and its copy is much rougher along its normals than A (a noisy scan as the
+   target: ``ResolutionConfig.smooth_rougher``, :func:`rougher_than`), each of its vertices
+   moves to the mean of the dense vertices it owns (:func:`smoothed`);
 2. matches the pair at that common resolution with the whole stage list (descriptors,
    refinement, spectral pass, finish), or from a given initial map carried to the copy
    (:func:`coarse_start`; the orient stage's hypotheses after a lift are such maps);
@@ -220,8 +220,10 @@ class ResolutionStage(Stage):
             state.log.ran("resolution", state.timings["resolution"], why)
             return None
         coarse, cs = level
-        rougher = cfg.resolution.smooth_rougher
-        ratio = rougher_than(coarse, sparse, rougher)
+        # A noisy dense B only: on a noisy dense A it was measured worse (decisions.md).
+        ratio = None
+        if self.side == "b":
+            ratio = rougher_than(coarse, sparse, cfg.resolution.smooth_rougher)
         if ratio is not None:
             coarse = smoothed(coarse, dense)
             cs = dense.derived(coarse.mesh)
@@ -232,9 +234,7 @@ class ResolutionStage(Stage):
         )
         res, f, lift = self.lifted(state, coarse, cs, nested)
         counts = f"{cs.n_vertices} vertices" + (
-            f" (smoothed: {ratio:.1f} times as rough as {'B' if self.side == 'a' else 'A'})"
-            if ratio is not None
-            else ""
+            f" (smoothed: {ratio:.1f} times as rough as A)" if ratio is not None else ""
         )
         if (
             self.side == "a"
@@ -246,8 +246,6 @@ class ResolutionStage(Stage):
             # unlike k-hop balls there, and can put a hand on a thigh. Only from a map that
             # passes (a wrong one places the density wrongly), and kept only if it passes too.
             second = collapse_to_sites(dense.internal, sites_like(f, dense.points))
-            if rougher_than(second, sparse, rougher) is not None:
-                second = smoothed(second, dense)
             if len(second.mesh.faces):
                 cs2 = dense.derived(second.mesh)
                 state.timings["resolution.first"] = time.perf_counter() - t
