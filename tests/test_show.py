@@ -85,6 +85,32 @@ def test_error_and_confidence_panels(pair):
     assert main([*cmd, str(d / "short.npy")]) == 2
 
 
+@pytest.mark.parametrize(
+    "values, message",
+    [
+        (np.full(300, np.nan), "must hold numbers in [0, 1]"),
+        (np.full(300, 5.0), "must hold numbers in [0, 1]"),
+        (np.full(300, 1j), "must hold numbers in [0, 1]"),
+        (None, "is not a NumPy .npy array"),
+    ],
+)
+def test_a_confidence_file_that_is_not_a_confidence_fails_in_one_line(
+    pair, capsys, values, message
+):
+    d, _, _ = pair
+    path = d / "bad.npy"
+    if values is None:
+        path.write_text("0.5\n" * 300)
+    else:
+        np.save(path, values)
+    out = d / "bad.png"
+    cmd = [*argv(d), "--png", str(out), "--color-by", "confidence", "--confidence", str(path)]
+    assert main(cmd) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("hope-rs: error:") and message in err and err.count("\n") == 1
+    assert not out.exists()
+
+
 def test_vertex_errors_are_zero_exactly_where_the_map_is_right(pair):
     from hope_rs.evaluation.show import vertex_errors
 

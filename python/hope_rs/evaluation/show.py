@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import functools
 import os
+import pickle
 
 import numpy as np
 
@@ -273,6 +274,28 @@ def _parse_size(text: str) -> tuple[int, int]:
     return w, h
 
 
+def _confidence(path: str, n: int) -> np.ndarray:
+    """The per-vertex confidence of A from the .npy file ``path``, checked: ``n`` finite
+    numbers in [0, 1], as ``hope-rs match --confidence-out`` writes them."""
+    try:
+        values = np.load(path, allow_pickle=False)
+    except FileNotFoundError:
+        raise FileNotFoundError(f"no such confidence file: {path!r}") from None
+    except (OSError, ValueError, pickle.UnpicklingError):
+        raise ValueError(
+            f"--confidence {path!r} is not a NumPy .npy array (hope-rs match --confidence-out "
+            "writes one)"
+        ) from None
+    if values.shape != (n,):
+        raise ValueError(
+            f"--confidence holds {values.shape} values; it needs one per vertex of A ({n})"
+        )
+    real = np.issubdtype(values.dtype, np.integer) or np.issubdtype(values.dtype, np.floating)
+    if not real or not (np.isfinite(values).all() and values.min() >= 0.0 and values.max() <= 1.0):
+        raise ValueError(f"--confidence {path!r} must hold numbers in [0, 1]")
+    return values
+
+
 def add_parser(sub) -> None:
     """Register ``hope-rs show``."""
     p = sub.add_parser(
@@ -385,12 +408,7 @@ def cmd_show(args) -> int:
         label = "geodesic error / sqrt(area of B)"
         top = max(0.1, float(np.quantile(values, 0.99)))
     elif color_by == "confidence":
-        values = np.load(args.confidence)
-        if values.shape != (a.n_vertices,):
-            raise ValueError(
-                f"--confidence holds {values.shape} values; it needs one per vertex of A "
-                f"({a.n_vertices})"
-            )
+        values = _confidence(args.confidence, a.n_vertices)
         label, top, cmap = "confidence", 1.0, "viridis"
     if args.png:
         render_pair(
