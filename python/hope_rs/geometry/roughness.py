@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 
 from .mesh import Mesh, unique_edges
+from .normals import vertex_normal_sums
+from .sites import owner_means
 
 __all__ = ["at_owner_means", "normal_roughness"]
 
@@ -29,10 +31,7 @@ def normal_roughness(mesh: Mesh) -> float:
     np.add.at(ring, e[:, 1], v[e[:, 0]])
     length = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)
     total = np.bincount(e[:, 0], length, n) + np.bincount(e[:, 1], length, n)
-    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-    normal = np.zeros((n, 3))
-    for k in range(3):
-        np.add.at(normal, f[:, k], fn)
+    normal = vertex_normal_sums(v, f)
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
     ok = (deg > 0) & (total > 0)
     off = np.abs(np.sum((v[ok] - ring[ok] / deg[ok, None]) * normal[ok], axis=1))
@@ -42,10 +41,7 @@ def normal_roughness(mesh: Mesh) -> float:
 def at_owner_means(coarse: Mesh, fine: np.ndarray, owner: np.ndarray) -> Mesh:
     """``coarse`` with each vertex at the mean of the fine points ``fine`` it owns
     (``owner[i]``: the coarse vertex of fine point ``i``); a vertex that owns none stays."""
-    n = coarse.n_vertices
-    count = np.bincount(owner, minlength=n).astype(float)
-    sums = np.stack([np.bincount(owner, fine[:, k], n) for k in range(3)], axis=1)
+    means, has = owner_means(fine, owner, coarse.n_vertices)
     pts = coarse.vertices.copy()
-    has = count > 0
-    pts[has] = sums[has] / count[has, None]
+    pts[has] = means[has]
     return Mesh(pts, coarse.faces)

@@ -65,13 +65,18 @@ def cell_sites(vertices: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.
     return _sites_of(np.asarray(vertices, dtype=np.float64), owner.reshape(-1), ids.size), owner
 
 
+def owner_means(v: np.ndarray, owner: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(the mean of the points ``v`` of each of ``n`` groups, point ``i`` in group
+    ``owner[i]``; whether each group has a point): an empty group's mean is not a number."""
+    count = np.bincount(owner, minlength=n).astype(np.float64)
+    sums = np.stack([np.bincount(owner, weights=v[:, d], minlength=n) for d in range(3)], axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return sums / count[:, None], count > 0
+
+
 def _sites_of(v: np.ndarray, owner: np.ndarray, n_cells: int) -> np.ndarray:
     """The site of each of ``n_cells`` cells, vertex ``i`` being in cell ``owner[i]``."""
-    count = np.bincount(owner, minlength=n_cells).astype(np.float64)
-    centroid: np.ndarray = np.stack(
-        [np.bincount(owner, weights=v[:, d], minlength=n_cells) for d in range(3)], axis=1
-    )
-    centroid /= count[:, None]
+    centroid = owner_means(v, owner, n_cells)[0]
     d2 = ((v - centroid[owner]) ** 2).sum(axis=1)
     by_cell = np.lexsort((np.arange(v.shape[0]), d2, owner))
     first = np.r_[True, owner[by_cell][1:] != owner[by_cell][:-1]]

@@ -154,10 +154,14 @@ def coarse_copy(shape: Shape, n_target: int, tolerance: float) -> tuple[Coarse, 
     manifold-keeping edge collapses (:func:`hope_rs.geometry.collapse.collapse_to_count`), or
     ``None`` when ``shape`` has no more vertices or the copy has no face. The copy keeps the
     oriented faces as they come."""
+    c = _collapsed(shape, n_target, tolerance)
+    return None if c is None else (c, shape.derived(c.mesh))
+
+
+def _collapsed(shape: Shape, n_target: int, tolerance: float) -> Coarse | None:
+    """The Coarse of :func:`coarse_copy`, before its Shape is built."""
     c = collapse_to_count(shape.internal, n_target, tolerance=tolerance)
-    if c is None or len(c.mesh.faces) == 0:
-        return None
-    return c, shape.derived(c.mesh)
+    return None if c is None or len(c.mesh.faces) == 0 else c
 
 
 def rougher_than(coarse: Coarse, like: Shape, rougher: float) -> float | None:
@@ -213,20 +217,19 @@ class ResolutionStage(Stage):
             detail += f" per unit area ({density(dense):.0f} against {density(sparse):.0f})"
         t = state.log.start("resolution", detail=detail)
         self._turned = None  # A's turned-over triangles on B, built when first asked
-        level = coarse_copy(dense, common_count(dense, sparse), cfg.resolution.count_tolerance)
-        if level is None:
+        coarse = _collapsed(dense, common_count(dense, sparse), cfg.resolution.count_tolerance)
+        if coarse is None:
             state.timings["resolution"] = time.perf_counter() - t
             why = f"{detail}, but clustering it leaves no face: matched at full resolution"
             state.log.ran("resolution", state.timings["resolution"], why)
             return None
-        coarse, cs = level
         # A noisy dense B only: on a noisy dense A it was measured worse (decisions.md).
         ratio = None
         if self.side == "b":
             ratio = rougher_than(coarse, sparse, cfg.resolution.smooth_rougher)
         if ratio is not None:
             coarse = smoothed(coarse, dense)
-            cs = dense.derived(coarse.mesh)
+        cs = dense.derived(coarse.mesh)
         nested = dataclasses.replace(
             cfg,
             resolution=dataclasses.replace(cfg.resolution, enabled=False),

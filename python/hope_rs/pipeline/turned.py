@@ -23,25 +23,15 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from ..geometry.mesh import boundary_edges
+from ..geometry.normals import face_normals, vertex_normal_sums
 from ..shape import Shape
 
 __all__ = ["TurnedFaces", "face_normals", "vertex_normals"]
 
 
-def face_normals(p: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(m, 3) cross products of the faces' edges: normal times twice the area."""
-    return np.cross(p[faces[:, 1]] - p[faces[:, 0]], p[faces[:, 2]] - p[faces[:, 0]])
-
-
 def vertex_normals(s: Shape) -> np.ndarray:
     """(n, 3) area-weighted sums of the normals of each vertex's faces (internal numbering)."""
-    faces = s.internal.faces
-    n = face_normals(s.internal.vertices, faces)
-    out = np.zeros((s.n_vertices, 3))
-    for corner in range(3):
-        for axis in range(3):
-            out[:, axis] += np.bincount(faces[:, corner], n[:, axis], minlength=s.n_vertices)
-    return out
+    return vertex_normal_sums(s.internal.vertices, s.internal.faces)
 
 
 def _components(s: Shape) -> tuple[np.ndarray, np.ndarray]:
