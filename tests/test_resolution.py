@@ -21,15 +21,18 @@ from hope_rs.features.descriptors import shot_at
 from hope_rs.geometry.coarsen import coarse_to_count
 from hope_rs.geometry.subdivide import subdivide
 from hope_rs.pipeline import multiscale, orientation_repair
+from hope_rs.pipeline.confidence import flipped_share
 from hope_rs.pipeline.config import ResolutionConfig
 from hope_rs.pipeline.options import check_config
 from hope_rs.pipeline.resolution import (
     coarse_copy,
     common_count,
+    rough_scan,
     sites_like,
     subdivisions,
 )
 from hope_rs.pipeline.runner import run_match
+from hope_rs.pipeline.turned import TurnedFaces
 
 
 def test_subdivision_keeps_the_original_vertices_first():
@@ -244,6 +247,32 @@ def test_the_copy_a_dense_a_is_judged_at_is_the_one_it_was_matched_at():
     assert seen["view"] is None
 
 
+def test_a_noisy_dense_a_is_judged_on_its_copy_a_clean_one_at_full_resolution():
+    sphere = hope_rs.Mesh(*bumpy_sphere(400, 3))
+    dense = subdivide(sphere, 2)
+    noise = np.random.default_rng(0).normal(0.0, 0.005 * dense.scale, dense.vertices.shape)
+    noisy = hope_rs.Shape(hope_rs.Mesh(dense.vertices + noise, dense.faces))
+    clean, b = hope_rs.Shape(dense), hope_rs.Shape(sphere)
+    assert rough_scan(noisy, b, 1.5) and not rough_scan(noisy, b, float("inf"))
+    assert not rough_scan(clean, b, 1.5)  # subdivision makes a surface smoother
+    seen = {}
+
+    def grab(state, name):
+        if name == "resolution":
+            seen["view"], seen["f"] = state.common_a, state.f
+
+    for a, rough in ((noisy, True), (clean, False)):
+        res = run_match(a, b, "shot", MatchConfig(), on_stage=grab)
+        view, f = seen["view"], seen["f"]
+        assert view.rough is rough
+        on_copy = TurnedFaces(view.shape, b).share(view.of(f))
+        full = TurnedFaces(a, b).share(f)
+        assert flipped_share(a, b, f, view=view) == (on_copy if rough else full)
+        assert res.quality.flipped_share == (on_copy if rough else full)
+        if rough:  # a noisy scan's own triangles turn over at random
+            assert full > 2 * on_copy, (full, on_copy)
+
+
 def test_subdivisions_come_nearest_the_denser_count():
     assert [subdivisions(5000, n) for n in (6000, 20000, 40000, 80000, 110000)] == [1, 1, 2, 2, 2]
     assert subdivisions(1000, 5000) == 1
@@ -428,18 +457,42 @@ def test_a_noisy_dense_copy_is_smoothed_a_clean_one_is_not():
     dense = subdivide(m, 2)
     noise = np.random.default_rng(0).normal(0.0, 0.005 * dense.scale, dense.vertices.shape)
     noisy = hope_rs.Mesh(dense.vertices + noise, dense.faces)
-    res = hope_rs.match(m, noisy, max_passes=1)
+    # The copy made by the collapses alone (the second attempt on the smoothed mesh is tested
+    # below): the smoothing of its vertices is what this test is about.
+    once = dataclasses.replace(MatchConfig().resolution, collapse_excess=float("inf"))
+    config = MatchConfig(resolution=once)
+    res = hope_rs.match(m, noisy, max_passes=1, config=config)
     assert "(smoothed: " in res.stage("resolution").reason
     idx = np.arange(m.n_vertices)  # a subdivided mesh keeps its vertices first
     assert geodesic_errors(hope_rs.Shape(noisy), res.map, a_idx=idx, b_idx=idx).mean() < 0.06
-    back = hope_rs.match(noisy, m, max_passes=1)  # a noisy dense A is not smoothed
+    back = hope_rs.match(noisy, m, max_passes=1, config=config)  # a noisy dense A is not smoothed
     assert "A clustered to" in back.stage("resolution").reason
     assert "smoothed" not in back.stage("resolution").reason
-    never = dataclasses.replace(MatchConfig().resolution, smooth_rougher=float("inf"))
+    never = dataclasses.replace(once, smooth_rougher=float("inf"))
     off = hope_rs.match(m, noisy, max_passes=1, config=MatchConfig(resolution=never))
     assert "smoothed" not in off.stage("resolution").reason
     clean = hope_rs.match(m, dense, max_passes=1)
     assert "smoothed" not in clean.stage("resolution").reason
+
+
+def test_collapses_a_noisy_scan_refuses_are_made_again_on_it_smoothed():
+    dense = subdivide(hope_rs.Mesh(*bumpy_sphere(400, 0)), 2)
+    noise = np.random.default_rng(1).normal(0.0, 0.005 * dense.scale, dense.vertices.shape)
+    noisy = hope_rs.Shape(hope_rs.Mesh(dense.vertices + noise, dense.faces))
+    target = noisy.n_vertices // 16
+    first, _ = coarse_copy(noisy, target, 0.05)  # collapses turning a noisy face over refused
+    assert first.mesh.n_vertices > 1.25 * target
+    again, copy = coarse_copy(noisy, target, 0.05, 1.25, 5)
+    assert again.mesh.n_vertices <= 1.1 * target
+    # The copy keeps its vertices' own positions, a valid closed manifold of the same genus.
+    np.testing.assert_array_equal(again.mesh.vertices, noisy.internal.vertices[again.sites])
+    assert euler_characteristic(again.mesh.n_vertices, again.mesh.faces) == 2
+    assert not any(mesh_defects(again.mesh.faces).values())
+    np.testing.assert_array_equal(again.owner[again.sites], np.arange(again.sites.size))
+    assert copy.n_vertices == again.mesh.n_vertices
+    clean = hope_rs.Shape(dense)  # a clean copy reaches its count: made once, the same
+    made, _ = coarse_copy(clean, target, 0.05, 1.25, 5)
+    np.testing.assert_array_equal(made.sites, coarse_copy(clean, target, 0.05)[0].sites)
 
 
 @pytest.mark.slow
@@ -455,3 +508,15 @@ def test_a_remeshed_body_against_a_noisy_dense_scan_of_another(tmp_path):
     clean_b = hope_rs.Shape(dense)  # scored on the clean surface
     assert geodesic_errors(clean_b, res.map, a_idx=ai, b_idx=bi).mean() < 0.03
     assert not res.quality.likely_failed
+    # The other way, the noisy scan as A: the collapses its noise refuses are made again on
+    # it smoothed, and the lifted map is judged on the copy it was made at (at full
+    # resolution its triangles land degenerate or turned over at random).
+    back = hope_rs.match(scan, a)
+    why = back.stage("resolution").reason
+    count = int(why.split("clustered to ")[1].split(" ")[0])
+    assert count <= 1.1 * a.n_vertices, why
+    template = hope_rs.Shape(a)
+    full = flipped_share(scan, template, template.rank[back.map[scan.order]])  # internal maps
+    assert geodesic_errors(template, back.map, a_idx=bi, b_idx=ai).mean() < 0.04
+    assert back.quality.flipped_share < 0.2 < full
+    assert not back.quality.likely_failed and not back.stage("orient").ran

@@ -6,7 +6,7 @@ from meshes import bumpy_sphere, flat_grid
 
 import hope_rs
 from hope_rs.geometry.collapse import collapse_to_count
-from hope_rs.geometry.roughness import at_owner_means, normal_roughness
+from hope_rs.geometry.roughness import at_owner_means, normal_roughness, umbrella_smoothed
 from hope_rs.geometry.subdivide import subdivide
 
 
@@ -30,3 +30,21 @@ def test_noise_is_rough_and_owner_means_take_it_out():
     np.testing.assert_allclose(means.vertices, expect)
     np.testing.assert_array_equal(means.faces, c.mesh.faces)
     assert normal_roughness(means) < normal_roughness(c.mesh)
+
+
+def test_umbrella_smoothing_takes_noise_out_and_keeps_the_faces():
+    dense = subdivide(hope_rs.Mesh(*bumpy_sphere(400, 0)), 1)
+    rng = np.random.default_rng(2)
+    noise = rng.normal(0.0, 0.005 * dense.scale, dense.vertices.shape)
+    lone = np.array([[5.0, 5.0, 5.0]])  # a vertex in no face stays where it is
+    noisy = hope_rs.Mesh(np.vstack([dense.vertices + noise, lone]), dense.faces)
+    smooth = umbrella_smoothed(noisy, 5)
+    np.testing.assert_array_equal(smooth.faces, noisy.faces)
+    np.testing.assert_array_equal(smooth.vertices[-1], lone[0])
+    assert normal_roughness(smooth) < 0.5 * normal_roughness(noisy)
+    np.testing.assert_array_equal(umbrella_smoothed(noisy, 0).vertices, noisy.vertices)
+    # One step moves a vertex halfway to its 1-ring's centroid.
+    one = umbrella_smoothed(noisy, 1).vertices
+    ring = [j for f in noisy.faces if 0 in f for j in f if j != 0]
+    centroid = noisy.vertices[sorted(set(ring))].mean(axis=0)
+    np.testing.assert_allclose(one[0], 0.5 * noisy.vertices[0] + 0.5 * centroid)

@@ -48,7 +48,7 @@ from .anchors import (
 from .config import CONFIDENCE_FEATURES, ConfidenceConfig, MatchConfig, RefineConfig, RepairConfig
 from .lmd import local_map_distortion
 from .result import MatchQuality
-from .state import MatchState, Stage
+from .state import CommonView, MatchState, Stage
 from .turned import TurnedFaces
 
 __all__ = [
@@ -131,11 +131,18 @@ def state_quality(state: MatchState) -> MatchQuality | None:
     assert state.f is not None  # a confidence comes with a map
     counterpart = None if state.partial is None else state.partial.counterpart
     judged = state.confidence if counterpart is None else state.confidence[counterpart]
-    flipped = flipped_share(state.a, state.b, state.f, among=counterpart)
+    view = state.common_a if counterpart is None else None
+    flipped = flipped_share(state.a, state.b, state.f, among=counterpart, view=view)
     return match_quality(judged, state.config.confidence, flipped=flipped)
 
 
-def flipped_share(a: Shape, b: Shape, f: np.ndarray, among: np.ndarray | None = None) -> float:
+def flipped_share(
+    a: Shape,
+    b: Shape,
+    f: np.ndarray,
+    among: np.ndarray | None = None,
+    view: CommonView | None = None,
+) -> float:
     """The share of A's area whose triangles ``f`` turns over
     (:class:`~hope_rs.pipeline.turned.TurnedFaces`: triangles whose image is degenerate count
     on neither side, and in a group with an open component the smaller side counts as turned,
@@ -153,12 +160,19 @@ def flipped_share(a: Shape, b: Shape, f: np.ndarray, among: np.ndarray | None = 
         The map, internal numbering.
     among : (n_a,) bool ndarray, optional
         The vertices of A (internal numbering) whose triangles count.
+    view : CommonView, optional
+        A dense A's copy the map was made at (:mod:`~hope_rs.pipeline.resolution`): when A
+        is rough at its own resolution (``view.rough``, a noisy scan, whose triangles a
+        right map turns over at random) the share is measured on the copy, ``f`` read at
+        its vertices. Not with ``among``.
 
     Returns
     -------
     float
         In [0, 1]; 0 when no triangle counts.
     """
+    if view is not None and view.rough:
+        return TurnedFaces(view.shape, b).share(view.of(f))
     return TurnedFaces(a, b, among).share(f)
 
 

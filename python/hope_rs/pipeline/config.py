@@ -518,6 +518,21 @@ class ResolutionConfig:
         edges. A copy of a clean surface is about as rough as the other shape or smoother,
         and keeps its vertices on the surface. ``inf``: never. (A dense A is not smoothed:
         measured worse, docs/decisions.md#smooth-rougher.)
+    collapse_excess : float
+        When the collapses keep more than this many times the copy's target count (a noisy
+        scan: a collapse that would turn a face over is refused, and its faces turn over at
+        the noise's scale), they are made again on the dense mesh smoothed
+        ``collapse_smoothing`` times (each vertex halfway to its 1-ring's centroid), the copy
+        keeping its vertices' own positions. ``inf``: never.
+    collapse_smoothing : int
+        The smoothing steps of that second attempt; at least 1.
+    judge_rougher : float
+        When A is the denser shape and more than this many times as rough along its normals
+        as B, each at its own resolution (a noisy scan), the share of A a map turns over
+        (the orient stage's trigger and cost, ``MatchQuality.flipped_share``) is measured on
+        A's copy, the map read at its vertices: a right map turns a noisy scan's own
+        triangles over at random. A clean dense surface is smoother than a sparser one.
+        ``inf``: never.
     """
 
     enabled: bool = True
@@ -528,6 +543,9 @@ class ResolutionConfig:
     refine_min_handles: float = field(default=0.04, metadata={"range": (0.0, 1.0)})
     follow_density: bool = True
     smooth_rougher: float = field(default=1.5, metadata={"range": (1.0, None)})
+    collapse_excess: float = field(default=1.25, metadata={"range": (1.0, None)})
+    collapse_smoothing: int = field(default=5, metadata={"range": (1, None)})
+    judge_rougher: float = field(default=1.5, metadata={"range": (1.0, None)})
 
     def __post_init__(self):
         _set_radii(self, "refine_schedule", "ResolutionConfig.refine_schedule must be")

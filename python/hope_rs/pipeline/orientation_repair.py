@@ -43,8 +43,9 @@ that match's confidence, on which the confidence's rule judges it and which the 
 keeps (with the confidence turned off, the rule judges no map of a dense A). For a dense A
 the LMD term of the cost and the turned regions the derived maps change are measured on the
 copy of A the stage's map was made at (``state.common_a``, the same copy for every
-hypothesis): at full resolution a right many-to-one map keeps few 2-rings' distances and its
-turned triangles scatter.
+hypothesis), and so is the turned-over share when A is rough at its own resolution (a noisy
+scan): at full resolution a right many-to-one map keeps few 2-rings' distances and its turned
+triangles scatter, on a noisy scan at random.
 
 B's symmetry is the match of B's mirror image (coordinates reflected in a plane through its
 centroid) to B itself: vertex ``i`` of the mirror image is vertex ``i`` of B reflected, so the
@@ -109,63 +110,51 @@ def turned_regions(a: Shape, turned: np.ndarray, rings: int) -> np.ndarray:
 
 
 class _Judge:
-    """How the stage judges a map of A: the share of A's area it turns over (triangles whose
-    image is degenerate count on neither side, so a dense A's many-to-one map is measured on
-    the others), and the LMD inconsistency on A, or for a dense A matched at a common
-    resolution on the copy the stage's map was made at (``state.common_a``, the same for every
-    hypothesis), its vertices read off the map: at full resolution a right many-to-one map
-    keeps few 2-rings' distances. The turned regions the derived maps change are found there
-    too (:meth:`turned`)."""
+    """How the stage judges a map of A: the share of A's area it turns over and the LMD
+    inconsistency on A. For a dense A matched at a common resolution the LMD is measured on
+    the copy the stage's map was made at (``state.common_a``, the same for every
+    hypothesis), its vertices read off the map, and so are the turned regions the derived
+    maps change (:meth:`turned`, each vertex of A taking its copy vertex's): at full
+    resolution a right many-to-one map keeps few 2-rings' distances and lands most small
+    triangles degenerate. So is the turned share when A is rough at its own resolution
+    (``CommonView.rough``, :func:`~hope_rs.pipeline.confidence.flipped_share`)."""
 
     def __init__(self, state: MatchState):
-        self.a, self.b = state.a, state.b
+        self.b = state.b
         self.view = state.common_a
-        self.tf = TurnedFaces(self.a, self.b)
-        self._view_tf: TurnedFaces | None = None
+        self.full = TurnedFaces(state.a, self.b)
+        self.shape = state.a if self.view is None else self.view.shape
+        self.tf = self.full if self.view is None else TurnedFaces(self.shape, self.b)
+
+    def _of(self, f: np.ndarray) -> np.ndarray:
+        """A map of A (internal numbering) on the shape it is judged on."""
+        return f if self.view is None else self.view.of(f)
 
     def share(self, f: np.ndarray) -> float:
         """The share of A's area ``f`` (internal numbering) turns over."""
-        return self.tf.share(f)
+        if self.view is not None and self.view.rough:
+            return self.tf.share(self._of(f))
+        return self.full.share(f)
 
     def cost(self, f: np.ndarray, weight: float) -> float:
         """:func:`map_cost` of ``f``, its LMD measured where the map was made."""
-        if self.view is None:
-            return map_cost(self.a, self.b, f, self.tf, weight)
-        return map_cost(self.view.shape, self.b, self.view.of(f), self.tf, weight, turned_map=f)
+        return map_cost(self.shape, self.b, self._of(f), self.share(f), weight)
 
     def turned(self, f: np.ndarray, rings: int) -> np.ndarray:
         """Bool per vertex of A: in a region ``f`` turns over (more than half of a vertex's
-        triangles' area, grown by ``rings`` 1-rings: a region's seam turns over only in part).
-        For a dense A the regions are found on the copy, where the map is about one-to-one (at
-        full resolution most small triangles land degenerate and the turned ones scatter), and
-        each vertex of A takes its copy vertex's."""
-        if self.view is None:
-            return turned_regions(self.a, self.tf.vertices(f, 0.5), rings)
-        if self._view_tf is None:
-            self._view_tf = TurnedFaces(self.view.shape, self.b)
-        at = self.view.of(f)
-        return turned_regions(self.view.shape, self._view_tf.vertices(at, 0.5), rings)[
-            self.view.owner
-        ]
+        triangles' area, grown by ``rings`` 1-rings: a region's seam turns over only in
+        part)."""
+        region = turned_regions(self.shape, self.tf.vertices(self._of(f), 0.5), rings)
+        return region if self.view is None else region[self.view.owner]
 
 
-def map_cost(
-    a: Shape,
-    b: Shape,
-    f: np.ndarray,
-    turned: TurnedFaces,
-    weight: float,
-    *,
-    turned_map: np.ndarray | None = None,
-) -> float:
-    """What the stage minimises: the share of A's area ``f`` turns over plus ``weight`` times
-    the share of A's vertices whose 2-ring LMD finds inconsistent (a right map keeps both
-    low; a mirror image keeps distances but turns over, a scrambled map does neither).
-    ``turned_map``: the map whose turned-over share counts, when the LMD is measured on
-    another copy of A (``f`` is then that copy's map)."""
+def map_cost(a: Shape, b: Shape, f: np.ndarray, turned: float, weight: float) -> float:
+    """What the stage minimises: ``turned``, the share of A's area the map ``f`` turns over,
+    plus ``weight`` times the share of A's vertices whose 2-ring LMD finds inconsistent (a
+    right map keeps both low; a mirror image keeps distances but turns over, a scrambled map
+    does neither)."""
     _, consistent = local_map_distortion(a, b, f)
-    share = turned.share(f if turned_map is None else turned_map)
-    return float(share) + weight * float(1.0 - np.mean(consistent))
+    return float(turned) + weight * float(1.0 - np.mean(consistent))
 
 
 def _judged_by_confidence(state: MatchState) -> bool:

@@ -15,7 +15,10 @@ when one shape has more than ``ResolutionConfig.max_ratio`` times the other's de
    edge collapses that keep the copy a valid manifold
    (:func:`hope_rs.geometry.collapse.collapse_to_count`; each coarse vertex is a vertex of
    the dense mesh, and owns the dense vertices merged into it; plain clustering glues
-   non-manifold edges and turns faces over, which misleads the coarse match); when B is the
+   non-manifold edges and turns faces over, which misleads the coarse match); when the
+   collapses fall well short of the count (a noisy scan, whose faces turn over at the
+   noise's scale, refuses them: ``ResolutionConfig.collapse_excess``) they are made again
+   on the mesh smoothed, the copy keeping its vertices' own positions; when B is the
    denser shape and its copy is much rougher along its normals than A (a noisy scan as the
    target: ``ResolutionConfig.smooth_rougher``, :func:`rougher_than`), each of its vertices
    moves to the mean of the dense vertices it owns (:func:`smoothed`);
@@ -48,10 +51,13 @@ when one shape has more than ``ResolutionConfig.max_ratio`` times the other's de
 The map is final, and its confidence is the coarse match's (each dense vertex of A takes its
 coarse vertex's): a dense A's many-to-one map to a sparse B keeps few of its 2-rings'
 distances however right it is. The pair is judged (``MatchResult.quality``) on that
-confidence and the share of A the lifted map turns over at full resolution. The stages after
-it do not run, but for the orient stage, which runs on that judgement; its hypotheses are
-matched through this stage too, each from its map carried to the common resolution, and a map
-it adopts carries its own match's confidence (docs/decisions.md#resolution).
+confidence and the share of A the lifted map turns over, measured on A's copy when A is a
+noisy scan (more than ``ResolutionConfig.judge_rougher`` times as rough at its own
+resolution as B: :func:`rough_scan`), whose own triangles a right map turns over at random.
+The stages after it do not run, but for the orient stage, which runs on that judgement; its
+hypotheses are matched through this stage too, each from its map carried to the common
+resolution, and a map it adopts carries its own match's confidence
+(docs/decisions.md#resolution).
 """
 
 from __future__ import annotations
@@ -66,18 +72,18 @@ from scipy.spatial import cKDTree
 
 from ..geometry.coarsen import Coarse
 from ..geometry.collapse import collapse_to_count, collapse_to_sites
-from ..geometry.roughness import at_owner_means, normal_roughness
+from ..geometry.mesh import Mesh
+from ..geometry.roughness import at_owner_means, normal_roughness, umbrella_smoothed
 from ..geometry.sites import cell_sites
 from ..geometry.subdivide import subdivide
 from ..shape import Shape
-from .confidence import match_quality
+from .confidence import flipped_share, match_quality
 from .handles import face_handles
 from .landmarks import coarse_landmarks
 from .multiscale import lift_map
 from .result import MatchResult
 from .shared_faces import qualifies
 from .state import QUIET, CommonView, Halt, MatchState, Stage
-from .turned import TurnedFaces
 
 __all__ = [
     "ResolutionStage",
@@ -149,19 +155,52 @@ def coarse_start(state: MatchState, side: str, coarse: Coarse):
     return coarse.owner[f[state.a.rank]]
 
 
-def coarse_copy(shape: Shape, n_target: int, tolerance: float) -> tuple[Coarse, Shape] | None:
+def coarse_copy(
+    shape: Shape, n_target: int, tolerance: float, excess: float = math.inf, smoothing: int = 0
+) -> tuple[Coarse, Shape] | None:
     """(Coarse, its Shape) of ``shape``'s internal mesh with about ``n_target`` vertices, by
     manifold-keeping edge collapses (:func:`hope_rs.geometry.collapse.collapse_to_count`), or
     ``None`` when ``shape`` has no more vertices or the copy has no face. The copy keeps the
-    oriented faces as they come."""
-    c = _collapsed(shape, n_target, tolerance)
+    oriented faces as they come. ``excess``, ``smoothing``: see :func:`_collapsed`."""
+    c = _collapsed(shape, n_target, tolerance, excess, smoothing)
     return None if c is None else (c, shape.derived(c.mesh))
 
 
-def _collapsed(shape: Shape, n_target: int, tolerance: float) -> Coarse | None:
-    """The Coarse of :func:`coarse_copy`, before its Shape is built."""
-    c = collapse_to_count(shape.internal, n_target, tolerance=tolerance)
+def _collapsed(
+    shape: Shape, n_target: int, tolerance: float, excess: float = math.inf, smoothing: int = 0
+) -> Coarse | None:
+    """The Coarse of :func:`coarse_copy`, before its Shape is built (``excess``,
+    ``smoothing``: see :func:`_made_again`)."""
+    c = _made_again(
+        shape.internal,
+        n_target,
+        lambda m: collapse_to_count(m, n_target, tolerance=tolerance),
+        excess,
+        smoothing,
+    )
     return None if c is None or len(c.mesh.faces) == 0 else c
+
+
+def _made_again(
+    mesh: Mesh,
+    n_target: int,
+    collapse: Callable[[Mesh], Coarse | None],
+    excess: float,
+    smoothing: int,
+) -> Coarse | None:
+    """``collapse(mesh)``, or when it keeps more than ``excess`` times ``n_target`` vertices
+    (``ResolutionConfig.collapse_excess``), ``collapse`` of the mesh smoothed ``smoothing``
+    times (:func:`~hope_rs.geometry.roughness.umbrella_smoothed`) with its kept vertices at
+    their own positions, when that keeps fewer: a noisy scan's faces turn over at the
+    noise's scale, so the collapses that would turn one over are refused and the copy keeps
+    vertices off its sites."""
+    c = collapse(mesh)
+    if c is None or c.mesh.n_vertices <= excess * n_target:
+        return c
+    again = collapse(umbrella_smoothed(mesh, smoothing))
+    if again is None or len(again.mesh.faces) == 0 or again.mesh.n_vertices >= c.mesh.n_vertices:
+        return c
+    return dataclasses.replace(again, mesh=Mesh(mesh.vertices[again.sites], again.mesh.faces))
 
 
 def rougher_than(coarse: Coarse, like: Shape, rougher: float) -> float | None:
@@ -183,6 +222,22 @@ def smoothed(coarse: Coarse, dense: Shape) -> Coarse:
     return dataclasses.replace(coarse, mesh=mesh)
 
 
+def _view(coarse: Coarse, cs: Shape, rough: bool) -> CommonView:
+    """The copy ``cs`` of a dense A (made from ``coarse``) as a :class:`CommonView`;
+    ``rough``: A is rough at its own resolution (:func:`rough_scan`)."""
+    return CommonView(cs, coarse.sites[cs.order], cs.rank[coarse.owner], rough)
+
+
+def rough_scan(a: Shape, b: Shape, rougher: float) -> bool:
+    """Whether A is more than ``rougher`` times as rough along its normals as B, each at its
+    own resolution (:func:`~hope_rs.geometry.roughness.normal_roughness`;
+    ``ResolutionConfig.judge_rougher``): a noisy scan, whose own triangles a right map turns
+    over at random. A clean dense surface is smoother than a sparser one."""
+    if not math.isfinite(rougher):
+        return False
+    return normal_roughness(a.internal) > rougher * normal_roughness(b.internal)
+
+
 class ResolutionStage(Stage):
     """The "resolution" stage (see the module notes): runs only when one shape is more than
     ``ResolutionConfig.max_ratio`` times denser than the other and no part was detected. A
@@ -194,7 +249,7 @@ class ResolutionStage(Stage):
     def __init__(self):
         self.side: str | None = None
         self.start_handles = 0.0  # share of handles of the refinement's start
-        self._turned: TurnedFaces | None = None
+        self.rough = False  # A is a noisy dense scan (rough_scan)
 
     def skip_reason(self, state: MatchState):
         cfg = state.config.resolution
@@ -216,8 +271,15 @@ class ResolutionStage(Stage):
             # A part: its count is not its density.
             detail += f" per unit area ({density(dense):.0f} against {density(sparse):.0f})"
         t = state.log.start("resolution", detail=detail)
-        self._turned = None  # A's turned-over triangles on B, built when first asked
-        coarse = _collapsed(dense, common_count(dense, sparse), cfg.resolution.count_tolerance)
+        rc = cfg.resolution
+        self.rough = self.side == "a" and rough_scan(a, b, rc.judge_rougher)
+        coarse = _collapsed(
+            dense,
+            common_count(dense, sparse),
+            rc.count_tolerance,
+            rc.collapse_excess,
+            rc.collapse_smoothing,
+        )
         if coarse is None:
             state.timings["resolution"] = time.perf_counter() - t
             why = f"{detail}, but clustering it leaves no face: matched at full resolution"
@@ -242,18 +304,26 @@ class ResolutionStage(Stage):
         if (
             self.side == "a"
             and cfg.resolution.follow_density
-            and self.trusted(state, res, coarse, f)
+            and self.trusted(state, res, coarse, cs, f)
         ):
             # Again at a copy of A whose vertices lie as densely as B's do where the map sends
             # them: a uniform copy against a template denser at its hands and face compares
             # unlike k-hop balls there, and can put a hand on a thigh. Only from a map that
             # passes (a wrong one places the density wrongly), and kept only if it passes too.
-            second = collapse_to_sites(dense.internal, sites_like(f, dense.points))
+            sites = sites_like(f, dense.points)
+            second = _made_again(
+                dense.internal,
+                sites.size,
+                lambda m: collapse_to_sites(m, sites),
+                rc.collapse_excess,
+                rc.collapse_smoothing,
+            )
+            assert second is not None  # collapse_to_sites always makes a copy
             if len(second.mesh.faces):
                 cs2 = dense.derived(second.mesh)
                 state.timings["resolution.first"] = time.perf_counter() - t
                 again = self.lifted(state, second, cs2, nested)
-                if self.trusted(state, again[0], second, again[1]):
+                if self.trusted(state, again[0], second, cs2, again[1]):
                     coarse, cs, (res, f, lift) = second, cs2, again
                     counts += f", then at {cs.n_vertices} placed as densely as B's"
                 else:
@@ -269,7 +339,7 @@ class ResolutionStage(Stage):
                 f, note = fine, f", refined at full resolution ({h})"
         state.f = state.hope_map = f
         if self.side == "a":
-            state.common_a = CommonView(cs, coarse.sites[cs.order], cs.rank[coarse.owner])
+            state.common_a = _view(coarse, cs, self.rough)
         if isinstance(state.init, str):
             state.f0 = f  # a given initial map stays the result's init_map
         if res.confidence is not None:
@@ -286,14 +356,15 @@ class ResolutionStage(Stage):
         )
         return Halt(f"the map is lifted from the match at {cs.n_vertices} vertices of {name}")
 
-    def trusted(self, state: MatchState, res: MatchResult, coarse: Coarse, f: np.ndarray) -> bool:
+    def trusted(
+        self, state: MatchState, res: MatchResult, coarse: Coarse, cs: Shape, f: np.ndarray
+    ) -> bool:
         """Whether the lifted map ``f`` of a dense A passes: it turns at most
-        ``OrientConfig.min_turned`` of A's area over and the confidence's rule, on the
-        confidence carried over from the match ``res`` at a common resolution, does not flag
-        it."""
-        if self._turned is None:
-            self._turned = TurnedFaces(state.a, state.b)
-        share = self._turned.share(f)
+        ``OrientConfig.min_turned`` of A's area over (for a rough A measured on the copy
+        ``cs``, of ``coarse``, it was made at), and the confidence's rule, on the confidence carried over
+        from the match ``res`` there, does not flag it."""
+        view = _view(coarse, cs, self.rough)
+        share = flipped_share(state.a, state.b, f, view=view)
         if share > state.config.orient.min_turned:
             return False
         if res.confidence is None:

@@ -126,11 +126,16 @@ class CommonView:
         Per internal vertex of the copy, the vertex of A (internal numbering) it is.
     owner : (n_a,) int ndarray
         Per internal vertex of A, the copy's internal vertex it was merged into.
+    rough : bool
+        A is rough at its own resolution (a noisy scan,
+        ``ResolutionConfig.judge_rougher``): the share of A a map turns over is measured on
+        the copy too, where A's own triangles turn over at random.
     """
 
     shape: Shape
     sites: np.ndarray
     owner: np.ndarray
+    rough: bool = False
 
     def of(self, f: np.ndarray) -> np.ndarray:
         """A map of A (internal numbering) read at the copy's vertices."""

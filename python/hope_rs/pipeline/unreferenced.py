@@ -21,6 +21,15 @@ from .result import MatchResult
 __all__ = ["Referenced", "referenced"]
 
 
+def _index(keep: np.ndarray | None, n: int) -> np.ndarray:
+    """Per vertex of a mesh of ``n`` vertices, its index among ``keep`` (-1: not kept;
+    ``None``: every vertex kept)."""
+    out = np.full(n, -1, dtype=np.int64)
+    kept = np.arange(n) if keep is None else keep
+    out[kept] = np.arange(kept.size)
+    return out
+
+
 def _compact(mesh: Mesh) -> tuple[Mesh, np.ndarray] | None:
     """``mesh`` without the vertices no face uses and the indices of those it keeps, or
     ``None`` when faces use every vertex."""
@@ -29,9 +38,7 @@ def _compact(mesh: Mesh) -> tuple[Mesh, np.ndarray] | None:
     if used.all():
         return None
     keep = np.flatnonzero(used)
-    new = np.full(mesh.n_vertices, -1, dtype=np.int64)
-    new[keep] = np.arange(keep.size)
-    return Mesh(mesh.vertices[keep], new[mesh.faces]), keep
+    return Mesh(mesh.vertices[keep], _index(keep, mesh.n_vertices)[mesh.faces]), keep
 
 
 @dataclasses.dataclass(frozen=True)
@@ -58,18 +65,11 @@ class Referenced:
         ]
         return "; ".join(parts)
 
-    def _index_b(self) -> np.ndarray:
-        """Per vertex of B (own numbering), its index in the compact B (-1: in no face)."""
-        out = np.full(self.n_b, -1, dtype=np.int64)
-        keep = np.arange(self.n_b) if self.keep_b is None else self.keep_b
-        out[keep] = np.arange(keep.size)
-        return out
-
     def init_in(self, init: np.ndarray) -> np.ndarray:
         """A given initial map in the compact numbering: a vertex of A in no face is dropped,
         an image in no face moves to the nearest vertex of B that faces use."""
         f = init if self.keep_a is None else init[self.keep_a]
-        idx = self._index_b()[f]
+        idx = _index(self.keep_b, self.n_b)[f]
         off = idx < 0
         if off.any():
             assert self.keep_b is not None  # only B's unused vertices have no index
@@ -88,9 +88,7 @@ class Referenced:
         ):
             if keep is None:
                 continue
-            idx = np.full(n, -1, dtype=np.int64)
-            idx[keep] = np.arange(keep.size)
-            mapped = idx[landmarks[:, col]]
+            mapped = _index(keep, n)[landmarks[:, col]]
             if (mapped < 0).any():
                 v = int(landmarks[np.argmax(mapped < 0), col])
                 raise ValueError(
