@@ -265,6 +265,7 @@ def test_a_noisy_dense_a_is_judged_on_its_copy_a_clean_one_at_full_resolution():
         res = run_match(a, b, "shot", MatchConfig(), on_stage=grab)
         view, f = seen["view"], seen["f"]
         assert view.rough is rough
+        assert ("a rough scan" in res.stage("resolution").reason) is rough
         on_copy = TurnedFaces(view.shape, b).share(view.of(f))
         full = TurnedFaces(a, b).share(f)
         assert flipped_share(a, b, f, view=view) == (on_copy if rough else full)
@@ -514,7 +515,8 @@ def test_a_remeshed_body_against_a_noisy_dense_scan_of_another(tmp_path):
     back = hope_rs.match(scan, a)
     why = back.stage("resolution").reason
     count = int(why.split("clustered to ")[1].split(" ")[0])
-    assert count <= 1.1 * a.n_vertices, why
+    assert count <= 1.1 * a.n_vertices and "collapses made again" in why, why
+    assert "a rough scan" in why
     template = hope_rs.Shape(a)
     full = flipped_share(scan, template, template.rank[back.map[scan.order]])  # internal maps
     assert geodesic_errors(template, back.map, a_idx=bi, b_idx=ai).mean() < 0.04

@@ -162,23 +162,23 @@ def coarse_copy(
     manifold-keeping edge collapses (:func:`hope_rs.geometry.collapse.collapse_to_count`), or
     ``None`` when ``shape`` has no more vertices or the copy has no face. The copy keeps the
     oriented faces as they come. ``excess``, ``smoothing``: see :func:`_collapsed`."""
-    c = _collapsed(shape, n_target, tolerance, excess, smoothing)
+    c, _ = _collapsed(shape, n_target, tolerance, excess, smoothing)
     return None if c is None else (c, shape.derived(c.mesh))
 
 
 def _collapsed(
     shape: Shape, n_target: int, tolerance: float, excess: float = math.inf, smoothing: int = 0
-) -> Coarse | None:
-    """The Coarse of :func:`coarse_copy`, before its Shape is built (``excess``,
-    ``smoothing``: see :func:`_made_again`)."""
-    c = _made_again(
+) -> tuple[Coarse | None, bool]:
+    """The Coarse of :func:`coarse_copy`, before its Shape is built, and whether it was made
+    again on the mesh smoothed (``excess``, ``smoothing``: see :func:`_made_again`)."""
+    c, again = _made_again(
         shape.internal,
         n_target,
         lambda m: collapse_to_count(m, n_target, tolerance=tolerance),
         excess,
         smoothing,
     )
-    return None if c is None or len(c.mesh.faces) == 0 else c
+    return (None if c is None or len(c.mesh.faces) == 0 else c), again
 
 
 def _made_again(
@@ -187,20 +187,20 @@ def _made_again(
     collapse: Callable[[Mesh], Coarse | None],
     excess: float,
     smoothing: int,
-) -> Coarse | None:
+) -> tuple[Coarse | None, bool]:
     """``collapse(mesh)``, or when it keeps more than ``excess`` times ``n_target`` vertices
     (``ResolutionConfig.collapse_excess``), ``collapse`` of the mesh smoothed ``smoothing``
     times (:func:`~hope_rs.geometry.roughness.umbrella_smoothed`) with its kept vertices at
     their own positions, when that keeps fewer: a noisy scan's faces turn over at the
     noise's scale, so the collapses that would turn one over are refused and the copy keeps
-    vertices off its sites."""
+    vertices off its sites. Also whether the second one was kept."""
     c = collapse(mesh)
     if c is None or c.mesh.n_vertices <= excess * n_target:
-        return c
+        return c, False
     again = collapse(umbrella_smoothed(mesh, smoothing))
     if again is None or len(again.mesh.faces) == 0 or again.mesh.n_vertices >= c.mesh.n_vertices:
-        return c
-    return dataclasses.replace(again, mesh=Mesh(mesh.vertices[again.sites], again.mesh.faces))
+        return c, False
+    return dataclasses.replace(again, mesh=Mesh(mesh.vertices[again.sites], again.mesh.faces)), True
 
 
 def rougher_than(coarse: Coarse, like: Shape, rougher: float) -> float | None:
@@ -273,7 +273,7 @@ class ResolutionStage(Stage):
         t = state.log.start("resolution", detail=detail)
         rc = cfg.resolution
         self.rough = self.side == "a" and rough_scan(a, b, rc.judge_rougher)
-        coarse = _collapsed(
+        coarse, made_again = _collapsed(
             dense,
             common_count(dense, sparse),
             rc.count_tolerance,
@@ -299,8 +299,13 @@ class ResolutionStage(Stage):
         )
         res, f, lift = self.lifted(state, coarse, cs, nested)
         counts = f"{cs.n_vertices} vertices" + (
-            f" (smoothed: {ratio:.1f} times as rough as A)" if ratio is not None else ""
+            " (its collapses made again on it smoothed: its noise refused them)"
+            if made_again
+            else ""
         )
+        counts += f" (smoothed: {ratio:.1f} times as rough as A)" if ratio is not None else ""
+        if self.rough:
+            counts += " (a rough scan: its turned-over share measured on the copy)"
         if (
             self.side == "a"
             and cfg.resolution.follow_density
@@ -311,7 +316,7 @@ class ResolutionStage(Stage):
             # unlike k-hop balls there, and can put a hand on a thigh. Only from a map that
             # passes (a wrong one places the density wrongly), and kept only if it passes too.
             sites = sites_like(f, dense.points)
-            second = _made_again(
+            second, _ = _made_again(
                 dense.internal,
                 sites.size,
                 lambda m: collapse_to_sites(m, sites),
