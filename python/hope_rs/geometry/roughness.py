@@ -13,7 +13,12 @@ from .mesh import Mesh, unique_edges
 from .normals import vertex_normal_sums
 from .sites import owner_means
 
-__all__ = ["at_owner_means", "normal_roughness", "umbrella_smoothed"]
+__all__ = ["ROUGHNESS_FLOOR", "at_owner_means", "normal_roughness", "rougher", "umbrella_smoothed"]
+
+#: The least roughness a comparison divides by (mean edge lengths): a flat surface measures
+#: 0 and a finely subdivided one about 0.017, so against them any noise would read as
+#: infinitely rougher.
+ROUGHNESS_FLOOR = 0.02
 
 
 def normal_roughness(mesh: Mesh) -> float:
@@ -36,6 +41,12 @@ def normal_roughness(mesh: Mesh) -> float:
     ok = (deg > 0) & (total > 0)
     off = np.abs(np.sum((v[ok] - ring[ok] / deg[ok, None]) * normal[ok], axis=1))
     return float(np.median(off / (total[ok] / deg[ok])))
+
+
+def rougher(mesh: Mesh, than: Mesh) -> float:
+    """How many times as rough ``mesh`` is as ``than`` (:func:`normal_roughness`, each at its
+    own resolution; ``than``'s measure at least :data:`ROUGHNESS_FLOOR`)."""
+    return normal_roughness(mesh) / max(normal_roughness(than), ROUGHNESS_FLOOR)
 
 
 def at_owner_means(coarse: Mesh, fine: np.ndarray, owner: np.ndarray) -> Mesh:

@@ -172,6 +172,7 @@ def flipped_share(
         In [0, 1]; 0 when no triangle counts.
     """
     if view is not None and view.rough:
+        assert among is None  # a part is not matched at a common resolution
         return TurnedFaces(view.shape, b).share(view.of(f))
     return TurnedFaces(a, b, among).share(f)
 

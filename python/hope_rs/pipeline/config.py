@@ -525,7 +525,7 @@ class ResolutionConfig:
         ``collapse_smoothing`` times (each vertex halfway to its 1-ring's centroid), the copy
         keeping its vertices' own positions. ``inf``: never.
     collapse_smoothing : int
-        The smoothing steps of that second attempt; at least 1.
+        The smoothing steps of that second attempt; 1 to 100.
     judge_rougher : float
         When A is the denser shape and more than this many times as rough along its normals
         as B, each at its own resolution (a noisy scan), the share of A a map turns over
@@ -544,7 +544,7 @@ class ResolutionConfig:
     follow_density: bool = True
     smooth_rougher: float = field(default=1.5, metadata={"range": (1.0, None)})
     collapse_excess: float = field(default=1.25, metadata={"range": (1.0, None)})
-    collapse_smoothing: int = field(default=5, metadata={"range": (1, None)})
+    collapse_smoothing: int = field(default=5, metadata={"range": (1, 100)})
     judge_rougher: float = field(default=1.5, metadata={"range": (1.0, None)})
 
     def __post_init__(self):

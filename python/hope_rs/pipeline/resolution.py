@@ -73,7 +73,7 @@ from scipy.spatial import cKDTree
 from ..geometry.coarsen import Coarse
 from ..geometry.collapse import collapse_to_count, collapse_to_sites
 from ..geometry.mesh import Mesh
-from ..geometry.roughness import at_owner_means, normal_roughness, umbrella_smoothed
+from ..geometry.roughness import at_owner_means, rougher, umbrella_smoothed
 from ..geometry.sites import cell_sites
 from ..geometry.subdivide import subdivide
 from ..shape import Shape
@@ -203,16 +203,16 @@ def _made_again(
     return dataclasses.replace(again, mesh=Mesh(mesh.vertices[again.sites], again.mesh.faces)), True
 
 
-def rougher_than(coarse: Coarse, like: Shape, rougher: float) -> float | None:
+def rougher_than(coarse: Coarse, like: Shape, times: float) -> float | None:
     """How many times as rough along its normals as ``like`` the copy ``coarse`` is
-    (:func:`~hope_rs.geometry.roughness.normal_roughness`), when more than ``rougher`` times
+    (:func:`~hope_rs.geometry.roughness.rougher`), when more than ``times`` times
     (``ResolutionConfig.smooth_rougher``); else ``None``. A noisy dense scan keeps its noise at
     the vertices a copy keeps, where it is no longer small against the edges; a copy of a
     clean dense surface is about as rough as the sparser shape or smoother."""
-    if not math.isfinite(rougher):
+    if not math.isfinite(times):
         return None
-    ratio = normal_roughness(coarse.mesh) / max(normal_roughness(like.internal), 1e-12)
-    return ratio if ratio > rougher else None
+    ratio = rougher(coarse.mesh, like.internal)
+    return ratio if ratio > times else None
 
 
 def smoothed(coarse: Coarse, dense: Shape) -> Coarse:
@@ -228,14 +228,12 @@ def _view(coarse: Coarse, cs: Shape, rough: bool) -> CommonView:
     return CommonView(cs, coarse.sites[cs.order], cs.rank[coarse.owner], rough)
 
 
-def rough_scan(a: Shape, b: Shape, rougher: float) -> bool:
-    """Whether A is more than ``rougher`` times as rough along its normals as B, each at its
+def rough_scan(a: Shape, b: Shape, times: float) -> bool:
+    """Whether A is more than ``times`` times as rough along its normals as B, each at its
     own resolution (:func:`~hope_rs.geometry.roughness.normal_roughness`;
     ``ResolutionConfig.judge_rougher``): a noisy scan, whose own triangles a right map turns
     over at random. A clean dense surface is smoother than a sparser one."""
-    if not math.isfinite(rougher):
-        return False
-    return normal_roughness(a.internal) > rougher * normal_roughness(b.internal)
+    return math.isfinite(times) and rougher(a.internal, b.internal) > times
 
 
 class ResolutionStage(Stage):
@@ -299,7 +297,7 @@ class ResolutionStage(Stage):
         )
         res, f, lift = self.lifted(state, coarse, cs, nested)
         counts = f"{cs.n_vertices} vertices" + (
-            " (its collapses made again on it smoothed: its noise refused them)"
+            " (its collapses redone on the mesh denoised: its noise refused them)"
             if made_again
             else ""
         )
@@ -316,7 +314,7 @@ class ResolutionStage(Stage):
             # unlike k-hop balls there, and can put a hand on a thigh. Only from a map that
             # passes (a wrong one places the density wrongly), and kept only if it passes too.
             sites = sites_like(f, dense.points)
-            second, _ = _made_again(
+            second, redone = _made_again(
                 dense.internal,
                 sites.size,
                 lambda m: collapse_to_sites(m, sites),
@@ -330,7 +328,9 @@ class ResolutionStage(Stage):
                 again = self.lifted(state, second, cs2, nested)
                 if self.trusted(state, again[0], second, cs2, again[1]):
                     coarse, cs, (res, f, lift) = second, cs2, again
-                    counts += f", then at {cs.n_vertices} placed as densely as B's"
+                    counts += f", then at {cs.n_vertices} placed as densely as B's" + (
+                        " (collapses redone on the mesh denoised)" if redone else ""
+                    )
                 else:
                     counts += f" (not at {cs2.n_vertices} placed as densely as B's: that map fails)"
         f = f.astype(np.int64)

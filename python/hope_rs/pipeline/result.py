@@ -30,7 +30,9 @@ class MatchQuality:
         much of the map is probably wrong; look at the pair (``hope-rs show --color-by
         confidence``) before using it.
     flipped_share : float
-        The share of A's area whose triangles the map turns over (:func:`~hope_rs.pipeline.confidence.flipped_share`).
+        The share of A's area whose triangles the map turns over
+        (:func:`~hope_rs.pipeline.confidence.flipped_share`; for a noisy dense A matched at a
+        common resolution, measured on its copy: ``ResolutionConfig.judge_rougher``).
     """
 
     mean_confidence: float
