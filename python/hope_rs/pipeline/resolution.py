@@ -63,6 +63,7 @@ resolution, and a map it adopts carries its own match's confidence
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 from typing import Callable
@@ -162,21 +163,23 @@ def coarse_copy(
     manifold-keeping edge collapses (:func:`hope_rs.geometry.collapse.collapse_to_count`), or
     ``None`` when ``shape`` has no more vertices or the copy has no face. The copy keeps the
     oriented faces as they come. ``excess``, ``smoothing``: see :func:`_collapsed`."""
-    c, _ = _collapsed(shape, n_target, tolerance, excess, smoothing)
+    c, _ = _collapsed(
+        shape, n_target, tolerance, excess, lambda: umbrella_smoothed(shape.internal, smoothing)
+    )
     return None if c is None else (c, shape.derived(c.mesh))
 
 
 def _collapsed(
-    shape: Shape, n_target: int, tolerance: float, excess: float = math.inf, smoothing: int = 0
+    shape: Shape, n_target: int, tolerance: float, excess: float, denoised: Callable[[], Mesh]
 ) -> tuple[Coarse | None, bool]:
     """The Coarse of :func:`coarse_copy`, before its Shape is built, and whether it was made
-    again on the mesh smoothed (``excess``, ``smoothing``: see :func:`_made_again`)."""
+    again on the mesh smoothed (``excess``, ``denoised``: see :func:`_made_again`)."""
     c, again = _made_again(
         shape.internal,
         n_target,
         lambda m: collapse_to_count(m, n_target, tolerance=tolerance),
         excess,
-        smoothing,
+        denoised,
     )
     return (None if c is None or len(c.mesh.faces) == 0 else c), again
 
@@ -186,18 +189,18 @@ def _made_again(
     n_target: int,
     collapse: Callable[[Mesh], Coarse | None],
     excess: float,
-    smoothing: int,
+    denoised: Callable[[], Mesh],
 ) -> tuple[Coarse | None, bool]:
     """``collapse(mesh)``, or when it keeps more than ``excess`` times ``n_target`` vertices
-    (``ResolutionConfig.collapse_excess``), ``collapse`` of the mesh smoothed ``smoothing``
-    times (:func:`~hope_rs.geometry.roughness.umbrella_smoothed`) with its kept vertices at
+    (``ResolutionConfig.collapse_excess``), ``collapse`` of ``denoised()`` (the mesh smoothed:
+    :func:`~hope_rs.geometry.roughness.umbrella_smoothed`) with its kept vertices at
     their own positions, when that keeps fewer: a noisy scan's faces turn over at the
     noise's scale, so the collapses that would turn one over are refused and the copy keeps
     vertices off its sites. Also whether the second one was kept."""
     c = collapse(mesh)
     if c is None or c.mesh.n_vertices <= excess * n_target:
         return c, False
-    again = collapse(umbrella_smoothed(mesh, smoothing))
+    again = collapse(denoised())
     if again is None or len(again.mesh.faces) == 0 or again.mesh.n_vertices >= c.mesh.n_vertices:
         return c, False
     return dataclasses.replace(again, mesh=Mesh(mesh.vertices[again.sites], again.mesh.faces)), True
@@ -271,12 +274,10 @@ class ResolutionStage(Stage):
         t = state.log.start("resolution", detail=detail)
         rc = cfg.resolution
         self.rough = self.side == "a" and rough_scan(a, b, rc.judge_rougher)
+        # Smoothed once, when a copy first needs it (the second copy may too).
+        denoised = functools.cache(lambda: umbrella_smoothed(dense.internal, rc.collapse_smoothing))
         coarse, made_again = _collapsed(
-            dense,
-            common_count(dense, sparse),
-            rc.count_tolerance,
-            rc.collapse_excess,
-            rc.collapse_smoothing,
+            dense, common_count(dense, sparse), rc.count_tolerance, rc.collapse_excess, denoised
         )
         if coarse is None:
             state.timings["resolution"] = time.perf_counter() - t
@@ -319,7 +320,7 @@ class ResolutionStage(Stage):
                 sites.size,
                 lambda m: collapse_to_sites(m, sites),
                 rc.collapse_excess,
-                rc.collapse_smoothing,
+                denoised,
             )
             assert second is not None  # collapse_to_sites always makes a copy
             if len(second.mesh.faces):
