@@ -22,6 +22,7 @@ from hope_rs.pipeline.config import (
     PartialConfig,
     RefineConfig,
     RepairConfig,
+    ResolutionConfig,
     SpectralConfig,
 )
 from hope_rs.pipeline.runner import run_match
@@ -155,6 +156,12 @@ def test_spectral_settings_reach_the_pass(bundled):
             MatchConfig(spectral=SpectralConfig(margin=float("nan"))),
             ValueError,
             r"spectral\.margin must be a number >= 0",
+        ),
+        (
+            # NaN on a field with a declared range: the message quotes the range.
+            MatchConfig(resolution=ResolutionConfig(judge_rougher=float("nan"))),
+            ValueError,
+            r"resolution\.judge_rougher must be a number >= 1\.0, got nan",
         ),
         (MatchConfig(refine=RefineConfig(top_k=2.5)), TypeError, r"top_k must be an integer"),
         (

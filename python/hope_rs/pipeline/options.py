@@ -158,8 +158,8 @@ def check_config(config, path: str = "MatchConfig") -> None:
         elif isinstance(ref, float):
             if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
                 raise TypeError(f"{name} must be a number, got {type(value).__name__} {value!r}")
-            if math.isnan(value) or (ref >= 0 and value < 0):
-                raise ValueError(f"{name} must be {_sign(ref, 'a number')}, got {value}")
+            if math.isnan(value) or ("range" not in f.metadata and ref >= 0 and value < 0):
+                raise ValueError(f"{name} must be {_float_allowed(f, ref)}, got {value}")
             if f.metadata.get("finite") and not math.isfinite(value):
                 raise ValueError(f"{name} must be a finite number (default {ref}), got {value}")
             if "range" in f.metadata:
@@ -169,6 +169,16 @@ def check_config(config, path: str = "MatchConfig") -> None:
                         raise ValueError(f"{name} must be a number in ({lo}, {hi}), got {value}")
                 elif value < lo or (hi is not None and value > hi):
                     raise ValueError(f"{name} must be {_span(lo, hi, 'a number')}, got {value}")
+
+
+def _float_allowed(f: dataclasses.Field, ref: float) -> str:
+    """What a float field takes, as its errors say it: its declared range, or its sign."""
+    if "range" not in f.metadata:
+        return _sign(ref, "a number")
+    lo, hi = f.metadata["range"]
+    if f.metadata.get("exclusive"):
+        return f"a number in ({lo}, {hi})"
+    return _span(lo, hi, "a number")
 
 
 def _span(lo, hi, what: str = "an integer") -> str:
