@@ -902,6 +902,20 @@ class OrientConfig:
         and the geodesic distances near it ...
     topology_hypotheses : tuple of str
         ... with these hypotheses (as ``hypotheses``) and the same stop rule.
+    on_torn : bool
+        The stage also tries other maps when neither rule above calls for it but the map
+        tears a region off the rest (:mod:`hope_rs.pipeline.torn`: a region carried to the
+        wrong place with its orientation and 2-rings kept, such as a head shifted along the
+        neck or a leg onto the leg beside it) ...
+    torn_hypotheses : tuple of str
+        ... with these hypotheses ("torn": the torn-off regions placed by their geodesic
+        distances to anchors in the rest, then refined) and the same stop rule.
+    tear_length : float
+        An edge of A is torn when its ends land farther apart on B than this many sqrt(area)
+        of B (in space); a right map's widest edges span a few of B's edges.
+    min_torn : float
+        The least share of A's area a piece cut off by torn edges must cover to count as torn
+        off. The share torn off is also a term of the stage's cost.
     seam_rings : int
         1-rings added around the turned-over vertices for the regional hypotheses.
     distortion_weight : float
@@ -930,14 +944,18 @@ class OrientConfig:
     )
     on_topology: bool = True
     topology_hypotheses: tuple[str, ...] = ("reseed", "reverse")
+    on_torn: bool = True
+    torn_hypotheses: tuple[str, ...] = ("torn",)
+    tear_length: float = field(default=0.08, metadata={"range": (0.0, None), "finite": True})
+    min_torn: float = field(default=0.01, metadata={"range": (0.0, 1.0)})
     seam_rings: int = 2
     distortion_weight: float = field(default=1.0, metadata={"finite": True})
     min_gain: float = field(default=0.02, metadata={"finite": True})
     again: bool = True
 
     def __post_init__(self):
-        known = ("mirror", "mirror_turned", "reseed", "wks", "reverse", "reverse_wks")
-        for name in ("hypotheses", "topology_hypotheses"):
+        known = ("mirror", "mirror_turned", "reseed", "torn", "wks", "reverse", "reverse_wks")
+        for name in ("hypotheses", "topology_hypotheses", "torn_hypotheses"):
             value = getattr(self, name)
             bad = [h for h in value if h not in known]
             if isinstance(value, str) or bad:

@@ -8,20 +8,24 @@ When the final map turns more than ``OrientConfig.min_turned`` of A's area over,
 less over but the confidence's rule flags it (``OrientConfig.on_failed``,
 :func:`~hope_rs.pipeline.confidence.map_quality`), or the two shapes differ in topology
 (``OrientConfig.on_topology``: a topological shortcut leads the k-hop balls and geodesic
-distances across it, and the map can put a region near it on the wrong side), this stage
-builds alternative maps (hypotheses), refines them through the rest of the pipeline and keeps
+distances across it, and the map can put a region near it on the wrong side), or the map tears
+a region off the rest (``OrientConfig.on_torn``, :mod:`hope_rs.pipeline.torn`: a region
+carried to the wrong place with its orientation and 2-rings kept), this stage builds
+alternative maps (hypotheses), refines them through the rest of the pipeline and keeps
 whichever of them and the map it started from scores best (:func:`map_cost`: turned-over
-share plus LMD inconsistency). Each refined hypothesis is a trial of
+share plus LMD inconsistency plus the share torn off). Each refined hypothesis is a trial of
 :mod:`hope_rs.pipeline.trials` (recorded in ``res.stage("orient").trials`` with minus its
 cost as score, the kept one marked); the kept one becomes the state's map.
 
-The hypotheses (``OrientConfig.hypotheses``; ``topology_hypotheses`` when only the topology
-calls for the stage):
+The hypotheses (``OrientConfig.hypotheses``; ``torn_hypotheses`` and ``topology_hypotheses``
+when only a torn-off region or the topology calls for the stage):
 
 * ``"mirror"``: the map composed with B's intrinsic left/right symmetry, everywhere;
 * ``"mirror_turned"``: the same, on the turned-over regions only;
 * ``"reseed"``: the turned-over vertices placed by their geodesic distances to anchors in the
   orientation-keeping rest (:func:`~hope_rs.pipeline.anchors.anchor_step`);
+* ``"torn"``: the vertices off the map's core (the largest piece it keeps in one, see
+  :mod:`hope_rs.pipeline.torn`) placed by their geodesic distances to anchors in the core;
 * ``"wks"``: the pipeline from the WKS initial map instead (a swapped pair of limbs, which
   the others keep);
 * ``"reverse"``: the pipeline from the match of B to A, inverted;
@@ -29,7 +33,8 @@ calls for the stage):
   gorilla, whose SHOT and WKS starts both fail in that direction, while WKS from the gorilla
   keeps the orientation); kept only when it passes the stop rule below, never derived from.
 
-The derived hypotheses are unrefined maps; the one turning the least over is refined. The
+The derived hypotheses are unrefined maps; of "mirror", "mirror_turned" and "reseed" the one
+turning the least over is refined, and "torn" is refined when the map tears a region off. The
 other starts follow in the order of the hypotheses tried (a start the stage's own match
 used is not tried again); after each, while no refined map passes the stop rule, the maps
 derived from that start's refined map (if it beats the stage's own) are tried too
@@ -68,6 +73,7 @@ from .confidence import map_quality, match_quality
 from .lmd import local_map_distortion
 from .progress import ProgressEvent
 from .state import QUIET, MatchState, Stage
+from .torn import TornRegions
 from .trials import (
     Candidate,
     Trial,
@@ -121,6 +127,10 @@ class _Judge:
 
     def __init__(self, state: MatchState):
         self.b = state.b
+        cfg = state.config.orient
+        #: The regions a map tears off (on A at full resolution: a lifted map keeps its
+        #: neighbours' images near each other however dense A is).
+        self.torn = TornRegions(state.a, self.b, cfg.tear_length, cfg.min_torn)
         self.view = state.common_a
         self.full = TurnedFaces(state.a, self.b)
         self.shape = state.a if self.view is None else self.view.shape
@@ -138,7 +148,7 @@ class _Judge:
 
     def cost(self, f: np.ndarray, weight: float) -> float:
         """:func:`map_cost` of ``f``, its LMD measured where the map was made."""
-        return map_cost(self.shape, self.b, self._of(f), self.share(f), weight)
+        return map_cost(self.shape, self.b, self._of(f), self.share(f), weight, self.torn.share(f))
 
     def turned(self, f: np.ndarray, rings: int) -> np.ndarray:
         """Bool per vertex of A: in a region ``f`` turns over (more than half of a vertex's
@@ -148,13 +158,16 @@ class _Judge:
         return region if self.view is None else region[self.view.owner]
 
 
-def map_cost(a: Shape, b: Shape, f: np.ndarray, turned: float, weight: float) -> float:
+def map_cost(
+    a: Shape, b: Shape, f: np.ndarray, turned: float, weight: float, torn: float = 0.0
+) -> float:
     """What the stage minimises: ``turned``, the share of A's area the map ``f`` turns over,
-    plus ``weight`` times the share of A's vertices whose 2-ring LMD finds inconsistent (a
-    right map keeps both low; a mirror image keeps distances but turns over, a scrambled map
-    does neither)."""
+    plus ``weight`` times the share of A's vertices whose 2-ring LMD finds inconsistent, plus
+    ``torn``, the share of A's area it tears off (:mod:`hope_rs.pipeline.torn`). A right map
+    keeps all three low; a mirror image keeps distances but turns over, a region shifted
+    along the surface keeps both but tears off, a scrambled map does none."""
     _, consistent = local_map_distortion(a, b, f)
-    return float(turned) + weight * float(1.0 - np.mean(consistent))
+    return float(turned) + weight * float(1.0 - np.mean(consistent)) + float(torn)
 
 
 def _judged_by_confidence(state: MatchState) -> bool:
@@ -309,24 +322,35 @@ class _Hypotheses:
                 if sizes.size and sizes.max() >= 4:
                     core = label == int(np.argmax(sizes))
                     out[name] = anchor_step(a, b, f, core, config=self.state.config.refine.repair)
+            elif name == "torn":
+                # The core the map keeps in one piece holds the anchors.
+                core, torn = self.judge.torn.pieces(f)
+                if torn.any() and core.sum() >= 4:
+                    out[name] = anchor_step(a, b, f, core, config=self.state.config.refine.repair)
         return out
 
     def from_derived(self, f: np.ndarray, share: float, base: str = "") -> list[Trial]:
-        """The least turned-over map derived from ``f`` refined, when it turns less over
-        than ``f`` (``share``); labelled ``base + "+" + hypothesis`` when derived from a
-        trial ``base``."""
+        """The least turned-over map derived from ``f`` by "mirror", "mirror_turned" or
+        "reseed" refined, when it turns less over than ``f`` (``share``), and the one derived
+        by "torn" refined, when ``f`` tears a region off; labelled ``base + "+" +
+        hypothesis`` when derived from a trial ``base``."""
         raw = self.derived(f)
-        if not raw:
-            return []
-        shares = {k: self.judge.share(g) for k, g in raw.items()}
         prefix = f"{base}+" if base else ""
-        self.notes.append(
-            f"{prefix}unrefined " + ", ".join(f"{k} {v:.0%}" for k, v in shares.items())
-        )
-        best = min(shares, key=lambda k: shares[k])
-        if shares[best] >= share:
-            return []
-        return self.refine([self.candidate(prefix + best, raw[best])])
+        cands = []
+        torn = raw.pop("torn", None)
+        if torn is not None:
+            if base:
+                self.notes.append(f"{base}: {self.judge.torn.share(f):.0%} torn off")
+            cands.append(self.candidate(prefix + "torn", torn))
+        if raw:
+            shares = {k: self.judge.share(g) for k, g in raw.items()}
+            self.notes.append(
+                f"{prefix}unrefined " + ", ".join(f"{k} {v:.0%}" for k, v in shares.items())
+            )
+            best = min(shares, key=lambda k: shares[k])
+            if shares[best] < share:
+                cands.append(self.candidate(prefix + best, raw[best]))
+        return self.refine(cands) if cands else []
 
     def reverse(self, label: str = "reverse") -> list[Trial]:
         """The pipeline from the match of B to A (unscored trial) inverted: each vertex of
@@ -395,7 +419,7 @@ class OrientStage(Stage):
             self._why += (", flagged likely failed" if flagged else ", not flagged") + (
                 f" (mean confidence {q.mean_confidence:.2f})"
             )
-        differ = False
+        differ = torn = False
         if share <= cfg.min_turned and not flagged and cfg.on_topology:
             ea, eb = state.a.euler_characteristic, state.b.euler_characteristic
             if ea != eb:
@@ -404,8 +428,17 @@ class OrientStage(Stage):
                     f"; the shapes differ in topology (Euler characteristics {ea} and {eb})"
                 )
                 self._names = cfg.topology_hypotheses
+        if share <= cfg.min_turned and not flagged and not differ and cfg.on_torn:
+            # A region carried to the wrong place with its orientation and 2-rings kept. (A
+            # shortcut can tear a map too; its own hypotheses come first there, and the first
+            # refined map that passes ends the stage.)
+            torn_share = self._judge.torn.share(state.f)
+            if torn_share > 0.0:
+                torn = True
+                self._why += f"; {torn_share:.0%} of A torn off"
+                self._names = cfg.torn_hypotheses
         state.timings["orient"] = time.perf_counter() - t
-        if share > cfg.min_turned or flagged or differ:
+        if share > cfg.min_turned or flagged or torn or differ:
             return None
         return f"{share:.0%} of A's area turned over (at most {cfg.min_turned:.0%})" + (
             ", not flagged" if _judged_by_confidence(state) else ""

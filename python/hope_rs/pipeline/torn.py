@@ -1,0 +1,86 @@
+"""Which regions of A a map tears off the rest.
+
+A right map is continuous: the two ends of an edge of A land near each other on B. A map that
+carries a region to the wrong place while keeping its orientation and its 2-rings (a head
+shifted along the neck, a leg onto the leg beside it) tears that region off along a seam
+whose edges land far apart. The edges of A whose ends land more than
+``OrientConfig.tear_length`` · sqrt(area) of B apart (in space, so that a topological
+shortcut of B does not tear a right map) are cut; in each component of A's mesh the piece
+of the rest with the largest area is its core, and the other pieces of at least
+``OrientConfig.min_torn`` of A's area are torn off. A right map tears nothing off at that
+length: its widest edges span a few of B's edges.
+
+Used by the "orient" stage (:mod:`hope_rs.pipeline.orientation_repair`): a trigger, a term
+of the cost it minimises, and the core its ``"torn"`` hypothesis re-places the rest from.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from ..shape import Shape
+
+__all__ = ["TornRegions"]
+
+
+def _pieces(n: int, edges: np.ndarray) -> np.ndarray:
+    """Component label per vertex of the graph of ``n`` vertices and these edges."""
+    graph = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    return connected_components(graph, directed=False)[1].astype(np.int64)
+
+
+class TornRegions:
+    """The regions of A that maps onto B tear off (see the module notes), with what depends
+    on the shapes alone computed once.
+
+    Parameters
+    ----------
+    a, b : Shape
+        The shapes (internal numbering).
+    length : float
+        ``OrientConfig.tear_length``: an edge of A is cut when its ends land farther apart
+        than this many sqrt(area) of B.
+    min_share : float
+        ``OrientConfig.min_torn``: the least share of A's area a piece must cover to count as
+        torn off (scattered vertices landing apart are the noise of a right map).
+    """
+
+    def __init__(self, a: Shape, b: Shape, length: float, min_share: float):
+        self.edges = a.edges
+        self.n = a.n_vertices
+        faces = a.internal.faces
+        area = np.bincount(faces.ravel(), np.repeat(a.internal.face_areas, 3), minlength=self.n)
+        total = area.sum()
+        #: Each vertex's share of A's area (a third of its faces').
+        self.area = area / total if total > 0 else np.full(self.n, 1.0 / max(self.n, 1))
+        self.mesh_part = _pieces(self.n, self.edges)
+        self._points_b = b.points
+        self._max_length = float(length) * b.scale
+        self.min_share = float(min_share)
+
+    def pieces(self, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(core, torn)``, bool per vertex of A under the map ``f`` (internal numbering):
+        the core pieces (the largest of each mesh component) and the pieces torn off
+        (the others of at least ``min_share`` of A's area)."""
+        e, pb = self.edges, self._points_b
+        f = np.asarray(f)
+        kept = np.linalg.norm(pb[f[e[:, 0]]] - pb[f[e[:, 1]]], axis=1) <= self._max_length
+        label = _pieces(self.n, e[kept])
+        size = np.bincount(label, self.area)
+        # Per mesh component, its largest piece (ties to the lowest label).
+        part = np.zeros(size.size, dtype=np.int64)
+        part[label] = self.mesh_part
+        order = np.lexsort((-size, part))  # by mesh component, largest piece first
+        first = np.ones(order.size, dtype=bool)
+        first[1:] = part[order[1:]] != part[order[:-1]]
+        is_core = np.zeros(size.size, dtype=bool)
+        is_core[order[first]] = True
+        core = is_core[label]
+        torn = ~core & (size[label] >= self.min_share)
+        return core, torn
+
+    def share(self, f: np.ndarray) -> float:
+        """The share of A's area that ``f`` tears off (see :meth:`pieces`), in [0, 1)."""
+        return float(self.area[self.pieces(f)[1]].sum())
