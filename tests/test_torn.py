@@ -8,16 +8,18 @@ import numpy as np
 import pytest
 from conftest import shared_pair
 from meshes import bumpy_sphere
-from scipy.spatial import cKDTree
+from scipy.spatial import ConvexHull, cKDTree
 
 import hope_rs
 from hope_rs.evaluation.evaluate import geodesic_errors
 from hope_rs.evaluation.perturbed import add_noise
-from hope_rs.pipeline.config import MatchConfig, OrientConfig
+from hope_rs.pipeline.config import MatchConfig, OrientConfig, RepairConfig
 from hope_rs.pipeline.options import check_config
-from hope_rs.pipeline.torn import TornRegions
+from hope_rs.pipeline.torn import TornRegions, replaced
 
-LENGTH, MIN_SHARE = OrientConfig().tear_length, OrientConfig().min_torn
+CFG = OrientConfig()
+SETTINGS = (CFG.tear_length, CFG.tear_edges, CFG.min_torn)
+MIN_SHARE = CFG.min_torn
 
 
 def _sphere(seed: int = 3, n: int = 600) -> hope_rs.Shape:
@@ -25,7 +27,8 @@ def _sphere(seed: int = 3, n: int = 600) -> hope_rs.Shape:
 
 
 def _area_share(s: hope_rs.Shape, vertices: np.ndarray) -> float:
-    """A third of the area of each vertex's faces, summed over ``vertices``, over the total."""
+    """A third of the area of each vertex's faces, summed over ``vertices`` (a mask), over
+    the total."""
     faces, area = s.internal.faces, s.internal.face_areas
     per_vertex = np.bincount(faces.ravel(), np.repeat(area, 3), minlength=s.n_vertices)
     return float(per_vertex[vertices].sum() / per_vertex.sum())
@@ -33,7 +36,7 @@ def _area_share(s: hope_rs.Shape, vertices: np.ndarray) -> float:
 
 def test_the_identity_tears_nothing_off():
     s = _sphere()
-    torn = TornRegions(s, s, LENGTH, MIN_SHARE)
+    torn = TornRegions(s, s, *SETTINGS)
     core, off = torn.pieces(np.arange(s.n_vertices))
     assert core.all() and not off.any()
     assert torn.share(np.arange(s.n_vertices)) == 0.0
@@ -48,21 +51,81 @@ def test_a_cap_carried_to_the_far_side_is_torn_off_and_its_area_counted():
     turned = p * np.array([1.0, -1.0, -1.0])
     f = np.arange(s.n_vertices)
     f[cap] = cKDTree(p).query(turned[cap])[1]
-    torn = TornRegions(s, s, LENGTH, MIN_SHARE)
+    torn = TornRegions(s, s, *SETTINGS)
     core, off = torn.pieces(f)
     assert np.array_equal(off, cap) and np.array_equal(core, ~cap)
-    assert torn.share(f) == pytest.approx(_area_share(s, np.flatnonzero(cap)))
+    assert torn.share(f) == pytest.approx(_area_share(s, cap))
     # A piece under min_share counts as neither core nor torn off.
-    strict = TornRegions(s, s, LENGTH, _area_share(s, np.flatnonzero(cap)) + 0.01)
+    strict = TornRegions(s, s, CFG.tear_length, CFG.tear_edges, _area_share(s, cap) + 0.01)
     core, off = strict.pieces(f)
     assert not off.any() and np.array_equal(core, ~cap)
+
+
+def _hull_sphere(n: int, seed: int) -> hope_rs.Shape:
+    """A unit sphere triangulated through ``n`` random points (their convex hull)."""
+    p = np.random.default_rng(seed).normal(size=(n, 3))
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    return hope_rs.Shape(hope_rs.Mesh(p, ConvexHull(p).simplices))
+
+
+@pytest.mark.parametrize("n_a, n_b", [(150, 150), (300, 300), (3000, 150), (150, 3000)])
+def test_a_right_map_between_coarse_or_unlike_meshes_tears_nothing_off(n_a, n_b):
+    # Two triangulations of one sphere, each vertex of A sent to the nearest vertex of B: at
+    # these resolutions an image spans more than 0.08 sqrt(area), but few mean edge lengths.
+    a, b = _hull_sphere(n_a, 1), _hull_sphere(n_b, 2)
+    f = cKDTree(b.points / b.scale).query(a.points / a.scale)[1]
+    assert TornRegions(a, b, *SETTINGS).share(f) == 0.0
+    # Against the sqrt(area) alone, a coarse mesh's right map would tear.
+    assert TornRegions(a, b, CFG.tear_length, 0.0, CFG.min_torn).share(f) > 0.3
+
+
+def _cap_carried_off(s: hope_rs.Shape, among: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The identity of ``s`` with the cap of the vertices in ``among`` highest in z carried
+    to the far side of their sphere (rotated by 180 degrees about x through its centre):
+    ``(map, cap)``."""
+    p = s.points
+    centre = p[among].mean(axis=0)
+    z = p[:, 2] - centre[2]
+    cap = among & (z > 0.6 * z[among].max())
+    turned = (p - centre) * np.array([1.0, -1.0, -1.0]) + centre
+    f = np.arange(s.n_vertices)
+    f[cap] = np.flatnonzero(among)[cKDTree(p[among]).query(turned[cap])[1]]
+    return f, cap
+
+
+def test_the_torn_off_cap_is_placed_back_from_the_core():
+    s = _sphere()
+    f, cap = _cap_carried_off(s, np.ones(s.n_vertices, dtype=bool))
+    torn = TornRegions(s, s, *SETTINGS)
+    assert torn.share(f) > MIN_SHARE
+    g = replaced(s, s, f, torn, RepairConfig())
+    assert g is not None and np.array_equal(g[~cap], f[~cap])
+    assert np.mean(g[cap] == np.flatnonzero(cap)) > 0.9 and torn.share(g) == 0.0
+    # Nothing torn off: nothing to re-place.
+    assert replaced(s, s, np.arange(s.n_vertices), torn, RepairConfig()) is None
+
+
+def test_a_cap_torn_off_one_of_two_components_is_placed_back_from_its_own_core():
+    # Anchors in the other sphere reach none of its vertices: the cap is placed from the
+    # anchors of its own sphere's core, and the other sphere is left as it is.
+    v, f = bumpy_sphere(300, 4)
+    both = hope_rs.Shape(hope_rs.Mesh(np.vstack([v, v + [5.0, 0, 0]]), np.vstack([f, f + len(v)])))
+    second = np.zeros(both.n_vertices, dtype=bool)
+    second[both.rank[len(v) :]] = True  # internal numbering
+    m, cap = _cap_carried_off(both, second)
+    torn = TornRegions(both, both, *SETTINGS)
+    core, off = torn.pieces(m)
+    assert np.array_equal(off, cap) and core[~second].all()
+    g = replaced(both, both, m, torn, RepairConfig())
+    assert g is not None and np.array_equal(g[~cap], m[~cap])
+    assert np.mean(g[cap] == np.flatnonzero(cap)) > 0.9 and torn.share(g) == 0.0
 
 
 def test_each_mesh_component_keeps_its_largest_piece():
     # Two spheres side by side mapped onto themselves: neither is torn off the other.
     v, f = bumpy_sphere(300, 4)
     both = hope_rs.Shape(hope_rs.Mesh(np.vstack([v, v + [5.0, 0, 0]]), np.vstack([f, f + len(v)])))
-    torn = TornRegions(both, both, LENGTH, MIN_SHARE)
+    torn = TornRegions(both, both, *SETTINGS)
     core, off = torn.pieces(np.arange(both.n_vertices))
     assert core.all() and not off.any()
 
@@ -72,6 +135,8 @@ def test_config_checks_the_torn_settings():
         OrientConfig(torn_hypotheses=("torn", "spin"))
     with pytest.raises(ValueError, match="tear_length"):
         check_config(MatchConfig(orient=OrientConfig(tear_length=float("inf"))))
+    with pytest.raises(ValueError, match="tear_edges"):
+        check_config(MatchConfig(orient=OrientConfig(tear_edges=-1.0)))
     with pytest.raises(ValueError, match="min_torn"):
         check_config(MatchConfig(orient=OrientConfig(min_torn=1.5)))
 
@@ -87,7 +152,7 @@ def test_a_region_torn_off_under_noise_is_repaired():
     a, b = hope_rs.Shape(ma), hope_rs.Shape(mb)
     off = dataclasses.replace(MatchConfig(), orient=OrientConfig(on_torn=False))
     before = hope_rs.match(a, b, config=off)
-    torn = TornRegions(a, b, LENGTH, MIN_SHARE)
+    torn = TornRegions(a, b, *SETTINGS)
     assert torn.share(a.map_in(b, before.map)) > MIN_SHARE
     assert geodesic_errors(mb, before.map, a_idx=ai, b_idx=bi).mean() > 0.045
     res = hope_rs.match(a, b)

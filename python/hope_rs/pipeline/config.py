@@ -891,7 +891,8 @@ class OrientConfig:
         good enough to stop at only when that rule does not flag it.
     hypotheses : tuple of str
         The alternative maps tried ("mirror", "mirror_turned", "reseed": derived from a
-        map, the one turning the least over refined; "reverse": from the match of B to A
+        map, the one turning the least over refined; "torn": see ``torn_hypotheses``;
+        "reverse": from the match of B to A
         inverted; "wks": the pipeline from WKS; "reverse_wks": from the match of B to A from
         WKS, inverted, kept only when it passes the stop rule), the derived ones first, then
         the others in the order given, until one turns at most ``min_turned`` over.
@@ -903,19 +904,25 @@ class OrientConfig:
     topology_hypotheses : tuple of str
         ... with these hypotheses (as ``hypotheses``) and the same stop rule.
     on_torn : bool
-        The stage also tries other maps when neither rule above calls for it but the map
-        tears a region off the rest (:mod:`hope_rs.pipeline.torn`: a region carried to the
-        wrong place with its orientation and 2-rings kept, such as a head shifted along the
-        neck or a leg onto the leg beside it) ...
+        The stage also tries other maps when neither the turned share, the confidence's rule
+        nor the topology calls for it but the map tears a region off the rest
+        (:mod:`hope_rs.pipeline.torn`: a region carried to the wrong place with its
+        orientation and 2-rings kept, such as a head shifted along the neck) ...
     torn_hypotheses : tuple of str
-        ... with these hypotheses ("torn": the torn-off regions placed by their geodesic
-        distances to anchors in the rest, then refined) and the same stop rule.
+        ... with these hypotheses ("torn": every vertex off the core of a mesh component
+        with a piece torn off placed by its geodesic distances to anchors in that core, then
+        refined) and the same stop rule.
     tear_length : float
-        An edge of A is torn when its ends land farther apart on B than this many sqrt(area)
-        of B (in space); a right map's widest edges span a few of B's edges.
+        An edge of A is torn when its ends land farther apart on B (in space) than this many
+        sqrt(area) of B ...
+    tear_edges : float
+        ... and than this many mean edge lengths of A or of B, the longer (each in its own
+        sqrt(area)): on a coarse mesh a right map's edges span more of the surface. A right
+        map's widest edges span a few edges.
     min_torn : float
         The least share of A's area a piece cut off by torn edges must cover to count as torn
-        off. The share torn off is also a term of the stage's cost.
+        off. The share torn off is also a term of the stage's cost, for every trigger
+        (``min_torn = 1`` leaves it out).
     seam_rings : int
         1-rings added around the turned-over vertices for the regional hypotheses.
     distortion_weight : float
@@ -947,6 +954,7 @@ class OrientConfig:
     on_torn: bool = True
     torn_hypotheses: tuple[str, ...] = ("torn",)
     tear_length: float = field(default=0.08, metadata={"range": (0.0, None), "finite": True})
+    tear_edges: float = field(default=3.0, metadata={"range": (0.0, None), "finite": True})
     min_torn: float = field(default=0.01, metadata={"range": (0.0, 1.0)})
     seam_rings: int = 2
     distortion_weight: float = field(default=1.0, metadata={"finite": True})

@@ -24,8 +24,9 @@ when only a torn-off region or the topology calls for the stage):
 * ``"mirror_turned"``: the same, on the turned-over regions only;
 * ``"reseed"``: the turned-over vertices placed by their geodesic distances to anchors in the
   orientation-keeping rest (:func:`~hope_rs.pipeline.anchors.anchor_step`);
-* ``"torn"``: the vertices off the map's core (the largest piece it keeps in one, see
-  :mod:`hope_rs.pipeline.torn`) placed by their geodesic distances to anchors in the core;
+* ``"torn"``: the vertices off the map's core (in each mesh component, the largest piece it
+  keeps in one, see :mod:`hope_rs.pipeline.torn`) placed by their geodesic distances to
+  anchors in that core (:func:`~hope_rs.pipeline.torn.replaced`);
 * ``"wks"``: the pipeline from the WKS initial map instead (a swapped pair of limbs, which
   the others keep);
 * ``"reverse"``: the pipeline from the match of B to A, inverted;
@@ -73,7 +74,7 @@ from .confidence import map_quality, match_quality
 from .lmd import local_map_distortion
 from .progress import ProgressEvent
 from .state import QUIET, MatchState, Stage
-from .torn import TornRegions
+from .torn import TornRegions, replaced
 from .trials import (
     Candidate,
     Trial,
@@ -123,14 +124,15 @@ class _Judge:
     maps change (:meth:`turned`, each vertex of A taking its copy vertex's): at full
     resolution a right many-to-one map keeps few 2-rings' distances and lands most small
     triangles degenerate. So is the turned share when A is rough at its own resolution
-    (``CommonView.rough``, :func:`~hope_rs.pipeline.confidence.flipped_share`)."""
+    (``CommonView.rough``, :func:`~hope_rs.pipeline.confidence.flipped_share`). The share
+    torn off (:attr:`torn`), the cost's third term, is measured on A at full resolution."""
 
     def __init__(self, state: MatchState):
         self.b = state.b
         cfg = state.config.orient
         #: The regions a map tears off (on A at full resolution: a lifted map keeps its
         #: neighbours' images near each other however dense A is).
-        self.torn = TornRegions(state.a, self.b, cfg.tear_length, cfg.min_torn)
+        self.torn = TornRegions(state.a, self.b, cfg.tear_length, cfg.tear_edges, cfg.min_torn)
         self.view = state.common_a
         self.full = TurnedFaces(state.a, self.b)
         self.shape = state.a if self.view is None else self.view.shape
@@ -165,7 +167,8 @@ def map_cost(
     plus ``weight`` times the share of A's vertices whose 2-ring LMD finds inconsistent, plus
     ``torn``, the share of A's area it tears off (:mod:`hope_rs.pipeline.torn`). A right map
     keeps all three low; a mirror image keeps distances but turns over, a region shifted
-    along the surface keeps both but tears off, a scrambled map does none."""
+    along the surface keeps both but tears off; a scrambled map shatters into pieces too small
+    to count as torn off, and LMD sees it."""
     _, consistent = local_map_distortion(a, b, f)
     return float(turned) + weight * float(1.0 - np.mean(consistent)) + float(torn)
 
@@ -225,7 +228,8 @@ class _Hypotheses:
     def __init__(self, state: MatchState, judge: _Judge, names: tuple[str, ...]):
         self.state, self.judge = state, judge
         self.cfg = state.config.orient
-        #: The hypotheses tried (``OrientConfig.hypotheses`` or ``.topology_hypotheses``).
+        #: The hypotheses tried (``OrientConfig.hypotheses``, ``.topology_hypotheses`` or
+        #: ``.torn_hypotheses``).
         self.names = names
         #: Whether the map was lifted from a match at a common resolution (its confidence
         #: carried over): so is every refined hypothesis, each matched there through the
@@ -308,7 +312,7 @@ class _Hypotheses:
 
     def derived(self, f: np.ndarray) -> dict[str, np.ndarray]:
         """The unrefined maps derived from ``f`` (internal numbering) by the derived
-        hypotheses tried ("mirror", "mirror_turned", "reseed")."""
+        hypotheses tried ("mirror", "mirror_turned", "reseed", "torn")."""
         cfg, a, b = self.cfg, self.state.a, self.state.b
         region = self.judge.turned(f, cfg.seam_rings)
         out = {}
@@ -323,10 +327,9 @@ class _Hypotheses:
                     core = label == int(np.argmax(sizes))
                     out[name] = anchor_step(a, b, f, core, config=self.state.config.refine.repair)
             elif name == "torn":
-                # The core the map keeps in one piece holds the anchors.
-                core, torn = self.judge.torn.pieces(f)
-                if torn.any() and core.sum() >= 4:
-                    out[name] = anchor_step(a, b, f, core, config=self.state.config.refine.repair)
+                g = replaced(a, b, f, self.judge.torn, self.state.config.refine.repair)
+                if g is not None:
+                    out[name] = g
         return out
 
     def from_derived(self, f: np.ndarray, share: float, base: str = "") -> list[Trial]:
@@ -368,8 +371,9 @@ class _Hypotheses:
 
 class OrientStage(Stage):
     """The "orient" stage (see the module notes); runs when the map turns more than
-    ``OrientConfig.min_turned`` of A's area over, is flagged likely failed or the shapes
-    differ in topology, on whole closed shapes without landmarks."""
+    ``OrientConfig.min_turned`` of A's area over, is flagged likely failed, the shapes
+    differ in topology or the map tears a region off, on whole closed shapes without
+    landmarks."""
 
     name = "orient"
     #: A map another stage found final can still be a mirror image (LMD trusts it everywhere).
@@ -429,9 +433,10 @@ class OrientStage(Stage):
                 )
                 self._names = cfg.topology_hypotheses
         if share <= cfg.min_turned and not flagged and not differ and cfg.on_torn:
-            # A region carried to the wrong place with its orientation and 2-rings kept. (A
-            # shortcut can tear a map too; its own hypotheses come first there, and the first
-            # refined map that passes ends the stage.)
+            # A region carried to the wrong place with its orientation and 2-rings kept. Not
+            # when the topologies differ: a weld tears right maps too, and only the topology's
+            # hypotheses run there (a re-placed map passing the stop rule first would end the
+            # stage before the reverse match).
             torn_share = self._judge.torn.share(state.f)
             if torn_share > 0.0:
                 torn = True

@@ -3,15 +3,16 @@
 A right map is continuous: the two ends of an edge of A land near each other on B. A map that
 carries a region to the wrong place while keeping its orientation and its 2-rings (a head
 shifted along the neck, a leg onto the leg beside it) tears that region off along a seam
-whose edges land far apart. The edges of A whose ends land more than
-``OrientConfig.tear_length`` · sqrt(area) of B apart (in space, so that a topological
-shortcut of B does not tear a right map) are cut; in each component of A's mesh the piece
-of the rest with the largest area is its core, and the other pieces of at least
-``OrientConfig.min_torn`` of A's area are torn off. A right map tears nothing off at that
-length: its widest edges span a few of B's edges.
+whose edges land far apart. The edges of A whose ends land farther apart on B (in space, so
+that a topological shortcut of B does not tear a right map) than ``OrientConfig.tear_length``
+· sqrt(area) of B, or on coarse meshes ``OrientConfig.tear_edges`` mean edge lengths of A or
+B (the longer), are cut; in each component of A's mesh the piece with the largest area is its
+core, and the other pieces of at least ``OrientConfig.min_torn`` of A's area are torn off. A
+right map tears nothing off: its widest edges span a few edges.
 
 Used by the "orient" stage (:mod:`hope_rs.pipeline.orientation_repair`): a trigger, a term
-of the cost it minimises, and the core its ``"torn"`` hypothesis re-places the rest from.
+of the cost it minimises, and the core its ``"torn"`` hypothesis re-places the rest from
+(:func:`replaced`).
 """
 
 from __future__ import annotations
@@ -21,8 +22,10 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from ..shape import Shape
+from .anchors import anchor_step
+from .config import RepairConfig
 
-__all__ = ["TornRegions"]
+__all__ = ["TornRegions", "replaced"]
 
 
 def _pieces(n: int, edges: np.ndarray) -> np.ndarray:
@@ -41,23 +44,28 @@ class TornRegions:
         The shapes (internal numbering).
     length : float
         ``OrientConfig.tear_length``: an edge of A is cut when its ends land farther apart
-        than this many sqrt(area) of B.
+        than this many sqrt(area) of B ...
+    edges : float
+        ... and than ``OrientConfig.tear_edges`` mean edge lengths of A or of B, the longer
+        (each in its shape's sqrt(area)): a coarse mesh's right map spans longer edges.
     min_share : float
         ``OrientConfig.min_torn``: the least share of A's area a piece must cover to count as
         torn off (scattered vertices landing apart are the noise of a right map).
     """
 
-    def __init__(self, a: Shape, b: Shape, length: float, min_share: float):
+    def __init__(self, a: Shape, b: Shape, length: float, edges: float, min_share: float):
         self.edges = a.edges
         self.n = a.n_vertices
         faces = a.internal.faces
         area = np.bincount(faces.ravel(), np.repeat(a.internal.face_areas, 3), minlength=self.n)
-        total = area.sum()
-        #: Each vertex's share of A's area (a third of its faces').
-        self.area = area / total if total > 0 else np.full(self.n, 1.0 / max(self.n, 1))
+        #: Each vertex's share of A's area (a third of its faces'; a Shape has a positive area).
+        self.area = area / area.sum()
+        #: Per vertex of A, its component of A's mesh.
         self.mesh_part = _pieces(self.n, self.edges)
         self._points_b = b.points
-        self._max_length = float(length) * b.scale
+        longest = max(_mean_edge(a), _mean_edge(b))
+        #: The image length beyond which an edge is cut, in B's coordinates.
+        self.max_length = max(float(length), float(edges) * longest) * b.scale
         self.min_share = float(min_share)
 
     def pieces(self, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -66,7 +74,7 @@ class TornRegions:
         (the others of at least ``min_share`` of A's area)."""
         e, pb = self.edges, self._points_b
         f = np.asarray(f)
-        kept = np.linalg.norm(pb[f[e[:, 0]]] - pb[f[e[:, 1]]], axis=1) <= self._max_length
+        kept = np.linalg.norm(pb[f[e[:, 0]]] - pb[f[e[:, 1]]], axis=1) <= self.max_length
         label = _pieces(self.n, e[kept])
         size = np.bincount(label, self.area)
         # Per mesh component, its largest piece (ties to the lowest label).
@@ -84,3 +92,33 @@ class TornRegions:
     def share(self, f: np.ndarray) -> float:
         """The share of A's area that ``f`` tears off (see :meth:`pieces`), in [0, 1)."""
         return float(self.area[self.pieces(f)[1]].sum())
+
+
+def _mean_edge(s: Shape) -> float:
+    """The mean length of the shape's edges in its sqrt(area) (0 without edges)."""
+    e = s.edges
+    if e.size == 0:
+        return 0.0
+    return float(np.linalg.norm(s.points[e[:, 0]] - s.points[e[:, 1]], axis=1).mean() / s.scale)
+
+
+def replaced(
+    a: Shape, b: Shape, f: np.ndarray, torn: TornRegions, config: RepairConfig = RepairConfig()
+) -> np.ndarray | None:
+    """``f`` (internal numbering) with the vertices off the core of each mesh component of A
+    that has a piece torn off placed by their geodesic distances to anchors in that
+    component's core (:func:`~hope_rs.pipeline.anchors.anchor_step`), the other components
+    as they are; ``None`` when nothing is torn off or no such core has 4 vertices. One
+    component at a time: the anchors' distances do not reach across components."""
+    core, off = torn.pieces(f)
+    g = np.asarray(f).copy()
+    moved = False
+    for part in np.unique(torn.mesh_part[off]):
+        inside = torn.mesh_part == part
+        if (core & inside).sum() < 4:
+            continue
+        placed = anchor_step(a, b, f, core & inside, config=config)
+        change = inside & ~core
+        g[change] = placed[change]
+        moved = True
+    return g if moved else None
