@@ -225,7 +225,7 @@ def test_shapes_of_different_topology_run_the_stage_with_its_topology_hypotheses
     info = hope_rs.match(m, welded, config=cfg, max_passes=1).stage("orient")
     assert info.ran and "differ in topology (Euler characteristics 2 and 1)" in info.reason
     assert [t.label for t in info.trials] == ["kept", "B to A", "reverse"]
-    off = dataclasses.replace(cfg, orient=OrientConfig(on_topology=False))
+    off = dataclasses.replace(cfg, orient=OrientConfig(on_topology=False, on_torn=False))
     info = hope_rs.match(m, welded, config=off, max_passes=1).stage("orient")
     assert not info.ran and "at most 20%" in info.reason
 
@@ -256,7 +256,7 @@ def test_a_map_misled_by_topological_shortcuts_is_repaired():
     ma, mb, ai, bi = shared_pair("faust_r", "tr_reg_002->tr_reg_007")
     w = weld_shortcuts(mb)
     assert w.welds.shape[0] >= 3
-    off = dataclasses.replace(MatchConfig(), orient=OrientConfig(on_topology=False))
+    off = dataclasses.replace(MatchConfig(), orient=OrientConfig(on_topology=False, on_torn=False))
     before = hope_rs.match(ma, w.mesh, config=off)
     res = hope_rs.match(ma, w.mesh)
     info = res.stage("orient")
