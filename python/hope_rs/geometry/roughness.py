@@ -21,6 +21,14 @@ __all__ = ["ROUGHNESS_FLOOR", "at_owner_means", "normal_roughness", "rougher", "
 ROUGHNESS_FLOOR = 0.02
 
 
+def _ring_sums(v: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """Per vertex, the sum of its 1-ring's points (``e``: the unique edges)."""
+    ring = np.zeros_like(v, dtype=np.float64)
+    np.add.at(ring, e[:, 0], v[e[:, 1]])
+    np.add.at(ring, e[:, 1], v[e[:, 0]])
+    return ring
+
+
 def normal_roughness(mesh: Mesh) -> float:
     """The median over vertices of how far a vertex lies off the centroid of its 1-ring along
     its normal (area-weighted), in units of its mean edge length: a scale-free measure that
@@ -31,9 +39,7 @@ def normal_roughness(mesh: Mesh) -> float:
         return 0.0
     n = len(v)
     deg = np.bincount(e.ravel(), minlength=n).astype(float)
-    ring = np.zeros((n, 3))
-    np.add.at(ring, e[:, 0], v[e[:, 1]])
-    np.add.at(ring, e[:, 1], v[e[:, 0]])
+    ring = _ring_sums(v, e)
     length = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)
     total = np.bincount(e[:, 0], length, n) + np.bincount(e[:, 1], length, n)
     normal = vertex_normal_sums(v, f)
@@ -69,9 +75,7 @@ def umbrella_smoothed(mesh: Mesh, iterations: int) -> Mesh:
     deg = np.bincount(e.ravel(), minlength=n).astype(float)
     has = deg > 0  # a vertex in no edge stays
     for _ in range(iterations):
-        ring = np.zeros((n, 3))
-        np.add.at(ring, e[:, 0], v[e[:, 1]])
-        np.add.at(ring, e[:, 1], v[e[:, 0]])
+        ring = _ring_sums(v, e)
         v = v.copy()
         v[has] = 0.5 * v[has] + 0.5 * ring[has] / deg[has, None]
     return Mesh(v, mesh.faces)

@@ -24,6 +24,7 @@ from scipy.sparse.csgraph import connected_components
 from ..shape import Shape
 from .anchors import anchor_step
 from .config import RepairConfig
+from .partial import mean_edge
 
 __all__ = ["TornRegions", "replaced"]
 
@@ -63,7 +64,8 @@ class TornRegions:
         #: Per vertex of A, its component of A's mesh.
         self.mesh_part = _pieces(self.n, self.edges)
         self._points_b = b.points
-        longest = max(_mean_edge(a), _mean_edge(b))
+        # Each shape's mean edge in its own sqrt(area) (a Shape has edges and a positive area).
+        longest = max(mean_edge(a) / a.scale, mean_edge(b) / b.scale)
         #: The image length beyond which an edge is cut, in B's coordinates.
         self.max_length = max(float(length), float(edges) * longest) * b.scale
         self.min_share = float(min_share)
@@ -92,14 +94,6 @@ class TornRegions:
     def share(self, f: np.ndarray) -> float:
         """The share of A's area that ``f`` tears off (see :meth:`pieces`), in [0, 1)."""
         return float(self.area[self.pieces(f)[1]].sum())
-
-
-def _mean_edge(s: Shape) -> float:
-    """The mean length of the shape's edges in its sqrt(area) (0 without edges)."""
-    e = s.edges
-    if e.size == 0:
-        return 0.0
-    return float(np.linalg.norm(s.points[e[:, 0]] - s.points[e[:, 1]], axis=1).mean() / s.scale)
 
 
 def replaced(
