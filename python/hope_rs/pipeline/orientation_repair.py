@@ -72,6 +72,7 @@ from ..shape import Shape
 from .anchors import anchor_step, firm_regions
 from .confidence import map_quality, match_quality
 from .lmd import local_map_distortion
+from .partial import part_match_config
 from .progress import ProgressEvent
 from .state import QUIET, MatchState, Stage
 from .torn import TornRegions, replaced
@@ -177,9 +178,11 @@ def _judged_by_confidence(state: MatchState) -> bool:
     """Whether the confidence's rule judges the maps (``OrientConfig.on_failed``): not for a
     dense A matched at a common resolution when that match measured no confidence (the
     confidence turned off): measured on the many-to-one map at full resolution, the rule
-    flags it however right."""
+    flags it however right; nor for a part (its rule is the confidence stage's, which knows
+    the part's counterpart on the whole)."""
     lifted_without = state.common_a is not None and state.confidence is None
-    return state.config.orient.on_failed and not lifted_without
+    whole = state.partial is None
+    return state.config.orient.on_failed and not lifted_without and whole
 
 
 class _Relay:
@@ -197,8 +200,9 @@ class _Relay:
 def _nested_config(state: MatchState, *, confidence: bool = False):
     """The settings of a nested match: this stage and the deformation pass off (the pass runs
     once, on the map this stage keeps: its nearest-point maps turn more triangles over than
-    the maps it starts from); the confidence only with ``confidence``."""
-    cfg = state.config
+    the maps it starts from); the confidence only with ``confidence``. A part A is matched
+    at the scale the partial stage chose, with that stage's settings for it."""
+    cfg = state.config if state.partial is None else part_match_config(state.config)
     return dataclasses.replace(
         cfg,
         orient=dataclasses.replace(cfg.orient, enabled=False),
@@ -394,16 +398,19 @@ class OrientStage(Stage):
             return QUIET
         if state.landmarks is not None:
             return "landmarks given"
-        if state.partial is not None:
+        part = state.partial is not None
+        if part and not (state.partial.part == "a" and cfg.on_torn):
             return "a part: its orientation is the partial stage's"
         if state.f is None or state.run is None:
             return "no map"
-        if any(boundary_edges(s.internal.faces).size for s in (state.a, state.b)):
+        if not part and any(boundary_edges(s.internal.faces).size for s in (state.a, state.b)):
             # Which side of an open surface is outward is a guess (see turned.py), and the
             # partial stage's nested matches of a part are open.
             return "an open surface"
         t = time.perf_counter()
         self._judge = _Judge(state)
+        if part:
+            return self._part_reason(state, t)
         share = self._judge.share(state.f)
         self._why = f"{share:.0%} of A turned over"
         self._names = cfg.hypotheses
@@ -448,6 +455,20 @@ class OrientStage(Stage):
         return f"{share:.0%} of A's area turned over (at most {cfg.min_turned:.0%})" + (
             ", not flagged" if _judged_by_confidence(state) else ""
         )
+
+    def _part_reason(self, state: MatchState, t: float) -> str | None:
+        """A part A's map (the partial stage's, at the whole's scale) is tried again only
+        when it tears a region off (``on_torn``, ``torn_hypotheses``): which side of an open
+        surface is outward is a guess, so its turned-over share calls for nothing, and the
+        confidence's rule for a part is the confidence stage's."""
+        assert self._judge is not None and state.f is not None
+        torn_share = self._judge.torn.share(state.f)
+        state.timings["orient"] = time.perf_counter() - t
+        if torn_share == 0.0:
+            return "a part, nothing torn off: its orientation is the partial stage's"
+        self._why = f"A is a part; {torn_share:.0%} of it torn off"
+        self._names = state.config.orient.torn_hypotheses
+        return None
 
     def run(self, state: MatchState) -> None:
         cfg = state.config.orient

@@ -41,7 +41,7 @@ from scipy.spatial import cKDTree
 
 from ..geometry.mesh import boundary_edges
 from ..shape import Shape
-from .config import PartialConfig
+from .config import MatchConfig, PartialConfig
 from .landmarks import input_landmarks
 from .part_info import PartialInfo
 from .resolution import density
@@ -65,6 +65,7 @@ __all__ = [
     "detect_part",
     "invert_part_map",
     "mean_edge",
+    "part_match_config",
 ]
 
 
@@ -127,6 +128,23 @@ def detect_part(a: Shape, b: Shape, config: PartialConfig | None = None) -> Part
     if lb - la >= config.min_boundary_excess and la <= config.max_whole_boundary:
         return PartialInfo("b", (la, lb), max(a.scale, b.scale))
     return None
+
+
+def part_match_config(cfg: MatchConfig) -> MatchConfig:
+    """The settings of a part's own match at a given scale: this stage off (the part is
+    already measured at the whole's scale), the deformation pass off (a part's spectrum is
+    not the whole's) and, with ``PartialConfig.max_turned``, the refinement's witnesses
+    limited to vertices not mostly turned over."""
+    off = dataclasses.replace(
+        cfg,
+        partial=dataclasses.replace(cfg.partial, enabled=False),
+        deform=dataclasses.replace(cfg.deform, enabled=False),
+    )
+    if cfg.partial.max_turned is not None:
+        off = dataclasses.replace(
+            off, refine=dataclasses.replace(cfg.refine, max_turned=cfg.partial.max_turned)
+        )
+    return off
 
 
 class PartialStage(Stage):
@@ -210,16 +228,7 @@ class PartialStage(Stage):
         cfg = state.config
         a, b = state.a, state.b
         trials = cfg.partial.scale_trials
-        # A part's spectrum is not the whole's: the deformation pass is for whole shapes.
-        off = dataclasses.replace(
-            cfg,
-            partial=dataclasses.replace(cfg.partial, enabled=False),
-            deform=dataclasses.replace(cfg.deform, enabled=False),
-        )
-        if cfg.partial.max_turned is not None:
-            off = dataclasses.replace(
-                off, refine=dataclasses.replace(cfg.refine, max_turned=cfg.partial.max_turned)
-            )
+        off = part_match_config(cfg)
         if trials:
             # The trials are compared by their confidence (the map does not depend on it).
             off = dataclasses.replace(

@@ -6,7 +6,8 @@ shifted along the neck, a leg onto the leg beside it) tears that region off alon
 whose edges land far apart. The edges of A whose ends land farther apart on B (in space, so
 that a topological shortcut of B does not tear a right map) than ``OrientConfig.tear_length``
 · sqrt(area) of B, or on coarse meshes ``OrientConfig.tear_edges`` mean edge lengths of A or
-B (the longer), are cut; in each component of A's mesh the piece with the largest area is its
+B (the longer), are cut, except those with an end on A's boundary (a part's rim lands
+loosely); in each component of A's mesh the piece with the largest area is its
 core, and the other pieces of at least ``OrientConfig.min_torn`` of A's area are torn off. A
 right map tears nothing off: its widest edges span a few edges.
 
@@ -21,6 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
+from ..geometry.mesh import boundary_edges
 from ..shape import Shape
 from .anchors import anchor_step
 from .config import RepairConfig
@@ -63,6 +65,12 @@ class TornRegions:
         self.area = area / area.sum()
         #: Per vertex of A, its component of A's mesh.
         self.mesh_part = _pieces(self.n, self.edges)
+        #: The edges of A with an end on its boundary, never cut: a part's rim vertices,
+        #: their 2-rings incomplete, land loosely, and a narrow strip beside a hole would
+        #: tear a limb off a right map.
+        rim = np.zeros(self.n, dtype=bool)
+        rim[boundary_edges(faces).ravel()] = True
+        self.on_rim = rim[self.edges].any(axis=1)
         self._points_b = b.points
         # Each shape's mean edge in its own sqrt(area) (a Shape has edges and a positive area).
         longest = max(mean_edge(a) / a.scale, mean_edge(b) / b.scale)
@@ -77,6 +85,7 @@ class TornRegions:
         e, pb = self.edges, self._points_b
         f = np.asarray(f)
         kept = np.linalg.norm(pb[f[e[:, 0]]] - pb[f[e[:, 1]]], axis=1) <= self.max_length
+        kept |= self.on_rim
         label = _pieces(self.n, e[kept])
         size = np.bincount(label, self.area)
         # Per mesh component, its largest piece (ties to the lowest label).
