@@ -907,14 +907,16 @@ class OrientConfig:
         The stage also tries other maps when neither the turned share, the confidence's rule
         nor the topology calls for it but the map tears a region off the rest
         (:mod:`hope_rs.pipeline.torn`: a region carried to the wrong place with its
-        orientation and 2-rings kept, such as a head shifted along the neck) ...
+        orientation and 2-rings kept, such as a head shifted along the neck); on a part A
+        matched to a whole (the partial stage's map) this is the only trigger ...
     torn_hypotheses : tuple of str
         ... with these hypotheses ("torn": every vertex off the core of a mesh component
         with a piece torn off placed by its geodesic distances to anchors in that core, then
         refined) and the same stop rule.
     tear_length : float
         An edge of A is torn when its ends land farther apart on B (in space) than this many
-        sqrt(area) of B ...
+        sqrt(area) of B (never one with an end on A's boundary: a part's rim lands
+        loosely) ...
     tear_edges : float
         ... and than this many mean edge lengths of A or of B, the longer (each in its own
         sqrt(area)): on a coarse mesh a right map's edges span more of the surface. A right

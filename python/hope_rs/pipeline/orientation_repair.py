@@ -10,7 +10,9 @@ less over but the confidence's rule flags it (``OrientConfig.on_failed``,
 (``OrientConfig.on_topology``: a topological shortcut leads the k-hop balls and geodesic
 distances across it, and the map can put a region near it on the wrong side), or the map tears
 a region off the rest (``OrientConfig.on_torn``, :mod:`hope_rs.pipeline.torn`: a region
-carried to the wrong place with its orientation and 2-rings kept), this stage builds
+carried to the wrong place with its orientation and 2-rings kept; the one trigger for a part A
+matched to a whole, whose refined hypotheses are matched at the partial stage's scale with its
+settings), this stage builds
 alternative maps (hypotheses), refines them through the rest of the pipeline and keeps
 whichever of them and the map it started from scores best (:func:`map_cost`: turned-over
 share plus LMD inconsistency plus the share torn off). Each refined hypothesis is a trial of
@@ -377,7 +379,7 @@ class OrientStage(Stage):
     """The "orient" stage (see the module notes); runs when the map turns more than
     ``OrientConfig.min_turned`` of A's area over, is flagged likely failed, the shapes
     differ in topology or the map tears a region off, on whole closed shapes without
-    landmarks."""
+    landmarks; on a part A matched to a whole, only when the map tears a region off."""
 
     name = "orient"
     #: A map another stage found final can still be a mirror image (LMD trusts it everywhere).
