@@ -400,8 +400,9 @@ class OrientStage(Stage):
             return QUIET
         if state.landmarks is not None:
             return "landmarks given"
-        part = state.partial is not None
-        if part and not (state.partial.part == "a" and cfg.on_torn):
+        info = state.partial
+        part = info is not None
+        if info is not None and not (info.part == "a" and cfg.on_torn):
             return "a part: its orientation is the partial stage's"
         if state.f is None or state.run is None:
             return "no map"
