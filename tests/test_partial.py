@@ -28,6 +28,7 @@ from hope_rs.pipeline import runner
 from hope_rs.pipeline.config import (
     ConfidenceConfig,
     MatchConfig,
+    OrientConfig,
     PartialConfig,
     RefineConfig,
     SpectralConfig,
@@ -295,9 +296,10 @@ def test_a_cut_tosca_shape_gains_from_the_slanted_spectral_pass(tmp_path):
     a, b = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
     ai, bi = pair.ground_truth(a.n_vertices, b.n_vertices)
     one = PartialConfig(scale_trials=())  # one scale: the spectral pass's own effect
-    e = geodesic_errors(b, match(a, b, config=MatchConfig(partial=one)).map, a_idx=ai, b_idx=bi)
-    e = e.mean()
-    square = MatchConfig(partial=one, spectral=SpectralConfig(slanted=False))
+    held = OrientConfig(on_torn=False)  # no repair after the partial stage
+    slanted = MatchConfig(partial=one, orient=held)
+    e = geodesic_errors(b, match(a, b, config=slanted).map, a_idx=ai, b_idx=bi).mean()
+    square = MatchConfig(partial=one, orient=held, spectral=SpectralConfig(slanted=False))
     e_square = geodesic_errors(b, match(a, b, config=square).map, a_idx=ai, b_idx=bi).mean()
     assert e < 0.03 and e_square > 1.3 * e
 
@@ -309,9 +311,10 @@ def test_scale_trials_keep_a_cut_cat_off_the_whole_s_missing_side(tmp_path):
     scales and their merge, chosen by confidence, halve the error. (The trials alone: the
     orientation check of the part's votes is off in both runs.)"""
     a, b, ai, bi = _partial_pair(tmp_path, "tosca_r", "cut30", 1, ("01_cat0_cut30", "01_cat2"))
-    res = match(a, b, config=MatchConfig(partial=PartialConfig(max_turned=None)))
+    held = OrientConfig(on_torn=False)  # no repair after the partial stage
+    res = match(a, b, config=MatchConfig(partial=PartialConfig(max_turned=None), orient=held))
     e = geodesic_errors(b, res.map, a_idx=ai, b_idx=bi).mean()
-    single = MatchConfig(partial=PartialConfig(scale_trials=(), max_turned=None))
+    single = MatchConfig(partial=PartialConfig(scale_trials=(), max_turned=None), orient=held)
     e_single = geodesic_errors(b, match(a, b, config=single).map, a_idx=ai, b_idx=bi).mean()
     assert e < 0.1 and e_single > 1.5 * e
     assert res.confidence is not None and res.stage("partial").ran
@@ -370,9 +373,10 @@ def test_wide_trials_rescue_a_posed_faust_part(tmp_path):
     (The trials alone: the orientation check of the part's votes is off in both runs.)"""
     stems = ("07_tr_reg_007_cut30", "07_tr_reg_008")
     a, b, ai, bi = _partial_pair(tmp_path, "faust_r", "cut30", 7, stems)
-    res = match(a, b, config=MatchConfig(partial=PartialConfig(max_turned=None)))
+    held = OrientConfig(on_torn=False)  # no repair after the partial stage
+    res = match(a, b, config=MatchConfig(partial=PartialConfig(max_turned=None), orient=held))
     narrow_cfg = PartialConfig(wide_trials=(), max_turned=None)
-    narrow = match(a, b, config=MatchConfig(partial=narrow_cfg))
+    narrow = match(a, b, config=MatchConfig(partial=narrow_cfg, orient=held))
     e, e_narrow = (geodesic_errors(b, r.map, a_idx=ai, b_idx=bi).mean() for r in (res, narrow))
     assert e < 0.1 and e_narrow > 0.12
     assert res.confidence.mean() > narrow.confidence.mean() + 0.15
@@ -388,8 +392,10 @@ def test_a_half_faust_part_keeps_its_orientation(tmp_path):
     is right."""
     stems = ("07_tr_reg_007_cut50", "07_tr_reg_008")
     a, b, ai, bi = _partial_pair(tmp_path, "faust_r", "cut50", 7, stems)
-    res = match(a, b)
-    unchecked = match(a, b, config=MatchConfig(partial=PartialConfig(max_turned=None)))
+    held = OrientConfig(on_torn=False)  # no repair after the partial stage
+    res = match(a, b, config=MatchConfig(orient=held))
+    unchecked_cfg = MatchConfig(partial=PartialConfig(max_turned=None), orient=held)
+    unchecked = match(a, b, config=unchecked_cfg)
     e, e_unchecked = (
         geodesic_errors(b, r.map, a_idx=ai, b_idx=bi).mean() for r in (res, unchecked)
     )

@@ -15,7 +15,8 @@ from hope_rs.evaluation.evaluate import geodesic_errors
 from hope_rs.evaluation.partial import cut_by_plane, plane_normal
 from hope_rs.evaluation.perturbed import add_noise
 from hope_rs.geometry.mesh import boundary_edges
-from hope_rs.pipeline.config import MatchConfig, OrientConfig, RepairConfig
+from hope_rs.pipeline import runner
+from hope_rs.pipeline.config import MatchConfig, OrientConfig, PartialConfig, RepairConfig
 from hope_rs.pipeline.options import check_config
 from hope_rs.pipeline.torn import TornRegions, replaced
 
@@ -46,7 +47,7 @@ def test_the_identity_tears_nothing_off():
 
 def test_an_edge_on_a_parts_rim_is_never_cut():
     # A part's rim vertices land loosely: sent to the far side of the whole, they stay in
-    # the core with the rest (cut, each would be a piece of its own).
+    # the core with the rest (cut, the rim would be torn off as a piece of its own).
     whole = _sphere()
     part = cut_by_plane(whole.mesh, plane_normal(1), 0.3)
     a = hope_rs.Shape(part.mesh)
@@ -183,9 +184,8 @@ def test_a_region_torn_off_under_noise_is_repaired():
 def test_a_region_torn_off_a_part_is_repaired():
     # FAUST remeshed tr_reg_007 cut by a plane removing 30% of its vertices (as the
     # benchmark's cut30 set builds its pair 7) matched to tr_reg_008: without the trigger the
-    # partial stage's map carries a hand to the wrong place, with its orientation kept, and
-    # is not flagged. The part's map is tried again from its core, at the scale the partial
-    # stage chose.
+    # partial stage's map carries both hands to the wrong places, with their orientation
+    # kept, and is not flagged. The part's map is placed back from its core.
     ma, mb, ai, bi = shared_pair("faust_r", "tr_reg_007->tr_reg_008")
     part = cut_by_plane(ma, plane_normal(7), 0.3)
     on_part = part.inverse(ma.n_vertices)[ai]
@@ -199,8 +199,6 @@ def test_a_region_torn_off_a_part_is_repaired():
     res = hope_rs.match(a, b)
     info = res.stage("orient")
     assert info.ran and "A is a part" in info.reason and "chose torn" in info.reason
-    # The same partial stage ran first: the part was measured at the same scale.
-    assert res.stage("partial").reason == before.stage("partial").reason
     assert geodesic_errors(mb, res.map, a_idx=ai, b_idx=bi).mean() < 0.06
 
 
@@ -211,3 +209,31 @@ def test_a_part_whose_map_tears_nothing_off_is_left_to_the_partial_stage():
     assert res.stage("partial").ran
     info = res.stage("orient")
     assert not info.ran and "nothing torn off" in info.reason
+
+
+def test_a_part_s_torn_hypothesis_is_matched_at_the_part_s_scale_and_settings(monkeypatch):
+    # A piece forced off the core of a part's map: the "torn" hypothesis is refined by a
+    # match of the part at the scale the partial stage chose, with that stage's settings.
+    whole = _sphere()
+    part = hope_rs.Shape(cut_by_plane(whole.mesh, plane_normal(1), 0.3).mesh)
+    height = part.points[:, 2]
+    cap = height > np.quantile(height, 0.9)
+    monkeypatch.setattr(TornRegions, "pieces", lambda self, f: (~cap, cap.copy()))
+    seen = []
+    nested = runner.run_match
+
+    def spy(*args, **kwargs):
+        seen.append((args[0], args[3]))
+        return nested(*args, **kwargs)
+
+    monkeypatch.setattr(runner, "run_match", spy)
+    res = hope_rs.match(part, whole)
+    info = res.stage("orient")
+    assert info.ran and "A is a part; " in info.reason and "torn:" in info.reason
+    trials = [s.scale for s, c in seen if c.orient.enabled and not c.partial.enabled]
+    refined = [(s, c) for s, c in seen if not c.orient.enabled]
+    assert trials and len(refined) == 1
+    shape, config = refined[0]
+    assert shape.scale in trials and shape.scale != part.scale
+    assert not config.partial.enabled and not config.deform.enabled
+    assert config.refine.max_turned == PartialConfig().max_turned

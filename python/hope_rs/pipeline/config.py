@@ -880,7 +880,9 @@ class OrientConfig:
     Attributes
     ----------
     enabled : bool
-        Run the "orient" stage (whole shapes without landmarks only).
+        Run the "orient" stage (without landmarks; on a part A matched to a whole, only its
+        torn-off trigger, with those of ``torn_hypotheses`` that
+        :data:`~hope_rs.pipeline.orientation_repair.PART_HYPOTHESES` allows).
     min_turned : float
         The stage tries other maps when the final map turns more than this share of A's area
         over (``MatchQuality.flipped_share``); a right map of remeshed shapes turns a few

@@ -91,11 +91,17 @@ from .trials import (
 from .turned import TurnedFaces
 
 __all__ = [
+    "PART_HYPOTHESES",
     "OrientStage",
     "map_cost",
     "mirror_image",
     "turned_regions",
 ]
+
+
+#: The hypotheses tried on a part A (of ``OrientConfig.torn_hypotheses``): B's symmetry and
+#: the reverse match are whole-shape matches, which the part's settings do not make.
+PART_HYPOTHESES = ("torn", "reseed", "wks")
 
 
 def mirror_image(s: Shape) -> Shape:
@@ -402,7 +408,9 @@ class OrientStage(Stage):
             return "landmarks given"
         info = state.partial
         part = info is not None
-        if info is not None and not (info.part == "a" and cfg.on_torn):
+        if info is not None and info.part == "b":
+            return "B is a part: the partial stage's match of it to A has this stage"
+        if info is not None and not cfg.on_torn:
             return "a part: its orientation is the partial stage's"
         if state.f is None or state.run is None:
             return "no map"
@@ -465,12 +473,17 @@ class OrientStage(Stage):
         surface is outward is a guess, so its turned-over share calls for nothing, and the
         confidence's rule for a part is the confidence stage's."""
         assert self._judge is not None and state.f is not None
+        if state.confidence is not None:
+            # Lifted from a common resolution: the cost would be measured on the dense
+            # part's many-to-one map, which misjudges right maps.
+            return "a part matched at a common resolution: its map is the partial stage's"
         torn_share = self._judge.torn.share(state.f)
         state.timings["orient"] = time.perf_counter() - t
-        if torn_share == 0.0:
+        names = tuple(h for h in state.config.orient.torn_hypotheses if h in PART_HYPOTHESES)
+        if torn_share == 0.0 or not names:
             return "a part, nothing torn off: its orientation is the partial stage's"
         self._why = f"A is a part; {torn_share:.0%} of it torn off"
-        self._names = state.config.orient.torn_hypotheses
+        self._names = names
         return None
 
     def run(self, state: MatchState) -> None:
@@ -533,7 +546,9 @@ class OrientStage(Stage):
         if kept is not own:
             # The refinement the caller's callback saw stays the state's history.
             adopt(state, kept, maps_only=True)
-            state.zoomout = kept.zoomout
+            if state.partial is None:
+                # A part's confidence goes without a ZoomOut map (see trials.adopt).
+                state.zoomout = kept.zoomout
             # A confidence carried over from a match at a common resolution belongs to the
             # map replaced here: a lifted hypothesis carries its own; otherwise the confidence
             # stage measures the new map.

@@ -7,9 +7,11 @@ whose edges land far apart. The edges of A whose ends land farther apart on B (i
 that a topological shortcut of B does not tear a right map) than ``OrientConfig.tear_length``
 · sqrt(area) of B, or on coarse meshes ``OrientConfig.tear_edges`` mean edge lengths of A or
 B (the longer), are cut, except those with an end on A's boundary (a part's rim lands
-loosely); in each component of A's mesh the piece with the largest area is its
-core, and the other pieces of at least ``OrientConfig.min_torn`` of A's area are torn off. A
-right map tears nothing off: its widest edges span a few edges.
+loosely, and a narrow strip beside a hole would tear a right map's limb off; so a region torn
+off that reaches the boundary stays joined to the core through it, unseen); in each
+component of A's mesh the piece with the largest area is its core, and the other pieces of
+at least ``OrientConfig.min_torn`` of A's area are torn off. A right map tears nothing off:
+its widest edges span a few edges.
 
 Used by the "orient" stage (:mod:`hope_rs.pipeline.orientation_repair`): a trigger, a term
 of the cost it minimises, and the core its ``"torn"`` hypothesis re-places the rest from
