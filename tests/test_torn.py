@@ -237,3 +237,19 @@ def test_a_part_s_torn_hypothesis_is_matched_at_the_part_s_scale_and_settings(mo
     assert shape.scale in trials and shape.scale != part.scale
     assert not config.partial.enabled and not config.deform.enabled
     assert config.refine.max_turned == PartialConfig().max_turned
+
+
+def test_a_part_tries_only_the_hypotheses_that_apply_to_a_part(monkeypatch):
+    # B's symmetry and the reverse match are whole-shape matches: asked for them alone, a
+    # part whose map tears a region off says so and keeps its map.
+    whole = _sphere()
+    part = hope_rs.Shape(cut_by_plane(whole.mesh, plane_normal(1), 0.3).mesh)
+    height = part.points[:, 2]
+    cap = height > np.quantile(height, 0.9)
+    monkeypatch.setattr(TornRegions, "pieces", lambda self, f: (~cap, cap.copy()))
+    config = MatchConfig(orient=OrientConfig(torn_hypotheses=("mirror", "reverse")))
+    res = hope_rs.match(part, whole, config=config)
+    held = hope_rs.match(part, whole, config=MatchConfig(orient=OrientConfig(on_torn=False)))
+    info = res.stage("orient")
+    assert not info.ran and "no hypothesis of torn_hypotheses applies to a part" in info.reason
+    np.testing.assert_array_equal(res.map, held.map)

@@ -326,14 +326,20 @@ class _Hypotheses:
         """The unrefined maps derived from ``f`` (internal numbering) by the derived
         hypotheses tried ("mirror", "mirror_turned", "reseed", "torn")."""
         cfg, a, b = self.cfg, self.state.a, self.state.b
-        region = self.judge.turned(f, cfg.seam_rings)
+        regional = any(h in ("mirror_turned", "reseed") for h in self.names)
+        region = self.judge.turned(f, cfg.seam_rings) if regional else None
         out = {}
         for name in self.names:
             if name in ("mirror", "mirror_turned"):
                 sym = self.symmetry()
-                out[name] = sym[f] if name == "mirror" else np.where(region, sym[f], f)
+                if name == "mirror":
+                    out[name] = sym[f]
+                else:
+                    assert region is not None  # computed for the regional hypotheses
+                    out[name] = np.where(region, sym[f], f)
             elif name == "reseed":
                 # The largest orientation-keeping region holds the anchors.
+                assert region is not None  # computed for the regional hypotheses
                 label, sizes = firm_regions(a, ~region)
                 if sizes.size and sizes.max() >= 4:
                     core = label == int(np.argmax(sizes))
@@ -480,8 +486,13 @@ class OrientStage(Stage):
         torn_share = self._judge.torn.share(state.f)
         state.timings["orient"] = time.perf_counter() - t
         names = tuple(h for h in state.config.orient.torn_hypotheses if h in PART_HYPOTHESES)
-        if torn_share == 0.0 or not names:
+        if torn_share == 0.0:
             return "a part, nothing torn off: its orientation is the partial stage's"
+        if not names:
+            return (
+                f"a part, {torn_share:.0%} of it torn off, but no hypothesis of "
+                f"torn_hypotheses applies to a part (those of {', '.join(PART_HYPOTHESES)})"
+            )
         self._why = f"A is a part; {torn_share:.0%} of it torn off"
         self._names = names
         return None
