@@ -211,14 +211,20 @@ def test_a_part_whose_map_tears_nothing_off_is_left_to_the_partial_stage():
     assert not info.ran and "nothing torn off" in info.reason
 
 
-def test_a_part_s_torn_hypothesis_is_matched_at_the_part_s_scale_and_settings(monkeypatch):
-    # A piece forced off the core of a part's map: the "torn" hypothesis is refined by a
-    # match of the part at the scale the partial stage chose, with that stage's settings.
+def _part_with_a_piece_torn_off(monkeypatch) -> tuple[hope_rs.Shape, hope_rs.Shape]:
+    """A sphere and a part of it whose maps all tear the part's top tenth off (forced)."""
     whole = _sphere()
     part = hope_rs.Shape(cut_by_plane(whole.mesh, plane_normal(1), 0.3).mesh)
     height = part.points[:, 2]
     cap = height > np.quantile(height, 0.9)
     monkeypatch.setattr(TornRegions, "pieces", lambda self, f: (~cap, cap.copy()))
+    return whole, part
+
+
+def test_a_part_s_torn_hypothesis_is_matched_at_the_part_s_scale_and_settings(monkeypatch):
+    # A piece forced off the core of a part's map: the "torn" hypothesis is refined by a
+    # match of the part at the scale the partial stage chose, with that stage's settings.
+    whole, part = _part_with_a_piece_torn_off(monkeypatch)
     seen = []
     nested = runner.run_match
 
@@ -242,11 +248,7 @@ def test_a_part_s_torn_hypothesis_is_matched_at_the_part_s_scale_and_settings(mo
 def test_a_part_tries_only_the_hypotheses_that_apply_to_a_part(monkeypatch):
     # B's symmetry and the reverse match are whole-shape matches: asked for them alone, a
     # part whose map tears a region off says so and keeps its map.
-    whole = _sphere()
-    part = hope_rs.Shape(cut_by_plane(whole.mesh, plane_normal(1), 0.3).mesh)
-    height = part.points[:, 2]
-    cap = height > np.quantile(height, 0.9)
-    monkeypatch.setattr(TornRegions, "pieces", lambda self, f: (~cap, cap.copy()))
+    whole, part = _part_with_a_piece_torn_off(monkeypatch)
     config = MatchConfig(orient=OrientConfig(torn_hypotheses=("mirror", "reverse")))
     res = hope_rs.match(part, whole, config=config)
     held = hope_rs.match(part, whole, config=MatchConfig(orient=OrientConfig(on_torn=False)))

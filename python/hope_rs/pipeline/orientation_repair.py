@@ -424,6 +424,10 @@ class OrientStage(Stage):
             # Which side of an open surface is outward is a guess (see turned.py), and the
             # partial stage's nested matches of a part are open.
             return "an open surface"
+        if part and state.confidence is not None:
+            # Lifted from a common resolution: the cost would be measured on the dense
+            # part's many-to-one map, which misjudges right maps.
+            return "a part matched at a common resolution: its map is the partial stage's"
         t = time.perf_counter()
         self._judge = _Judge(state)
         if part:
@@ -479,10 +483,6 @@ class OrientStage(Stage):
         surface is outward is a guess, so its turned-over share calls for nothing, and the
         confidence's rule for a part is the confidence stage's."""
         assert self._judge is not None and state.f is not None
-        if state.confidence is not None:
-            # Lifted from a common resolution: the cost would be measured on the dense
-            # part's many-to-one map, which misjudges right maps.
-            return "a part matched at a common resolution: its map is the partial stage's"
         torn_share = self._judge.torn.share(state.f)
         state.timings["orient"] = time.perf_counter() - t
         names = tuple(h for h in state.config.orient.torn_hypotheses if h in PART_HYPOTHESES)
