@@ -110,6 +110,16 @@ def test_bad_inputs():
         hope_rs.overlap_cost(nb[:2], nb, ok_f, ok_w)
     with pytest.raises(ValueError, match="top_k"):
         hope_rs.overlap_cost(nb, nb, ok_f, ok_w, top_k=0)
+    with pytest.raises(ValueError, match="n_vertices must be >= 0, got -1"):
+        hope_rs.khop_neighbourhoods([[0, 1, 2]], 1, n_vertices=-1)
+    # A malformed index array is refused before scipy's own routines read it (they would
+    # corrupt the process's memory).
+    falling = sp.csr_matrix((np.ones(2), [0, 1], [0, 3, 2, 2]), shape=(3, 3))
+    with pytest.raises(ValueError, match="nbrs_a is not a valid sparse matrix.*non-decreasing"):
+        hope_rs.overlap_cost(falling, nb, ok_f, ok_w)
+    outside = sp.csr_matrix((np.ones(2), [0, 7], [0, 1, 2, 2]), shape=(3, 3))
+    with pytest.raises(ValueError, match="nbrs_b is not a valid sparse matrix"):
+        hope_rs.overlap_cost(nb, outside, ok_f, ok_w)
     # Witnesses may also be given as vertex indices.
     got = hope_rs.overlap_cost(nb, nb, ok_f, [0])
     assert got.toarray().sum() == 9

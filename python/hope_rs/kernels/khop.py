@@ -36,6 +36,8 @@ def khop_neighbourhoods(faces, k: int, *, n_vertices: int | None = None) -> sp.c
         When the pattern of ``n_vertices`` vertices cannot fit in the machine's memory.
     """
     k = _as_count(k, "k", upper=255)
+    if n_vertices is not None:
+        n_vertices = _as_count(n_vertices, "n_vertices")
     faces = as_faces(faces, n_vertices)
     if n_vertices is None:
         if faces.size == 0:
@@ -95,6 +97,11 @@ def _pattern(m, name: str) -> sp.csr_matrix:
     if m.shape[0] != m.shape[1]:
         raise ValueError(f"{name} must be square (vertices x vertices), got shape {m.shape}")
     m = sp.csr_matrix(m)
+    try:
+        # Before scipy's own routines read it: a malformed index array corrupts their memory.
+        m.check_format(full_check=True)
+    except ValueError as err:
+        raise ValueError(f"{name} is not a valid sparse matrix: {err}") from None
     m.sum_duplicates()
     return m
 
