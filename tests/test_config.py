@@ -6,7 +6,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from meshes import legless
+from meshes import bumpy_sphere, legless
 
 import hope_rs
 from hope_rs import MatchConfig
@@ -17,8 +17,11 @@ from hope_rs.pipeline import overlap as overlap_module
 from hope_rs.pipeline import shared_faces as finish_module
 from hope_rs.pipeline.config import (
     KEYWORDS,
+    ConfidenceConfig,
+    FinishConfig,
     InitialConfig,
     LandmarkConfig,
+    OrientConfig,
     PartialConfig,
     RefineConfig,
     RepairConfig,
@@ -165,6 +168,11 @@ def test_spectral_settings_reach_the_pass(bundled):
         ),
         (MatchConfig(refine=RefineConfig(top_k=2.5)), TypeError, r"top_k must be an integer"),
         (
+            MatchConfig(finish=FinishConfig(max_vertices="x")),
+            TypeError,
+            r"finish\.max_vertices must be None or an integer >= 0, got str 'x'",
+        ),
+        (
             MatchConfig(spectral=SpectralConfig(enabled=1)),
             TypeError,
             r"MatchConfig\.spectral\.enabled must be True or False",
@@ -201,6 +209,40 @@ def test_spectral_settings_that_contradict_each_other(fields, message):
     assert SpectralConfig(max_samples=120).max_samples == 120
 
 
+def test_repetitions_and_lengths_out_of_reach_are_refused_when_made():
+    with pytest.raises(
+        ValueError, match=r"ConfidenceConfig\.rings must be an integer in \[0, 10000\]"
+    ):
+        ConfidenceConfig(rings=2**40)
+    with pytest.raises(
+        ValueError, match=r"OrientConfig\.seam_rings must be an integer in \[0, 10000\]"
+    ):
+        OrientConfig(seam_rings=2**40)
+    a = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
+    f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    for radius, message in ((0.0, "a number > 0.0"), (float("inf"), "a finite number")):
+        shape = ShapeConfig(descriptors=DescriptorConfig(shot_radius=radius))
+        with pytest.raises(ValueError, match=rf"shot_radius must be {message}"):
+            hope_rs.match((a, f), (a, f), config=MatchConfig(shape=shape))
+    repair = RepairConfig(search_dims=0)
+    with pytest.raises(ValueError, match=r"repair\.search_dims must be an integer in \[1, 1024\]"):
+        hope_rs.match((a, f), (a, f), config=MatchConfig(refine=RefineConfig(repair=repair)))
+
+
+def test_a_shape_keeps_its_own_settings_and_the_result_says_so():
+    v, f = bumpy_sphere(400, 3)
+    wide = ShapeConfig(descriptors=DescriptorConfig(shot_radius=0.3))
+    b = (v * [1.0, 1.1, 0.9], f)
+    own = hope_rs.match(hope_rs.Shape((v, f), config=wide), b)
+    # The mesh beside it is described alike, and res.config says which settings ran.
+    assert own.config.shape == wide
+    np.testing.assert_array_equal(
+        own.map, hope_rs.match((v, f), b, config=MatchConfig(shape=wide)).map
+    )
+    with pytest.raises(ValueError, match="Shapes built with different ShapeConfigs"):
+        hope_rs.match(hope_rs.Shape((v, f), config=wide), hope_rs.Shape(b))
+
+
 def test_a_shape_refuses_settings_that_are_not_its_own():
     v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
     f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
@@ -216,6 +258,13 @@ def test_a_shape_refuses_settings_that_are_not_its_own():
         ("refine", "auction_floor_div", 0, ">= 1"),
         ("refine", "nearest_unused_k", 0, ">= 1"),
         ("refine", "polish_k", 0, r"in \[1, 64\]"),
+        # Repetitions without a ceiling would run for hours before anything failed.
+        ("spectral", "smoothing_steps", 2**40, r"in \[0, 10000\]"),
+        ("refine", "stay_counts", 2**40, r"in \[0, 1000\]"),
+        ("finish", "rounds", 2**40, r"in \[0, 1000\]"),
+        ("finish", "step_k", 0, r"in \[1, 64\]"),
+        ("partial", "merge_rings", 2**40, r"in \[0, 10000\]"),
+        ("multiscale", "fine_passes", 2**40, r"in \[0, 100\]"),
     ],
 )
 def test_counts_that_cannot_run_are_refused_before_any_work(bundled, stage, name, value, allowed):

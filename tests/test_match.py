@@ -121,6 +121,15 @@ def test_bad_init_map(faust_pair, init, err):
         hope_rs.match(*faust_pair, init=init)
 
 
+def test_an_unsigned_init_out_of_range_is_reported_as_given(faust_pair):
+    init = np.zeros(6890, dtype=np.uint64)
+    init[5] = 2**64 - 1
+    with pytest.raises(
+        ValueError, match=r"init must hold values in \[0, 6890\), got \[0, 18446744073709551615\]"
+    ):
+        hope_rs.match(*faust_pair, init=init)
+
+
 def test_bad_init_name(faust_pair):
     with pytest.raises(ValueError, match="unknown descriptor"):
         hope_rs.match(*faust_pair, init="sift")

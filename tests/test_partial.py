@@ -338,7 +338,7 @@ def test_scale_trials_setting_is_checked():
         PartialConfig(wide_below="0.5")
     with pytest.raises(ValueError, match=r"wide_margin must be a number in \[0, 1\]"):
         PartialConfig(wide_margin=-0.1)
-    with pytest.raises(ValueError, match=r"merge_rings must be an integer >= 0"):
+    with pytest.raises(ValueError, match=r"merge_rings must be an integer in \[0, 10000\]"):
         match(*_tiny_pair(), config=MatchConfig(partial=PartialConfig(merge_rings=-1)))
 
 

@@ -83,10 +83,10 @@ def as_index_map(f, length: int, upper: int, *, name: str = "f") -> np.ndarray:
         raise ValueError(f"{name} must be a 1-D array of length {length}, got shape {arr.shape}")
     if arr.size and not np.issubdtype(arr.dtype, np.integer):
         raise TypeError(f"{name} must be an integer array, got dtype {arr.dtype}")
-    arr = np.ascontiguousarray(arr, dtype=np.int64)
     if arr.size and (arr.min() < 0 or arr.max() >= upper):
+        # Checked before the cast to int64, which wraps unsigned values past 2**63 around.
         raise ValueError(f"{name} must hold values in [0, {upper}), got [{arr.min()}, {arr.max()}]")
-    return arr
+    return np.ascontiguousarray(arr, dtype=np.int64)
 
 
 def as_mask(mask, length: int, *, name: str = "witnesses") -> np.ndarray:

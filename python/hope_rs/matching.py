@@ -6,6 +6,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -58,7 +59,10 @@ def match(
     Parameters
     ----------
     a, b : Shape, Mesh or (vertices, faces)
-        The shapes. Pass :class:`Shape` objects to reuse their precomputation across pairs.
+        The shapes. Pass :class:`Shape` objects to reuse their precomputation across pairs;
+        a Shape keeps the :class:`~hope_rs.ShapeConfig` it was built with, over
+        ``config.shape`` (``res.config.shape`` is the one used, and a mesh given beside it is
+        described with it too).
     init : {"shot", "wks", "hks"} or (n_a,) array_like of int, keyword-only
         Descriptors for the initial map (default ``config.initial.descriptor``, "shot"), or
         an initial map itself (``init[i]`` a vertex of B).
@@ -139,6 +143,7 @@ def match(
     if init is None:
         init = config.initial.descriptor
     ma, mb = _as_mesh(a, config.k_max, "a"), _as_mesh(b, config.k_max, "b")
+    config = _shape_settings(ma, mb, config)
     if not isinstance(init, str):
         init = as_index_map(init, ma.n_vertices, mb.n_vertices, name="init")
     landmarks = check_landmarks(landmarks, ma.n_vertices, mb.n_vertices)
@@ -168,6 +173,22 @@ def match(
     finally:
         if bar is not None:
             bar.close()
+
+
+def _shape_settings(ma: Shape | Mesh, mb: Shape | Mesh, config: MatchConfig) -> MatchConfig:
+    """``config`` with the :class:`~hope_rs.ShapeConfig` the match uses: a given Shape's own
+    (its descriptors are computed with it), so that ``res.config`` says so and a mesh given
+    beside it is described alike. Two Shapes built with different settings are refused:
+    their descriptors cannot be compared."""
+    own = [x.config for x in (ma, mb) if isinstance(x, Shape)]
+    if len(own) == 2 and own[0] != own[1]:
+        raise ValueError(
+            "a and b are Shapes built with different ShapeConfigs, whose descriptors cannot be "
+            "compared; build both with the same config"
+        )
+    if own and own[0] != config.shape:
+        return dataclasses.replace(config, shape=own[0])
+    return config
 
 
 def _effective_config(config, init, options: dict, callback, progress) -> MatchConfig:
@@ -200,7 +221,8 @@ def _unknown_option(options: dict) -> str | None:
     if not unknown:
         return None
     return (
-        f"{unknown[0]!r}; the options are init, config, callback, progress, {', '.join(KEYWORDS)}"
+        f"{unknown[0]!r}; the options are init, landmarks, config, callback, progress, "
+        f"{', '.join(KEYWORDS)}"
     )
 
 

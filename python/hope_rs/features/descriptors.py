@@ -31,9 +31,11 @@ class DescriptorConfig:
         Laplacian eigenpairs behind WKS and HKS.
     """
 
-    shot_radius: float = 0.1
+    shot_radius: float = field(
+        default=0.1, metadata={"range": (0.0, None), "exclusive": True, "finite": True}
+    )
     sites: SiteConfig = field(default_factory=SiteConfig)
-    n_eigen: int = 100
+    n_eigen: int = field(default=100, metadata={"range": (0, 5000)})
 
 
 @dataclass(frozen=True)
@@ -54,8 +56,8 @@ class BasisConfig:
         does not swamp the other columns.
     """
 
-    coarse_extra: int = 20
-    coarse_iterations: int = 2
+    coarse_extra: int = field(default=20, metadata={"range": (0, 5000)})
+    coarse_iterations: int = field(default=2, metadata={"range": (0, 1000)})
     coarse_shift: float = 0.05
 
 

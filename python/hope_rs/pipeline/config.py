@@ -169,8 +169,8 @@ class RepairConfig:
         ... and its median vertex moves at least this far.
     """
 
-    n_anchors: int = 32
-    search_dims: int = 12
+    n_anchors: int = field(default=32, metadata={"range": (0, 10_000)})
+    search_dims: int = field(default=12, metadata={"range": (1, 1024)})
     unreachable: float = 4.0
     agree_rel: float = 0.1
     agree_abs: float = 0.03
@@ -251,7 +251,7 @@ class RefineConfig:
     global_check_pass: int = 1
     region_check_pass: int = 1
     stay_pass: int = 2
-    stay_counts: int = 1
+    stay_counts: int = field(default=1, metadata={"range": (0, 1000)})
     auction_floor_div: int = field(default=16, metadata={"range": (1, None)})
     nearest_unused_k: int = field(default=16, metadata={"range": (1, None)})
     max_turned: float | None = None
@@ -330,7 +330,7 @@ class SpectralConfig:
     max_discrepancy_ratio: float = 1.1
     max_zoomout_discrepancy_ratio: float = 1.2
     early_from_pass: int = 3
-    smoothing_steps: int = 32
+    smoothing_steps: int = field(default=32, metadata={"range": (0, 10_000)})
     margin: float = 0.05
     slanted: bool = True
 
@@ -384,11 +384,11 @@ class GrowthConfig:
     affine_stages: tuple[tuple[float, float], ...] = ((0.35, 2.0), (0.5, 1.5), (0.7, 1.2))
     weight_width: float = 0.7
     min_known: int = 6
-    rounds: int = 3
+    rounds: int = field(default=3, metadata={"range": (0, 1000)})
     faces_first: tuple = ("faces", 0, 1, 2)
     affine_first: tuple = (0, 1, 2, "faces")
     agreement_order: tuple = (0, 1, "faces", 2)
-    agreement_rounds: int = 3
+    agreement_rounds: int = field(default=3, metadata={"range": (0, 1000)})
 
 
 @dataclass(frozen=True)
@@ -418,11 +418,11 @@ class FinishConfig:
     enabled: bool = True
     max_vertices: int | None = None
     min_handles: float = 0.2
-    rounds: int = 10
+    rounds: int = field(default=10, metadata={"range": (0, 1000)})
     min_growth: float = 0.01
-    steps: int = 3
-    step_k: int = 5
-    arap_iterations: int = 5
+    steps: int = field(default=3, metadata={"range": (0, 1000)})
+    step_k: int = field(default=5, metadata={"range": (1, 64)})
+    arap_iterations: int = field(default=5, metadata={"range": (0, 1000)})
     anchor_weight: float = 1e-3
     growth: GrowthConfig = field(default_factory=GrowthConfig)
 
@@ -459,10 +459,10 @@ class MultiscaleConfig:
 
     enabled: bool | None = None
     auto_vertices: int = 60_000
-    fine_passes: int = 1
+    fine_passes: int = field(default=1, metadata={"range": (0, 100)})
     fine_schedule: tuple[int, ...] | None = (3, 2, 1)
     fine_seed_share: float = field(default=0.005, metadata={"range": (0.0, 1.0)})
-    fine_passes_small: int = 2
+    fine_passes_small: int = field(default=2, metadata={"range": (0, 100)})
     fine_passes_small_vertices: int = 60_000
     lift_ridge: float = 1e-3
 
@@ -737,7 +737,7 @@ class PartialConfig:
     whole_to_part: str = "reverse"
     counterpart_edges: float = 1.0
     scale_trials: tuple[float, ...] = (0.95, 1.05)
-    merge_rings: int = 32
+    merge_rings: int = field(default=32, metadata={"range": (0, 10_000)})
     wide_trials: tuple[float, ...] = (0.85, 0.9, 1.1)
     wide_below: float = 0.85
     wide_margin: float = 0.15
@@ -839,10 +839,20 @@ class ConfidenceConfig:
 
     def __post_init__(self):
         # Checked here, not when the confidence stage runs after the whole match.
-        for name, low in (("n_anchors", 1), ("rings", 0), ("min_vertices", 0)):
+        for name, low, high in (
+            ("n_anchors", 1, 10_000),
+            ("rings", 0, 10_000),
+            ("min_vertices", 0, None),
+        ):
             x = getattr(self, name)
-            if isinstance(x, bool) or not isinstance(x, numbers.Integral) or x < low:
-                raise ValueError(f"ConfidenceConfig.{name} must be an integer >= {low}, got {x!r}")
+            if (
+                isinstance(x, bool)
+                or not isinstance(x, numbers.Integral)
+                or int(x) < low
+                or (high is not None and int(x) > high)
+            ):
+                allowed = f">= {low}" if high is None else f"in [{low}, {high}]"
+                raise ValueError(f"ConfidenceConfig.{name} must be an integer {allowed}, got {x!r}")
         try:
             if isinstance(self.weights, (str, bytes)):
                 raise TypeError
@@ -980,8 +990,8 @@ class OrientConfig:
                 f"OrientConfig.min_turned must be a number in [0, 1], got {self.min_turned!r}"
             )
         r = self.seam_rings
-        if isinstance(r, bool) or not isinstance(r, numbers.Integral) or r < 0:
-            raise ValueError(f"OrientConfig.seam_rings must be an integer >= 0, got {r!r}")
+        if isinstance(r, bool) or not isinstance(r, numbers.Integral) or not 0 <= r <= 10_000:
+            raise ValueError(f"OrientConfig.seam_rings must be an integer in [0, 10000], got {r!r}")
 
 
 @dataclass(frozen=True)

@@ -129,8 +129,9 @@ def check_config(config, path: str = "MatchConfig") -> None:
     infinite where the field's metadata says ``finite``, nor outside its declared ``range``
     (bounds included, or excluded with ``exclusive``) or ``choices``: the constraints are
     declared once, on the field.
-    Nested configs are checked too; fields whose default is ``None``, a string or a tuple are
-    left to their own checks."""
+    Nested configs are checked too, and so is an optional integer (``int | None``) that is
+    set; other fields whose default is ``None``, a string or a tuple are left to their own
+    checks."""
     default = type(config)()
     for f in dataclasses.fields(config):
         value, ref = getattr(config, f.name), getattr(default, f.name)
@@ -148,6 +149,10 @@ def check_config(config, path: str = "MatchConfig") -> None:
                     f"{name} must be a {type(ref).__name__}, got {type(value).__name__}"
                 )
             check_config(value, f"{path}.{f.name}")
+        elif ref is None and str(f.type).replace(" ", "") == "int|None":
+            # An optional count or size (None: no limit).
+            lo, hi = f.metadata.get("range", (0, None))
+            _integer(name, value, lo, hi, f"None or {_span(lo, hi)}")
         elif isinstance(ref, bool):
             if not isinstance(value, (bool, np.bool_)):
                 raise TypeError(f"{name} must be True or False, got {value!r}")
@@ -166,7 +171,7 @@ def check_config(config, path: str = "MatchConfig") -> None:
                 lo, hi = f.metadata["range"]
                 if f.metadata.get("exclusive"):  # the bounds themselves excluded
                     if value <= lo or (hi is not None and value >= hi):
-                        raise ValueError(f"{name} must be a number in ({lo}, {hi}), got {value}")
+                        raise ValueError(f"{name} must be {_float_allowed(f, ref)}, got {value}")
                 elif value < lo or (hi is not None and value > hi):
                     raise ValueError(f"{name} must be {_span(lo, hi, 'a number')}, got {value}")
 
@@ -177,7 +182,7 @@ def _float_allowed(f: dataclasses.Field, ref: float) -> str:
         return _sign(ref, "a number")
     lo, hi = f.metadata["range"]
     if f.metadata.get("exclusive"):
-        return f"a number in ({lo}, {hi})"
+        return f"a number > {lo}" if hi is None else f"a number in ({lo}, {hi})"
     return _span(lo, hi, "a number")
 
 
