@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import trimesh
 from conftest import data_path
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -151,3 +152,16 @@ def test_the_resolution_stage_coarsens_a_dense_shape_to_a_manifold():
     )
     assert cs.n_vertices == collapsed.mesh.n_vertices
     assert coarse_copy(shape, 2000, 0.05) is None
+
+
+def test_a_copy_with_no_face_left_is_none():
+    """Five separate spheres merged into 12 sites: no sphere keeps three, so no face is left,
+    and the copy is None rather than a mesh that is not one."""
+    ball = trimesh.creation.icosphere(1)
+    v, f, n = ball.vertices, ball.faces, len(ball.vertices)
+    mesh = hope_rs.Mesh(
+        np.concatenate([v + [3.0 * i, 0, 0] for i in range(5)]),
+        np.concatenate([f + n * i for i in range(5)]),
+    )
+    assert collapse_to_count(mesh, 12) is None
+    assert collapse_to_sites(mesh, np.arange(5) * n) is None

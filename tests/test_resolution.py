@@ -7,6 +7,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+import trimesh
 from conftest import data_path, shared_pair
 from meshes import bumpy_sphere, euler_characteristic, flat_grid, mesh_defects
 from scipy.spatial import cKDTree
@@ -523,3 +524,20 @@ def test_a_remeshed_body_against_a_noisy_dense_scan_of_another(tmp_path):
     assert geodesic_errors(template, back.map, a_idx=bi, b_idx=ai).mean() < 0.04
     assert back.quality.flipped_share < 0.2 < full
     assert not back.quality.likely_failed and not back.stage("orient").ran
+
+
+def test_a_copy_that_keeps_no_face_leaves_the_pair_at_full_resolution():
+    """Five separate spheres against an icosahedron: the copy at the icosahedron's density
+    keeps no face, so the pair is matched as it is, either way round."""
+    ball = trimesh.creation.icosphere(1)
+    v, f, n = ball.vertices, ball.faces, len(ball.vertices)
+    spheres = (
+        np.concatenate([v + [3.0 * i, 0, 0] for i in range(5)]),
+        np.concatenate([f + n * i for i in range(5)]),
+    )
+    small = (trimesh.creation.icosphere(0).vertices, trimesh.creation.icosphere(0).faces)
+    for a, b in ((spheres, small), (small, spheres)):
+        res = hope_rs.match(a, b)
+        stage = res.stage("resolution")
+        assert stage.ran and "leaves no face: matched at full resolution" in stage.reason
+        assert res.map.shape == (len(a[0]),) and res.map.max() < len(b[0])

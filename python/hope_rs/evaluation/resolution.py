@@ -57,7 +57,10 @@ def _condition(cond: str, ma: Mesh, mb: Mesh, ai: np.ndarray, bi: np.ndarray):
     if cond == "dec1k":
         c = collapse_to_count(ma, DECIMATED_VERTICES)
         if c is None:
-            raise ValueError(f"a mesh of {ma.n_vertices} vertices cannot be clustered to fewer")
+            raise ValueError(
+                f"a mesh of {ma.n_vertices} vertices cannot be clustered to about "
+                f"{DECIMATED_VERTICES} with faces left"
+            )
         # An input of several pieces keeps its largest only.
         part = _largest_component(c.mesh, np.ones(c.mesh.n_vertices, dtype=bool))
         on_part = np.full(ma.n_vertices, -1, dtype=np.int64)

@@ -35,10 +35,11 @@ def shortest_path_tree(mesh: Mesh, sites: np.ndarray) -> tuple[np.ndarray, ...]:
     return dijkstra(graph, directed=False, indices=sites, min_only=True, return_predecessors=True)
 
 
-def collapse_to_sites(mesh: Mesh, sites: np.ndarray) -> Coarse:
+def collapse_to_sites(mesh: Mesh, sites: np.ndarray) -> Coarse | None:
     """Merge every vertex of ``mesh`` into the vertex of ``sites`` nearest it along the edge
     graph, by manifold-keeping half-edge collapses (see the module notes; in the Rust core).
-    A vertex no site reaches, or whose collapses are refused, is kept."""
+    A vertex no site reaches, or whose collapses are refused, is kept. ``None`` when no face
+    is left (each component merged into fewer than three sites)."""
     dist, pred, source = shortest_path_tree(mesh, sites)
     f = np.asarray(mesh.faces, dtype=np.int64)
     f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 2] != f[:, 0])]  # no area
@@ -50,6 +51,8 @@ def collapse_to_sites(mesh: Mesh, sites: np.ndarray) -> Coarse:
         pred.astype(np.int64),
         source.astype(np.int64),
     )
+    if len(faces) == 0:
+        return None
     return Coarse(Mesh(mesh.vertices[kept], faces), kept, owner)
 
 
@@ -58,7 +61,7 @@ def collapse_to_count(mesh: Mesh, n_target: int, *, tolerance: float = 0.05) -> 
     :func:`hope_rs.geometry.coarsen.coarse_to_count`'s uniform grid (``tolerance``: see
     :func:`~hope_rs.geometry.coarsen.uniform_cells_for_count`), every other vertex merged
     into its site by :func:`collapse_to_sites`; ``None`` when ``mesh`` has no more than
-    ``n_target`` vertices."""
+    ``n_target`` vertices or no face is left."""
     cells = uniform_cells_for_count(mesh, n_target, tolerance=tolerance)
     if cells is None:
         return None

@@ -181,7 +181,7 @@ def _collapsed(
         excess,
         denoised,
     )
-    return (None if c is None or len(c.mesh.faces) == 0 else c), again
+    return c, again
 
 
 def _made_again(
@@ -201,7 +201,7 @@ def _made_again(
     if c is None or c.mesh.n_vertices <= excess * n_target:
         return c, False
     again = collapse(denoised())
-    if again is None or len(again.mesh.faces) == 0 or again.mesh.n_vertices >= c.mesh.n_vertices:
+    if again is None or again.mesh.n_vertices >= c.mesh.n_vertices:
         return c, False
     return dataclasses.replace(again, mesh=Mesh(mesh.vertices[again.sites], again.mesh.faces)), True
 
@@ -322,8 +322,7 @@ class ResolutionStage(Stage):
                 rc.collapse_excess,
                 denoised,
             )
-            assert second is not None  # collapse_to_sites always makes a copy
-            if len(second.mesh.faces):
+            if second is not None:
                 cs2 = dense.derived(second.mesh)
                 state.timings["resolution.first"] = time.perf_counter() - t
                 again = self.lifted(state, second, cs2, nested)
