@@ -147,6 +147,8 @@ BAD = {
     "stl_huge_count": ("stl", stl_binary(TET_V, TET_F, count=10**9), "neither binary STL"),
     "stl_incomplete_facet": ("stl", stl_ascii(TET_V, TET_F).replace(b"vertex 0 0 1\nendloop", b"endloop", 1), "exactly 3 vertices"),
     "stl_nan": ("stl", stl_ascii(TET_V, TET_F).replace(b"vertex 1 0 0", b"vertex 1 nan 0", 1), "NaN"),
+    "stl_ascii_cut_after_a_facet": ("stl", stl_ascii(TET_V, TET_F).rsplit(b"endsolid", 1)[0], "ends before 'endsolid'"),
+    "stl_ascii_cut_in_a_facet_line": ("stl", stl_ascii(TET_V, TET_F).rsplit(b"endfacet", 1)[0] + b"endfacet\nfacet no", "ends inside a facet"),
     "stl_two_coordinates": ("stl", stl_ascii(TET_V, TET_F).replace(b"vertex 1 0 0", b"vertex 1 0", 1), "expected 3 coordinates"),
     # Unknown formats
     "unknown_extension": ("xyz", TET_OFF, "unknown mesh format '.xyz'; supported: .off, .obj, .ply, .stl"),
@@ -193,6 +195,16 @@ ODD = {
     "ply_binary_little": ("ply", ply_binary(TET_V, TET_F), 4, 4),
     "ply_binary_big": ("ply", ply_binary(TET_V, TET_F, endian=">"), 4, 4),
     "ply_binary_quads": ("ply", ply_binary(CUBE_V, CUBE_QUADS + [[0, 1, 2]]), 8, 13),
+    "ply_ascii_float_lists": (
+        # Float lists (texture coordinates, as MeshLab writes them) are read and not used.
+        "ply",
+        b"ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+        b"property float z\nproperty list uchar float uv\nelement face 4\n"
+        b"property list uchar int vertex_indices\nproperty list uchar float texcoord\n"
+        b"end_header\n0 0 0 0\n1 0 0 2 0.5 0.25\n0 1 0 1 0.5\n0 0 1 2 1 1\n"
+        b"3 0 2 1 0\n3 0 1 3 6 0 0 1 0 0 1\n3 0 3 2 1 0.5\n3 1 2 3 2 0.1 0.2\n",
+        4, 4,
+    ),
     "ply_ascii_quads": ("ply", ply_ascii(CUBE_V, CUBE_QUADS), 8, 12),
     "stl_ascii": ("stl", stl_ascii(TET_V, TET_F), 4, 4),
     "stl_binary": ("stl", stl_binary(TET_V, TET_F), 4, 4),

@@ -385,7 +385,11 @@ def _ply_ascii(body: bytes, elements, first_line: int) -> dict:
                     n = _int(t[k], no, "a list length") if k < len(t) else -1
                     if n < 0 or k + 1 + n > len(t):
                         raise LineError(no, f"malformed list in element {name!r}")
-                    cols[p[0]].append([_int(x, no, "a list entry") for x in t[k + 1 : k + 1 + n]])
+                    entries = t[k + 1 : k + 1 + n]
+                    if p[2][0] == "f":  # a float list (texture coordinates): read, not used
+                        cols[p[0]].append([_number(x, no) for x in entries])
+                    else:
+                        cols[p[0]].append([_int(x, no, "a list entry") for x in entries])
                     k += 1 + n
             if k != len(t):
                 raise LineError(no, f"{len(t) - k} values more than element {name!r} has")
@@ -463,6 +467,12 @@ def _ply_binary_lists(body, off, count, props, endian, name):
 # --- STL -----------------------------------------------------------------------------------
 
 
+#: ASCII STL's nesting: each keyword's depth before it and after it (0 outside a solid, 1 in
+#: a solid, 2 in a facet).
+_STL_NESTING = {"solid": (0, 1), "facet": (1, 2), "endfacet": (2, 1), "endsolid": (1, 0)}
+_STL_DEPTHS = ("outside a solid", "inside a solid", "inside a facet")
+
+
 def read_stl(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     if len(data) >= 84:
         n = struct.unpack_from("<I", data, 80)[0]
@@ -476,6 +486,9 @@ def read_stl(data: bytes) -> tuple[np.ndarray, np.ndarray]:
             "nor ASCII STL (it does not start with 'solid')"
         )
     verts = []
+    # How deep the parser is (0 outside a solid, 1 in a solid, 2 in a facet): a file cut short
+    # ends inside one of them, and is refused rather than read as the facets before the cut.
+    depth = 0
     for no, t in _lines(data, comment="\x00"):
         key = t[0].lower()
         if key == "vertex":
@@ -485,10 +498,17 @@ def read_stl(data: bytes) -> tuple[np.ndarray, np.ndarray]:
         elif key == "endloop":
             if len(verts) % 3:
                 raise LineError(no, "a facet needs exactly 3 vertices")
-        elif key not in ("solid", "facet", "outer", "endfacet", "endsolid"):
+        elif key in _STL_NESTING:
+            need, depth_after = _STL_NESTING[key]
+            if depth != need:
+                raise LineError(no, f"{key!r} {_STL_DEPTHS[depth]}")
+            depth = depth_after
+        elif key != "outer":
             raise LineError(no, f"unexpected ASCII STL line {_show(t)}")
-    if len(verts) % 3:
-        raise ValueError("the last facet is incomplete")
+    if len(verts) % 3 or depth == 2:
+        raise ValueError("the file ends inside a facet (cut short?)")
+    if depth == 1:
+        raise ValueError("the file ends before 'endsolid' (cut short?)")
     v = np.array(verts, dtype=np.float64).reshape(-1, 3)
     return v, np.arange(v.shape[0], dtype=np.int64).reshape(-1, 3)
 
