@@ -80,6 +80,19 @@ def test_a_bad_mesh_fails_its_pairs_only(folder, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == [MANIFEST, "s0__s1.txt", "s1__s2.txt"]
 
 
+def test_a_bad_mesh_in_memory_fails_its_pairs_only(tmp_path):
+    v, f = bumpy_sphere(200, 1)
+    broken = v.copy()
+    broken[3, 1] = np.nan
+    shapes = {"a": (v, f), "b": (v * 2, f), "bad": (broken, f), "holey": (v, f + 1000)}
+    pairs = [("a", "b"), ("bad", "a"), ("b", "holey")]
+    res = hope_rs.match_many(shapes, pairs, out_dir=tmp_path, jobs=1, cache=False)
+    assert [r.ok for r in res] == [True, False, False]
+    assert res[1].error.startswith("bad: ValueError: vertices contain NaN")
+    assert res[2].error.startswith("holey: ValueError:") and "face" in res[2].error
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([MANIFEST, "a__b.txt"])
+
+
 @pytest.mark.slow
 def test_objects_names_and_a_process_pool_give_the_same_maps(tmp_path):
     meshes = {f"m{s}": hope_rs.Mesh(*bumpy_sphere(250, 10 + s)) for s in range(3)}

@@ -93,6 +93,10 @@ def _spec(s, config) -> dict:
             "shapes must be mesh file paths, hope_rs.Mesh or hope_rs.Shape objects, (vertices, "
             f"faces) pairs or objects with .vertices and .faces, got {type(s).__name__}"
         ) from None
+    except ValueError as err:
+        # A mesh that cannot be one (NaN coordinates, faces out of range) fails its own pairs,
+        # like a corrupt file, not the batch.
+        return {"kind": "invalid", "error": str(err), "config": config}
     return {"kind": "mesh", "vertices": m.vertices, "faces": m.faces, "config": config}
 
 
@@ -100,6 +104,8 @@ def _vertex_bound(spec: dict) -> int:
     """The shape's vertex count, or for a file an upper bound from its size (0 if unknown)."""
     if spec["kind"] == "mesh":
         return len(spec["vertices"])
+    if spec["kind"] == "invalid":
+        return 0
     try:
         return os.path.getsize(spec["path"]) // FILE_BYTES_PER_VERTEX + 1
     except OSError:

@@ -44,6 +44,8 @@ def prepare_task(
     try:
         cache = ShapeCache(cache_root)
         config = spec["config"]
+        if spec["kind"] == "invalid":
+            raise ValueError(spec["error"])
         if spec["kind"] == "path":
             if not os.path.isfile(spec["path"]):
                 raise FileNotFoundError(f"no such mesh file: {spec['path']!r}")
