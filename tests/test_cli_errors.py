@@ -78,6 +78,7 @@ def test_output_checks_come_before_any_work(meshes, tmp_path, monkeypatch, capsy
         (Path(ro) / "map.txt", f"cannot write to output folder '{ro}'"),
         (tmp_path / "map.npz", "unknown suffix '.npz'"),
         (tmp_path, "is a folder"),
+        ("", "-o names no file (an empty path)"),
     ]
     for out, message in cases:
         assert main(["match", a, b, "-o", str(out), "-q"]) == 2

@@ -42,6 +42,11 @@ def test_unknown_suffix_and_bad_arrays_write_nothing(tmp_path):
         write_map(tmp_path / "m.txt", MAP.astype(float))
     with pytest.raises(ValueError, match="1-D integer array"):
         write_map(tmp_path / "m.txt", MAP.reshape(1, -1))
+    # What read_map would refuse is not written either.
+    with pytest.raises(ValueError, match="indices >= 0, got -1"):
+        write_map(tmp_path / "m.txt", np.array([0, -1, 2]))
+    with pytest.raises(ValueError, match="fit in int64, got 18446744073709551615"):
+        write_map(tmp_path / "m.npy", np.array([0, 2**64 - 1], dtype=np.uint64))
     assert list(tmp_path.iterdir()) == []
 
 

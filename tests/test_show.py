@@ -58,6 +58,7 @@ def test_png_has_the_requested_size(pair):
         (["--png", "x.png", "--color-by", "error"], "--color-by error needs --truth"),
         (["--png", "x.png", "--color-by", "confidence"], "needs --confidence FILE.npy"),
         (["--png", "x.png", "--truth", "a.vts"], "'identity' or two .vts files"),
+        (["--png", "x.jpg"], "must end in .png"),
     ],
 )
 def test_bad_options_fail_in_one_line(pair, capsys, extra, message):

@@ -66,6 +66,8 @@ def max_vertices(a, b) -> int:
 
 def cmd_match(args) -> int:
     config = config_from_args(args)  # before any work, like the outputs below
+    if args.output is not None and not args.output.strip():
+        raise ValueError("-o names no file (an empty path); leave -o out to print the map")
     if args.output:  # before any work: a known suffix, a folder we can write to
         check_output_file(args.output, "output")
         map_format(args.output)

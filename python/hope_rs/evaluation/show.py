@@ -392,6 +392,8 @@ def cmd_show(args) -> int:
         require_matplotlib()
     if args.png:  # before any work
         check_output_file(args.png, "--png")
+        if not args.png.lower().endswith(".png"):
+            raise ValueError(f"--png {args.png!r} must end in .png (the picture is written as PNG)")
     if args.ply:
         if os.path.isdir(args.ply):
             raise ValueError(f"--ply {args.ply!r} is a folder; give a file name such as out.ply")

@@ -91,8 +91,11 @@ def atomic_write(path: str | os.PathLike, write: Callable[[io.BufferedWriter], o
         raise IsADirectoryError(f"{shown!r} is a folder; give a file name")
     if _special(shown):
         # A FIFO, a socket or a device: renaming over it would replace it with a plain file.
-        with open(shown, "wb") as fh:
-            write(fh)
+        try:
+            with open(shown, "wb") as fh:
+                write(fh)
+        except OSError as err:
+            raise OSError(err.errno, f"cannot write {shown!r}: {err.strerror}") from None
         return
     path = os.path.realpath(shown)
     folder = os.path.dirname(path)
@@ -106,9 +109,12 @@ def atomic_write(path: str | os.PathLike, write: Callable[[io.BufferedWriter], o
             os.fsync(fh.fileno())
             os.fchmod(fh.fileno(), 0o666 & ~_umask())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as err:
         if os.path.exists(tmp):
             os.unlink(tmp)
+        if isinstance(err, OSError) and err.errno is not None:
+            # The disk full or gone: say which file could not be written.
+            raise OSError(err.errno, f"cannot write {shown!r}: {err.strerror}") from None
         raise
 
 
@@ -191,6 +197,10 @@ def write_map(path: str | os.PathLike, mapping) -> None:
     arr = np.asarray(mapping)
     if arr.ndim != 1 or (arr.size and not np.issubdtype(arr.dtype, np.integer)):
         raise ValueError(f"a map must be a 1-D integer array, got {arr.dtype} of shape {arr.shape}")
+    if arr.size and arr.min() < 0:
+        raise ValueError(f"a map holds vertex indices >= 0, got {arr.min()} (read_map refuses it)")
+    if arr.size and arr.max() > np.iinfo(np.int64).max:
+        raise ValueError(f"a map's vertex indices must fit in int64, got {arr.max()}")
     arr = arr.astype(np.int64, copy=False)
     if fmt == "npy":
         atomic_write(path, lambda fh: np.save(fh, arr, allow_pickle=False))
