@@ -9,7 +9,9 @@ from hope_rs.batch.cache import ShapeCache, cached_shape, file_digest
 from hope_rs.batch.driver import imatch_many, map_name, read_pairs
 from hope_rs.batch.manifest import MANIFEST, Manifest
 from hope_rs.cli import main
+from hope_rs.features.descriptors import DescriptorConfig
 from hope_rs.pipeline.config import OrientConfig
+from hope_rs.shape import ShapeConfig
 
 
 @pytest.fixture(scope="module")
@@ -91,6 +93,20 @@ def test_a_bad_mesh_in_memory_fails_its_pairs_only(tmp_path):
     assert res[1].error.startswith("bad: ValueError: vertices contain NaN")
     assert res[2].error.startswith("holey: ValueError:") and "face" in res[2].error
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([MANIFEST, "a__b.txt"])
+
+
+def test_shapes_described_with_different_settings_are_refused_before_any_work(tmp_path):
+    v, f = bumpy_sphere(200, 1)
+    wide = ShapeConfig(descriptors=DescriptorConfig(shot_radius=0.3))
+    shapes = {"s": hope_rs.Shape((v, f), config=wide), "m": (v * [1.0, 1.1, 0.9], f)}
+    with pytest.raises(ValueError, match=r"pair \('s', 'm'\): the two shapes are described"):
+        hope_rs.match_many(shapes, [("s", "m")], out_dir=tmp_path / "out", jobs=1, cache=False)
+    assert not (tmp_path / "out").exists()
+    # With the Shape's settings as the batch's, the pair runs.
+    same = hope_rs.match_many(
+        shapes, [("s", "m")], jobs=1, cache=False, config=hope_rs.MatchConfig(shape=wide)
+    )
+    assert same[0].ok
 
 
 @pytest.mark.slow

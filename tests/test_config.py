@@ -241,6 +241,12 @@ def test_a_shape_keeps_its_own_settings_and_the_result_says_so():
     )
     with pytest.raises(ValueError, match="Shapes built with different ShapeConfigs"):
         hope_rs.match(hope_rs.Shape((v, f), config=wide), hope_rs.Shape(b))
+    # A Shape's own settings are checked like the config's.
+    endless = ShapeConfig(descriptors=DescriptorConfig(n_eigen=2**40))
+    with pytest.raises(
+        ValueError, match=r"Shape\.config\.descriptors\.n_eigen must be an integer in"
+    ):
+        hope_rs.match(hope_rs.Shape((v, f), config=endless), b)
 
 
 def test_a_shape_refuses_settings_that_are_not_its_own():

@@ -1,5 +1,6 @@
 """Map files: formats by suffix, atomic writes with the usual permissions, checked reads."""
 
+import errno
 import os
 import stat
 import threading
@@ -104,6 +105,18 @@ def test_files_get_the_usual_permissions(tmp_path, mask):
             assert stat.S_IMODE((tmp_path / name).stat().st_mode) == 0o666 & ~mask
     finally:
         os.umask(old)
+
+
+@pytest.mark.parametrize("where", ["file", "device"])
+def test_a_write_the_disk_refuses_names_the_file(tmp_path, where):
+    def full(fh):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    path = tmp_path / "m.txt" if where == "file" else "/dev/null"
+    with pytest.raises(OSError, match=rf"No space left on device: '{path}'") as info:
+        atomic_write(path, full)
+    assert info.value.strerror == "No space left on device"  # messages built on it stay short
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_a_failed_write_leaves_the_old_file_and_no_temporary(tmp_path):

@@ -181,6 +181,8 @@ def _shape_settings(ma: Shape | Mesh, mb: Shape | Mesh, config: MatchConfig) -> 
     beside it is described alike. Two Shapes built with different settings are refused:
     their descriptors cannot be compared."""
     own = [x.config for x in (ma, mb) if isinstance(x, Shape)]
+    for shape_config in own:
+        check_config(shape_config, "Shape.config")
     if len(own) == 2 and own[0] != own[1]:
         raise ValueError(
             "a and b are Shapes built with different ShapeConfigs, whose descriptors cannot be "

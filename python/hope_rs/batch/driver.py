@@ -100,6 +100,21 @@ def _spec(s, config) -> dict:
     return {"kind": "mesh", "vertices": m.vertices, "faces": m.faces, "config": config}
 
 
+def _same_settings(pairs: list[tuple[int, int]], names: list[str], specs: list[dict]) -> None:
+    """Refuse, before any work, a pair whose two shapes would be described with different
+    :class:`~hope_rs.ShapeConfig` (a Shape's own and ``config.shape``, or two Shapes'):
+    descriptors made with different settings cannot be compared (:func:`hope_rs.match`
+    refuses two such Shapes too)."""
+    for i, j in pairs:
+        if specs[i]["config"] != specs[j]["config"]:
+            raise ValueError(
+                f"pair ({names[i]!r}, {names[j]!r}): the two shapes are described with different "
+                "ShapeConfigs (a Shape keeps the one it was built with, other shapes take "
+                "config.shape); build the Shapes with config.shape, or pass a config whose "
+                "shape is theirs"
+            )
+
+
 def _vertex_bound(spec: dict) -> int:
     """The shape's vertex count, or for a file an upper bound from its size (0 if unknown)."""
     if spec["kind"] == "mesh":
@@ -260,6 +275,7 @@ def imatch_many(
     ij = _resolve_pairs(pairs, names)
     marks = _pair_landmarks(landmarks, pairs, len(ij))
     specs = [_spec(s, cfg.shape) for s in shapes]
+    _same_settings(ij, names, specs)
     largest = max((_vertex_bound(s) for s in specs), default=0)
     paths: list[Path | None] = [None] * len(ij)
     manifest = None

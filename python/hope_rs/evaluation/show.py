@@ -392,7 +392,7 @@ def cmd_show(args) -> int:
         require_matplotlib()
     if args.png:  # before any work
         check_output_file(args.png, "--png")
-        if not args.png.lower().endswith(".png"):
+        if os.path.splitext(args.png)[1].lower() not in ("", ".png"):
             raise ValueError(f"--png {args.png!r} must end in .png (the picture is written as PNG)")
     if args.ply:
         if os.path.isdir(args.ply):

@@ -95,7 +95,7 @@ def atomic_write(path: str | os.PathLike, write: Callable[[io.BufferedWriter], o
             with open(shown, "wb") as fh:
                 write(fh)
         except OSError as err:
-            raise OSError(err.errno, f"cannot write {shown!r}: {err.strerror}") from None
+            raise _naming(err, shown) from None
         return
     path = os.path.realpath(shown)
     folder = os.path.dirname(path)
@@ -112,10 +112,18 @@ def atomic_write(path: str | os.PathLike, write: Callable[[io.BufferedWriter], o
     except BaseException as err:
         if os.path.exists(tmp):
             os.unlink(tmp)
-        if isinstance(err, OSError) and err.errno is not None:
-            # The disk full or gone: say which file could not be written.
-            raise OSError(err.errno, f"cannot write {shown!r}: {err.strerror}") from None
+        if isinstance(err, OSError):
+            raise _naming(err, shown) from None
         raise
+
+
+def _naming(err: OSError, path: str) -> OSError:
+    """``err`` (the disk full or gone) with ``path`` as its file name, so that its message
+    says which file could not be written; the same class (``OSError(errno, ...)`` picks the
+    subclass), unchanged when it has no error number."""
+    if err.errno is None or err.filename is not None:
+        return err
+    return OSError(err.errno, err.strerror, path)
 
 
 def check_writable_folder(
