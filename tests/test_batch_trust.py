@@ -6,6 +6,7 @@ import os
 import shutil
 import subprocess
 import sys
+import warnings
 
 import numpy as np
 import pytest
@@ -430,3 +431,9 @@ def test_7_the_manifest_journal_survives_a_cut_last_line_and_keeps_the_last_word
     (tmp_path / MANIFEST).write_text("not a manifest\n")
     with pytest.warns(RuntimeWarning, match="unreadable"):
         assert Manifest(tmp_path).entries == {}
+    (tmp_path / MANIFEST).unlink()
+    (tmp_path / MANIFEST).mkdir()  # refused in one line, with no warning first
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError, match=r"the batch manifest .* is a folder; move it away"):
+            Manifest(tmp_path)

@@ -168,6 +168,11 @@ def test_spectral_settings_reach_the_pass(bundled):
         ),
         (MatchConfig(refine=RefineConfig(top_k=2.5)), TypeError, r"top_k must be an integer"),
         (
+            MatchConfig(refine=RefineConfig(schedule="87")),
+            TypeError,
+            r"schedule must be a non-empty list .*got the string '87'",
+        ),
+        (
             MatchConfig(finish=FinishConfig(max_vertices="x")),
             TypeError,
             r"finish\.max_vertices must be None or an integer >= 0, got str 'x'",

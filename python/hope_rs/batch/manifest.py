@@ -70,6 +70,11 @@ class Manifest:
 
     def __init__(self, folder: str | os.PathLike):
         self.path = Path(folder) / MANIFEST
+        if self.path.is_dir():
+            raise ValueError(
+                f"the batch manifest {str(self.path)!r} is a folder; move it away (the manifest "
+                "is a file the batch writes)"
+            )
         self.entries: dict[str, dict] = {}
         lines = self._read()
         if lines is None or lines > 2 * len(self.entries) + 64:

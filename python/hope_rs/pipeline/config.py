@@ -274,7 +274,8 @@ class RefineConfig:
                     f">= 1 or None, got {self.pass_k_max!r}"
                 )
         # A tuple, so that the config stays hashable whatever sequence was given.
-        if self.schedule is not None and not isinstance(self.schedule, tuple):
+        if self.schedule is not None and not isinstance(self.schedule, (tuple, str, bytes)):
+            # A string stays one, for match's option check to refuse as a string.
             with contextlib.suppress(TypeError):  # not a sequence: match's option check says so
                 object.__setattr__(self, "schedule", tuple(self.schedule))
 
