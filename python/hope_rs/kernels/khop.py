@@ -43,7 +43,6 @@ def khop_neighbourhoods(faces, k: int, *, n_vertices: int | None = None) -> sp.c
         if faces.size == 0:
             raise ValueError("faces is empty; pass n_vertices to get isolated vertices")
         n_vertices = int(faces.max()) + 1
-    n_vertices = _as_count(n_vertices, "n_vertices")
     indptr, indices, data = _core.khop_neighbourhoods(faces, k, n_vertices)
     return sp.csr_matrix((data, indices, indptr), shape=(n_vertices, n_vertices))
 
