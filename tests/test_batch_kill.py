@@ -188,6 +188,35 @@ def test_ctrl_c_of_a_pool_batch_prints_the_summary_and_ends_its_workers(many_pai
     assert_no_survivors(tag, grace=5)
 
 
+def test_sigterm_of_a_batch_cleans_up_like_ctrl_c(many_pairs_file, tmp_path):
+    """``kill``, ``timeout`` or a scheduler send SIGTERM to the batch's process: it stops as
+    after Ctrl-C (the summary, its workers ended, the throw-away cache and the marks folder
+    removed) and exits with 143."""
+    pairs, total = many_pairs_file
+    out, tag, tmp = tmp_path / "out", uuid.uuid4().hex, tmp_path / "tmp"
+    tmp.mkdir()
+    cmd = [sys.executable, "-m", "hope_rs.cli", "batch", str(pairs), "--ext", ".off",
+           "--out", str(out), "-j", "2", "-q", "--no-cache"]  # fmt: skip
+    proc = subprocess.Popen(
+        cmd, env={**environment(tag), "TMPDIR": str(tmp)}, stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        while not list(out.glob("*.txt")) and proc.poll() is None:
+            time.sleep(0.02)
+        assert list(tmp.iterdir()), "the batch made no temporary folder to clean up"
+        os.kill(proc.pid, signal.SIGTERM)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 143, stderr
+    assert "Traceback" not in stderr and "rerun the same command" in stderr
+    assert f"{total} pairs: " in stdout and "(interrupted)" in stdout
+    assert_whole(sorted(out.glob("*.txt")))
+    assert_no_survivors(tag, grace=5)
+    assert list(tmp.iterdir()) == []
+
+
 def test_a_killed_worker_fails_at_most_its_pair_and_the_batch_finishes(pairs_file, tmp_path):
     """As the out-of-memory killer would: one worker of a running pool batch gets SIGKILL. The
     pool is restarted; every pair ends matched, or failed when it was the one being matched."""

@@ -12,6 +12,7 @@ import time
 from ..batch.driver import imatch_many, read_pairs
 from ..matching import check_match_options
 from ..pipeline.config import MatchConfig, read_config
+from .termination import interrupted_status
 
 __all__ = [
     "ENVIRONMENT",
@@ -201,25 +202,27 @@ def cmd_batch(args) -> int:
         map_format=args.format,
         landmarks=None if all(lm is None for lm in landmarks) else landmarks,
     )
-    interrupted = started = False
+    interrupted: KeyboardInterrupt | None = None
+    started = False
     try:
         for r in results:
             started = True
             counts["skipped" if r.skipped else ("matched" if r.ok else "failed")] += 1
             if not r.ok:
                 failures.append(f"{r.a} -> {r.b}: {r.error}")
-    except KeyboardInterrupt:
-        interrupted = started = True
+    except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM (cli.termination)
+        interrupted, started = e, True
     finally:
         results.close()  # on any early exit: end the workers now
         if started:
-            _summary(args, len(pairs), counts, failures, time.perf_counter() - t0, interrupted)
-    if interrupted:
+            seconds = time.perf_counter() - t0
+            _summary(args, len(pairs), counts, failures, seconds, interrupted is not None)
+    if interrupted is not None:
         print(
             "hope-rs: interrupted; the maps written are kept, rerun the same command to finish",
             file=sys.stderr,
         )
-        return 130
+        return interrupted_status(interrupted)
     return 1 if counts["failed"] else 0
 
 

@@ -31,6 +31,7 @@ from ..geometry.mesh import load_mesh
 from ..matching import match
 from ..pipeline.progress import ProgressBar
 from .batch_cli import add_batch_parser, add_setting_arguments, config_from_args, environment_help
+from .termination import interrupted_status, sigterm_raises
 
 
 def _summary(res) -> dict:
@@ -77,6 +78,11 @@ def cmd_match(args) -> int:
                 f"--confidence-out {args.confidence_out!r} must end in .npy (a NumPy float array)"
             )
         check_output_file(args.confidence_out, "--confidence-out")
+        if not config.confidence.enabled:
+            raise ValueError(
+                "--confidence-out needs the confidence stage, which the --config file turns "
+                "off ([confidence] enabled = false): drop one of the two"
+            )
         if args.output and same_file(args.output, args.confidence_out):
             raise ValueError(
                 f"-o and --confidence-out name the same file {args.output!r}; the confidence "
@@ -110,7 +116,7 @@ def cmd_match(args) -> int:
         print(f"hope-rs: note: --multiscale: {coarse.reason}", file=sys.stderr)
     if args.confidence_out:
         conf = res.confidence
-        assert conf is not None  # the command never turns the confidence stage off
+        assert conf is not None  # checked above: the confidence stage is on
         atomic_write(args.confidence_out, lambda fh: np.save(fh, conf, allow_pickle=False))
     if res.quality is not None and res.quality.likely_failed and not args.quiet:
         print(
@@ -227,10 +233,11 @@ def main(argv=None) -> int:
     formatwarning, warnings.formatwarning = warnings.formatwarning, one_line_warning
     handler = _log_to_stderr(args.verbose)
     try:
-        return args.func(args)
-    except KeyboardInterrupt:
+        with sigterm_raises():
+            return args.func(args)
+    except KeyboardInterrupt as e:
         print("hope-rs: interrupted", file=sys.stderr)
-        return 130
+        return interrupted_status(e)
     except BrokenPipeError:
         # The reader closed the pipe (`| head`): stop quietly, as other tools do; the output
         # goes nowhere from here, so the flush at exit cannot fail again.
