@@ -247,6 +247,13 @@ def test_cli_writes_the_confidence_for_show(tmp_path, capsys):
     assert main(["match", str(pa), str(pb), "-q", "--confidence-out", str(tmp_path / "c.txt")]) == 2
     assert "must end in .npy" in capsys.readouterr().err
     assert not (tmp_path / "c.txt").exists()
+    # So does asking for the confidence with a config that turns its stage off.
+    cfg = tmp_path / "noconf.toml"
+    cfg.write_text("[confidence]\nenabled = false\n")
+    off = ["--config", str(cfg), "--confidence-out", str(tmp_path / "c2.npy")]
+    assert main(["match", str(pa), str(pb), "-q", "-o", str(tmp_path / "m2.npy"), *off]) == 2
+    assert "needs the confidence stage" in capsys.readouterr().err
+    assert not (tmp_path / "m2.npy").exists() and not (tmp_path / "c2.npy").exists()
 
 
 @pytest.mark.slow

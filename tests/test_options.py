@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 import pytest
-from meshes import write_off
+from meshes import bumpy_sphere, write_off
 
 import hope_rs
 import hope_rs.batch.driver
@@ -111,6 +111,23 @@ def test_a_prebuilt_shape_with_a_smaller_k_max_is_rejected(pair):
     a = hope_rs.Shape(pair[0], k_max=3)
     with pytest.raises(ValueError, match="built with k_max=3 < requested k_max=8"):
         hope_rs.match(a, pair[1])
+
+
+def test_prebuilt_shapes_run_the_requested_smaller_k_max():
+    # Shapes hold balls up to their own k_max; the match's k_max decides the radii it runs.
+    a, b = hope_rs.Mesh(*bumpy_sphere(500, 1)), hope_rs.Mesh(*bumpy_sphere(450, 2))
+    opts = {"k_max": 4, "max_passes": 1, "spectral": False}
+    on_meshes = hope_rs.match(a, b, **opts)
+    on_shapes = hope_rs.match(hope_rs.Shape(a), hope_rs.Shape(b), **opts)
+    assert max(h.k for h in on_shapes.history) == 4
+    np.testing.assert_array_equal(on_shapes.map, on_meshes.map)
+
+
+def test_the_result_config_records_the_init_kind_given():
+    a, b = hope_rs.Mesh(*bumpy_sphere(300, 1)), hope_rs.Mesh(*bumpy_sphere(300, 2))
+    opts = {"max_passes": 1, "spectral": False}
+    assert hope_rs.match(a, b, init="hks", **opts).config.initial.descriptor == "hks"
+    assert hope_rs.match(a, b, **opts).config.initial.descriptor == "shot"
 
 
 @pytest.mark.parametrize("k_max", ["0", "99", "-3"])

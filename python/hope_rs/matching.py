@@ -208,7 +208,13 @@ def _effective_config(config, init, options: dict, callback, progress) -> MatchC
     values = {**config.options(), **options}
     kind = config.initial.descriptor if init is None else init
     check_options(init=kind, callback=callback, progress=progress, **values)
-    return config.with_options(**options) if options else config
+    config = config.with_options(**options) if options else config
+    if isinstance(init, str) and init != config.initial.descriptor:
+        # res.config says which descriptors started the match, as a batch's does.
+        config = dataclasses.replace(
+            config, initial=dataclasses.replace(config.initial, descriptor=init)
+        )
+    return config
 
 
 def unknown_options(options) -> list[str]:

@@ -44,6 +44,13 @@ __all__ = [
 ]
 
 
+def hop_limit(a: Shape, b: Shape, k_max: int | None) -> int:
+    """The largest hop radius a refinement of ``a`` and ``b`` runs: ``k_max`` (the match's
+    setting), at most the radius both shapes hold balls for."""
+    held = min(a.k_max, b.k_max)
+    return held if k_max is None else min(int(k_max), held)
+
+
 def default_schedule(k_max: int) -> list[int]:
     """One pass: k going k_max → 1. Coarse neighbourhoods first fix large errors, fine ones then
     sharpen (docs/decisions.md#schedule)."""
@@ -83,6 +90,7 @@ def refine(
     landmarks: np.ndarray | None = None,
     landmark_config: LandmarkConfig = LandmarkConfig(),
     clock: StepClock | None = None,
+    k_max: int | None = None,
 ) -> RefineResult:
     """Refine the map ``f0`` (A → B) with HOPE.
 
@@ -126,8 +134,11 @@ def refine(
 
     ``clock``, if given, adds up the k-hop steps' cost and assignment seconds (each step's
     own are in its :class:`Iteration`).
+
+    ``k_max``: the largest hop radius (``MatchConfig.k_max``); the shapes' own ``k_max`` (the
+    balls they hold) when None or larger.
     """
-    k_max = min(a.k_max, b.k_max)
+    k_max = hop_limit(a, b, k_max)
     schedule = list(config.schedule) if config.schedule is not None else default_schedule(k_max)
     if not schedule or any(not 1 <= k <= k_max for k in schedule):
         raise ValueError(f"every k of the schedule must be in [1, {k_max}], got {schedule}")
@@ -164,7 +175,8 @@ class RefineStage(Stage):
 
     def run(self, state: MatchState) -> Halt | None:
         a, b, cfg, hooks = state.a, state.b, state.config.refine, state.hooks
-        steps = _RefineSteps(a, b, state.log, cfg, state.callback, hooks)
+        k_max = hop_limit(a, b, state.config.k_max)
+        steps = _RefineSteps(k_max, state.log, cfg, state.callback, hooks)
         clock = StepClock()
         t = state.log.start("refine", steps.total, f"pass 1/{steps.n_passes}")
         res = refine(
@@ -176,6 +188,7 @@ class RefineStage(Stage):
             landmarks=state.landmarks,
             landmark_config=state.config.landmarks,
             clock=clock,
+            k_max=k_max,
         )
         state.timings["refine"] = time.perf_counter() - t
         clock.record(state.timings, "refine")
@@ -195,11 +208,11 @@ class _RefineSteps(RefineEvents):
     """The refinement's events in a match: logs and reports each step, labels the polish
     step and calls the user's callback; relays the last pass to the runner's hooks."""
 
-    def __init__(self, sa: Shape, sb: Shape, log: StageLog, cfg: RefineConfig, user, hooks):
+    def __init__(self, k_max: int, log: StageLog, cfg: RefineConfig, user, hooks):
         self.log, self.user, self.hooks = log, user, hooks
         schedule: Sequence[int] | None = cfg.schedule
         if schedule is None:
-            schedule = default_schedule(min(sa.k_max, sb.k_max))
+            schedule = default_schedule(k_max)
         self.n_passes = cfg.max_passes
         # Steps per pass; the passes after the caps' last entry are like the last one.
         repair = 1 if cfg.global_step else 0

@@ -76,7 +76,8 @@ class MatchResult:
         "polish", "spectral", "faces", "confidence" (see :data:`hope_rs.pipeline.progress.STAGES`). ``str()`` of an
         entry reads "spectral: skipped (HOPE's map settled: ...)".
     config : MatchConfig
-        The settings the match ran with.
+        The settings the match ran with; ``config.initial.descriptor`` is the ``init`` kind
+        given (with an ``init`` map, ``init_map`` is the start).
     confidence : (n_a,) float64 or None
         Per vertex of A, how far to trust its match, in [0, 1]: a calibrated estimate of the
         probability that ``map[i]`` lies within 0.05 sqrt(area) of the right vertex
