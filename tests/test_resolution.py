@@ -141,6 +141,21 @@ def test_the_lifted_map_of_a_subdivided_copy(faust_pair):
 
 
 @pytest.mark.slow
+def test_with_landmarks_the_lifted_map_is_refined_at_full_resolution_too(faust_pair):
+    """Landmarks do not turn the refinement at full resolution off: it runs with them
+    pinned, in the subdivided copy's numbering."""
+    a, _ = faust_pair
+    dense = subdivide(a, 1)
+    n = a.n_vertices
+    marks = np.array([0, n // 3, n // 2, n - 1])
+    res = hope_rs.match(a, dense, landmarks=np.column_stack([marks, marks]))
+    assert "full resolution" in res.stage("resolution").reason
+    np.testing.assert_array_equal(res.map[marks], marks)
+    e = geodesic_errors(dense, res.map, a_idx=np.arange(n), b_idx=np.arange(n))
+    assert e.mean() < 0.03
+
+
+@pytest.mark.slow
 def test_a_much_denser_a_is_judged_at_the_common_resolution(faust_pair):
     """A body subdivided twice (16x the vertices) against itself: the lifted map is many-to-one,
     so at full resolution it keeps few 2-rings' distances however right it is. The pair is

@@ -335,7 +335,7 @@ class ResolutionStage(Stage):
                     counts += f" (not at {cs2.n_vertices} placed as densely as B's: that map fails)"
         f = f.astype(np.int64)
         note = ""
-        if cfg.resolution.refine and state.landmarks is None:
+        if cfg.resolution.refine:
             fine = self.refined(state, f, dense, sparse, None if self.side == "b" else lift)
             h = f"{self.start_handles:.1%} of the vertices handles at the start"
             if fine is None:
@@ -454,7 +454,12 @@ class ResolutionStage(Stage):
             self.start_handles = float(face_handles(up, b, init[up.order]).mean())
             if self.start_handles < cfg.resolution.refine_min_handles:
                 return None
-            res = state.run(up, b, b.order[init], nested, callback=state.callback)
+            # The landmarks in the nested shapes' input numbering: A's vertices come first in
+            # the subdivided copy, in A's internal numbering.
+            lm = None
+            if state.landmarks is not None:
+                lm = np.column_stack([state.landmarks[:, 0], b.order[state.landmarks[:, 1]]])
+            res = state.run(up, b, b.order[init], nested, callback=state.callback, landmarks=lm)
             if not qualifies(up, b, b.rank[res.map[up.order]], cfg.finish):
                 return None
             return b.rank[res.map[: a.n_vertices]].astype(np.int64)
@@ -465,7 +470,11 @@ class ResolutionStage(Stage):
         self.start_handles = float(face_handles(a, up, up.rank[f]).mean())
         if self.start_handles < cfg.resolution.refine_min_handles:
             return None
-        res = state.run(a, up, f[a.rank], nested, callback=state.callback)
+        lm = None
+        if state.landmarks is not None:
+            # B's vertices come first in its subdivided copy, in B's internal numbering.
+            lm = np.column_stack([a.order[state.landmarks[:, 0]], state.landmarks[:, 1]])
+        res = state.run(a, up, f[a.rank], nested, callback=state.callback, landmarks=lm)
         if not qualifies(a, up, up.rank[res.map[a.order]], cfg.finish):
             return None
         back = cKDTree(b.points).query(points)[1]
