@@ -431,6 +431,11 @@ def test_7_the_manifest_journal_survives_a_cut_last_line_and_keeps_the_last_word
     (tmp_path / MANIFEST).write_text("not a manifest\n")
     with pytest.warns(RuntimeWarning, match="unreadable"):
         assert Manifest(tmp_path).entries == {}
+    newer = '{"hope_rs_manifest": 2}\n{"map": "x__y.txt", "entry": {}}\n'
+    (tmp_path / MANIFEST).write_text(newer)  # a newer version's: refused, not replaced
+    with pytest.raises(ValueError, match=r"written by a newer hope_rs \(layout 2\)"):
+        Manifest(tmp_path)
+    assert (tmp_path / MANIFEST).read_text() == newer
     (tmp_path / MANIFEST).unlink()
     (tmp_path / MANIFEST).mkdir()  # refused in one line, with no warning first
     with warnings.catch_warnings():

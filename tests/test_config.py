@@ -252,6 +252,10 @@ def test_a_shape_keeps_its_own_settings_and_the_result_says_so():
         ValueError, match=r"Shape\.config\.descriptors\.n_eigen must be an integer in"
     ):
         hope_rs.match(hope_rs.Shape((v, f), config=endless), b)
+    # WKS and HKS need a non-constant eigenpair: n_eigen=0 is refused before any work.
+    none = MatchConfig(shape=ShapeConfig(descriptors=DescriptorConfig(n_eigen=0)))
+    with pytest.raises(ValueError, match=r"n_eigen must be an integer in \[2, 5000\]"):
+        hope_rs.match((v, f), b, config=none, init="wks")
 
 
 def test_a_shape_refuses_settings_that_are_not_its_own():

@@ -89,6 +89,9 @@ def test_bad_npy_maps(tmp_path):
     np.save(path, MAP.reshape(5, 1))
     with pytest.raises(ValueError, match="1-D array"):
         read_map(path, 5)
+    np.save(path, np.array([0, 1, 2, 3, 2**63 + 5], dtype=np.uint64))
+    with pytest.raises(ValueError, match=f"holds index {2**63 + 5}, too large"):
+        read_map(path, 5)
     np.save(path, np.array([object()] * 5), allow_pickle=True)
     with pytest.raises(ValueError, match="damaged NumPy file"):  # pickles are refused
         read_map(path, 5)
@@ -116,6 +119,17 @@ def test_a_write_the_disk_refuses_names_the_file(tmp_path, where):
     with pytest.raises(OSError, match=rf"No space left on device: '{path}'") as info:
         atomic_write(path, full)
     assert info.value.strerror == "No space left on device"  # messages built on it stay short
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_short_write_without_an_error_number_names_the_file(tmp_path):
+    # NumPy reports a write cut short by a full disk or a file size limit without errno.
+    def short(fh):
+        raise OSError("4999 requested and 1008 written")
+
+    path = tmp_path / "m.npy"
+    with pytest.raises(OSError, match=rf"cannot write '{path}': 4999 requested and 1008 written"):
+        atomic_write(path, short)
     assert list(tmp_path.iterdir()) == []
 
 

@@ -1,3 +1,6 @@
+import copy
+import pickle
+
 import numpy as np
 import pytest
 from conftest import data_path
@@ -171,3 +174,14 @@ def test_refine_reports_a_settled_map_only_when_nothing_moves():
     full = refine(s, s, wrong)
     np.testing.assert_array_equal(full.map, exact)
     assert full.settled
+
+
+def test_a_shape_pickles_and_copies_with_its_computed_descriptors():
+    a = hope_rs.Shape(hope_rs.Mesh(*bumpy_sphere(300, 1)), k_max=5)
+    b = hope_rs.Mesh(*bumpy_sphere(300, 2))
+    before = hope_rs.match(a, b, k_max=5, max_passes=1, spectral=False)
+    for again in (pickle.loads(pickle.dumps(a)), copy.deepcopy(a)):
+        assert again.k_max == 5 and np.array_equal(again.order, a.order)
+        assert again._descriptors.keys() == a._descriptors.keys() != set()
+        after = hope_rs.match(again, b, k_max=5, max_passes=1, spectral=False)
+        np.testing.assert_array_equal(after.map, before.map)

@@ -171,6 +171,11 @@ def test_partial_stage_runs_only_on_a_part(sphere):
     given = match(part, sphere, init=cut.origin)
     assert (given.map == cut.origin).mean() > 0.95
     np.testing.assert_array_equal(given.init_map, cut.origin)
+    # The whole matched to the part from a given start goes directly, without the orient
+    # stage, and says so.
+    start = np.zeros(sphere.n_vertices, dtype=np.int64)
+    direct = match(sphere, part, init=start, max_passes=1)
+    assert "matched directly" in direct.stage("orient").reason
     # Two whole shapes, or the stage turned off: not on the match's path.
     whole = match(sphere, sphere)
     assert "partial" not in [s.name for s in whole.stages] and not whole.stage("partial").ran

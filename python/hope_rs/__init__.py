@@ -9,13 +9,13 @@ from ._version import __version__ as __version__
 from .batch.cache import ShapeCache
 from .batch.driver import PairResult, match_many, read_pairs
 from .evaluation.evaluate import geodesic_errors, load_vts, score
-from .geometry.map_io import read_map, write_map
+from .geometry.map_io import read_landmarks, read_map, write_map
 from .geometry.mesh import Mesh, load_mesh
 from .kernels.assignment import auction_assignment
 from .kernels.khop import khop_neighbourhoods, overlap_cost
 from .matching import MatchConfig, MatchResult, match
 from .pipeline.confidence import MatchQuality
-from .shape import Shape
+from .shape import Shape, ShapeConfig
 
 cap_rayon_threads()  # before any Rust call starts the thread pool (importing calls none)
 
@@ -27,6 +27,7 @@ __all__ = [
     "PairResult",
     "Shape",
     "ShapeCache",
+    "ShapeConfig",
     "auction_assignment",
     "geodesic_errors",
     "khop_neighbourhoods",
@@ -35,6 +36,7 @@ __all__ = [
     "match",
     "match_many",
     "overlap_cost",
+    "read_landmarks",
     "read_map",
     "read_pairs",
     "score",

@@ -92,6 +92,7 @@ class Shape:
             )
         self.mesh = mesh
         self.k_max = int(k_max)
+        self.orient = bool(orient)
         self.config = config
         self.internal, self.order, self.rank = canonical_mesh(mesh, orient=orient)
         # The internal mesh's coordinates are the input's times 4**scale_exponent (exact).
@@ -111,6 +112,15 @@ class Shape:
         self._edges: np.ndarray | None = None
         self._euler: int | None = None
         self._ring: sp.csr_matrix | None = None
+
+    def __reduce__(self):
+        # The Rust graph cannot be pickled: a copy is built again from the mesh and settings,
+        # and keeps the descriptors and the eigenbasis already computed (the costly parts).
+        args = (self.mesh, self.k_max, self.orient, self.config)
+        return (_rebuilt, args, {"_descriptors": self._descriptors, "_basis": self._basis})
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
 
     @property
     def points(self) -> np.ndarray:
@@ -309,3 +319,8 @@ class Shape:
 
     def __repr__(self) -> str:
         return f"Shape(n_vertices={self.n_vertices}, k_max={self.k_max})"
+
+
+def _rebuilt(mesh, k_max: int, orient: bool, config: ShapeConfig) -> Shape:
+    """A :class:`Shape` built again, for unpickling and copies (:meth:`Shape.__reduce__`)."""
+    return Shape(mesh, k_max=k_max, orient=orient, config=config)

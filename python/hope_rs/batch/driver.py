@@ -317,7 +317,22 @@ def imatch_many(
             tmp.cleanup()
 
 
-def match_many(shapes, pairs=None, **kwargs) -> list[PairResult]:
+def match_many(
+    shapes,
+    pairs=None,
+    *,
+    out_dir: str | os.PathLike | None = None,
+    jobs: int | None = None,
+    backend: str = "local",
+    cache: ShapeCache | str | os.PathLike | bool | None = True,
+    config: MatchConfig | None = None,
+    init: str | None = None,
+    progress=None,
+    ray_options: dict | None = None,
+    map_format: str = "txt",
+    landmarks=None,
+    **match_options,
+) -> list[PairResult]:
     """Match many pairs of shapes, each shape precomputed once; one result per pair, in order.
 
     Parameters
@@ -369,5 +384,21 @@ def match_many(shapes, pairs=None, **kwargs) -> list[PairResult]:
     list of PairResult
         Failed pairs have ``error`` set and ``map`` None; they never stop the batch.
     """
-    results = list(imatch_many(shapes, pairs, **kwargs))
+    results = list(
+        imatch_many(
+            shapes,
+            pairs,
+            out_dir=out_dir,
+            jobs=jobs,
+            backend=backend,
+            cache=cache,
+            config=config,
+            init=init,
+            progress=progress,
+            ray_options=ray_options,
+            map_format=map_format,
+            landmarks=landmarks,
+            **match_options,
+        )
+    )
     return sorted(results, key=lambda r: r.index)

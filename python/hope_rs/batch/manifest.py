@@ -92,9 +92,21 @@ class Manifest:
             why = "it is not a hope_rs batch manifest"
         lines = text.splitlines()
         try:
-            ok = json.loads(lines[0]) == HEADER
+            head = json.loads(lines[0])
         except (IndexError, ValueError):
-            ok = False
+            head = None
+        ok = head == HEADER
+        layout = head.get("hope_rs_manifest") if isinstance(head, dict) else None
+        if (
+            isinstance(layout, int)
+            and not isinstance(layout, bool)
+            and layout > HEADER["hope_rs_manifest"]
+        ):
+            # Replacing it would lose what a newer hope_rs recorded.
+            raise ValueError(
+                f"the batch manifest {str(self.path)!r} was written by a newer hope_rs (layout "
+                f"{layout}); run that version, or give another output folder"
+            )
         if not ok:
             warnings.warn(
                 f"batch manifest {str(self.path)!r} is unreadable ({why}); the maps of this "

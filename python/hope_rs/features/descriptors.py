@@ -28,14 +28,15 @@ class DescriptorConfig:
     sites : SiteConfig
         When vertices of a dense mesh share SHOT descriptors (:mod:`hope_rs.geometry.sites`).
     n_eigen : int
-        Laplacian eigenpairs behind WKS and HKS.
+        Laplacian eigenpairs behind WKS and HKS (at least 2: the first, constant, carries no
+        shape information).
     """
 
     shot_radius: float = field(
         default=0.1, metadata={"range": (0.0, None), "exclusive": True, "finite": True}
     )
     sites: SiteConfig = field(default_factory=SiteConfig)
-    n_eigen: int = field(default=100, metadata={"range": (0, 5000)})
+    n_eigen: int = field(default=100, metadata={"range": (2, 5000)})
 
 
 @dataclass(frozen=True)

@@ -120,9 +120,12 @@ def atomic_write(path: str | os.PathLike, write: Callable[[io.BufferedWriter], o
 def _naming(err: OSError, path: str) -> OSError:
     """``err`` (the disk full or gone) with ``path`` as its file name, so that its message
     says which file could not be written; the same class (``OSError(errno, ...)`` picks the
-    subclass), unchanged when it has no error number."""
-    if err.errno is None or err.filename is not None:
+    subclass). Without an error number (NumPy's short write: "4999 requested and 1008
+    written"), an ``OSError`` whose message names ``path``."""
+    if err.filename is not None:
         return err
+    if err.errno is None:
+        return OSError(f"cannot write {path!r}: {err}")
     return OSError(err.errno, err.strerror, path)
 
 
@@ -258,6 +261,8 @@ def read_map(
             raise ValueError(f"map {name!r} must hold a 1-D array, got shape {np.shape(arr)}")
         if arr.size and not np.issubdtype(arr.dtype, np.integer):
             raise ValueError(f"map {name!r} must hold integers, got dtype {arr.dtype}")
+        if arr.size and arr.dtype.kind == "u" and arr.max() > np.iinfo(np.int64).max:
+            raise ValueError(f"map {name!r} holds index {arr.max()}, too large for a vertex index")
         arr = arr.astype(np.int64)
     else:
         try:

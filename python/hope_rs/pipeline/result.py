@@ -21,9 +21,10 @@ class MatchQuality:
     Attributes
     ----------
     mean_confidence : float
-        The mean confidence over A's vertices.
+        The mean confidence over A's vertices that faces use (a vertex in no face has
+        confidence 0 and is left out: it says nothing of the surface's map).
     share_confident : float
-        The share of A's vertices with confidence at least ``ConfidenceConfig.threshold``.
+        The share of those vertices with confidence at least ``ConfidenceConfig.threshold``.
     likely_failed : bool
         ``mean_confidence < ConfidenceConfig.failed_mean``, ``share_confident <
         ConfidenceConfig.failed_share`` or ``flipped_share > ConfidenceConfig.failed_flipped``:
