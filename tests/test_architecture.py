@@ -18,7 +18,7 @@ PACKAGE = Path(hope_rs.__file__).parent
 
 #: Layer of each top-level module or subpackage, lowest first.
 LAYERS = {
-    "_core": 0, "_blas": 0, "_cancel": 0, "_validate": 0, "_version": 0, "_threads": 0,
+    "_core": 0, "_blas": 0, "_cancel": 0, "_terminate": 0, "_validate": 0, "_version": 0, "_threads": 0,
     "geometry": 1,
     "kernels": 2,
     "features": 3,

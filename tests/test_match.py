@@ -185,3 +185,7 @@ def test_a_shape_pickles_and_copies_with_its_computed_descriptors():
         assert again._descriptors.keys() == a._descriptors.keys() != set()
         after = hope_rs.match(again, b, k_max=5, max_passes=1, spectral=False)
         np.testing.assert_array_equal(after.map, before.map)
+    # A view at another scale shares the graph; pickled, it keeps its scale.
+    view = a.at_scale(2 * a.scale)
+    assert view.graph is a.graph
+    assert pickle.loads(pickle.dumps(view)).scale == view.scale

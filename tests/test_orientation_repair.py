@@ -13,7 +13,7 @@ from hope_rs.evaluation.evaluate import geodesic_errors
 from hope_rs.evaluation.perturbed import Welded, clean_errors, weld_shortcuts
 from hope_rs.geometry.mesh import load_mesh
 from hope_rs.pipeline.confidence import turned_factor
-from hope_rs.pipeline.config import ConfidenceConfig, MatchConfig, OrientConfig
+from hope_rs.pipeline.config import ConfidenceConfig, InitialConfig, MatchConfig, OrientConfig
 from hope_rs.pipeline.orientation_repair import mirror_image, turned_regions
 from hope_rs.pipeline.turned import TurnedFaces
 
@@ -96,6 +96,18 @@ def test_a_mirrored_start_is_repaired(mirrored_start):
     assert res.quality.flipped_share < 0.05
     assert geodesic_errors(b, res.map).mean() < 0.01
     assert np.mean(res.map == truth) > 0.9
+
+
+@pytest.mark.slow
+def test_b_s_symmetry_comes_from_shot_whatever_the_match_started_from(mirrored_start):
+    # WKS and HKS read a mirror image as the shape itself: found from them, B's "symmetry"
+    # was the identity and the mirror hypothesis gave back the mirrored map unchanged.
+    a, b, start = mirrored_start
+    cfg = MatchConfig(initial=InitialConfig(descriptor="hks"), orient=OrientConfig(
+        hypotheses=("mirror",), on_topology=False, on_torn=False))  # fmt: skip
+    res = hope_rs.match(a, b, init=start, config=cfg)
+    assert "chose kept" not in res.stage("orient").reason
+    assert geodesic_errors(b, res.map).mean() < 0.01
 
 
 @pytest.mark.slow

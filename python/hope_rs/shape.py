@@ -115,9 +115,17 @@ class Shape:
 
     def __reduce__(self):
         # The Rust graph cannot be pickled: a copy is built again from the mesh and settings,
-        # and keeps the descriptors and the eigenbasis already computed (the costly parts).
+        # and keeps its scale (a view's, :meth:`at_scale`), the descriptors and the eigenbasis
+        # already computed (the costly parts).
         args = (self.mesh, self.k_max, self.orient, self.config)
-        return (_rebuilt, args, {"_descriptors": self._descriptors, "_basis": self._basis})
+        state = {"scale": self.scale, "_descriptors": self._descriptors, "_basis": self._basis}
+        return (_rebuilt, args, state)
+
+    def __copy__(self) -> Shape:
+        # A shallow copy shares everything, the graph included (what at_scale's views need).
+        out = object.__new__(Shape)
+        out.__dict__.update(self.__dict__)
+        return out
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)

@@ -91,12 +91,18 @@ def code_fingerprint() -> str:
     return f"{__version__}-{core}"
 
 
+#: The numbering cached arrays are in: Morton order, coincident vertices by their neighbours
+#: (:func:`hope_rs.geometry.numbering.canonical_order`). A new name when that order changes,
+#: so entries in an older order are computed again.
+NUMBERING = "morton-coincident-by-neighbours"
+
+
 def descriptor_params(kind: str, config: DescriptorConfig = DescriptorConfig()) -> dict:
     """The key parameters of a descriptor entry: every descriptor setting, and the
     numbering they are computed in (the position-fixed one of hope_rs.geometry.numbering)."""
     if kind not in ("shot", "wks", "hks", "eigen"):
         raise ValueError(f"unknown descriptor {kind!r}; choose 'shot', 'wks' or 'hks'")
-    return {"descriptors": dataclasses.asdict(config), "numbering": "morton"}
+    return {"descriptors": dataclasses.asdict(config), "numbering": NUMBERING}
 
 
 def basis_params(k: int, config: ShapeConfig = ShapeConfig()) -> dict:
@@ -106,7 +112,7 @@ def basis_params(k: int, config: ShapeConfig = ShapeConfig()) -> dict:
         "k": int(k),
         "basis": dataclasses.asdict(config.basis),
         "coarsen": dataclasses.asdict(config.coarsen),
-        "numbering": "morton",
+        "numbering": NUMBERING,
     }
 
 

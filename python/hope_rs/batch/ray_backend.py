@@ -18,7 +18,9 @@ from __future__ import annotations
 
 import atexit
 import contextlib
+import signal
 
+from .._terminate import keep_sigterm
 from .tasks import pair_task, prepare_task
 
 
@@ -57,7 +59,9 @@ class RayBackend:
         ray = _require_ray()
         self._started = not ray.is_initialized()
         if self._started:
+            before = signal.getsignal(signal.SIGTERM)
             ray.init(address=address, include_dashboard=False, log_to_driver=False)
+            keep_sigterm(before)  # ray's own handler exits without the batch's cleanup
             atexit.register(self._shutdown)
         self.ray = ray
         self.threads = int(cpus_per_pair)

@@ -9,10 +9,10 @@ import sys
 import textwrap
 import time
 
+from .._terminate import interrupted_status
 from ..batch.driver import imatch_many, read_pairs
 from ..matching import check_match_options
 from ..pipeline.config import MatchConfig, read_config
-from .termination import interrupted_status
 
 __all__ = [
     "ENVIRONMENT",
@@ -43,6 +43,7 @@ EXIT_STATUS = {
     2: "a usage or input error: bad arguments, an unreadable or malformed input file, an "
     "unwritable output folder (nothing is computed)",
     130: "interrupted (Ctrl-C); a batch keeps the maps already written",
+    143: "ended by SIGTERM (kill, timeout, a scheduler), cleaned up as after Ctrl-C",
 }
 
 

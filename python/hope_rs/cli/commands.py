@@ -15,6 +15,7 @@ import warnings
 
 import numpy as np
 
+from .._terminate import interrupted_status, sigterm_raises
 from .._version import __version__
 from ..batch.driver import one_line_warning
 from ..evaluation import bench, partial, perturbed, resolution, show
@@ -31,7 +32,6 @@ from ..geometry.mesh import load_mesh
 from ..matching import match
 from ..pipeline.progress import ProgressBar
 from .batch_cli import add_batch_parser, add_setting_arguments, config_from_args, environment_help
-from .termination import interrupted_status, sigterm_raises
 
 
 def _summary(res) -> dict:

@@ -261,7 +261,7 @@ def read_map(
             raise ValueError(f"map {name!r} must hold a 1-D array, got shape {np.shape(arr)}")
         if arr.size and not np.issubdtype(arr.dtype, np.integer):
             raise ValueError(f"map {name!r} must hold integers, got dtype {arr.dtype}")
-        if arr.size and arr.dtype.kind == "u" and arr.max() > np.iinfo(np.int64).max:
+        if arr.size and arr.dtype.kind == "u" and arr.max() > np.uint64(np.iinfo(np.int64).max):
             raise ValueError(f"map {name!r} holds index {arr.max()}, too large for a vertex index")
         arr = arr.astype(np.int64)
     else:

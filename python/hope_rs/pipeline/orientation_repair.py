@@ -315,8 +315,9 @@ class _Hypotheses:
         if self.sym is None:
             b = self.state.b
             mirror = mirror_image(b)
-            init = self.state.config.initial.descriptor
-            c = Candidate("B's symmetry", mirror, b, init, _symmetry_config(self.state))
+            # From SHOT whatever the match's start: WKS and HKS are intrinsic, the same on a
+            # mirror image, so from them the "symmetry" comes out as the identity.
+            c = Candidate("B's symmetry", mirror, b, "shot", _symmetry_config(self.state))
             t = run_trial(self.state, "orient", c, self.progress)
             # Input vertex v of the mirror image is input vertex v of B.
             self.sym = b.rank[np.asarray(t.result.map)[b.order]]

@@ -20,7 +20,14 @@ from .config import RefineConfig, RepairConfig
 from .lmd import LmdTracker
 from .state import StepClock
 
-__all__ = ["assign_by_overlap", "best_overlap", "global_repair", "voters"]
+__all__ = ["assign_by_overlap", "best_overlap", "global_repair", "hop_limit", "voters"]
+
+
+def hop_limit(a: Shape, b: Shape, k_max: int | None) -> int:
+    """The largest hop radius a refinement of ``a`` and ``b`` runs: ``k_max`` (the match's
+    setting), at most the radius both shapes hold balls for."""
+    held = min(a.k_max, b.k_max)
+    return held if k_max is None else min(int(k_max), held)
 
 
 def global_repair(

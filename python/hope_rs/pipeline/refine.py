@@ -18,7 +18,7 @@ import numpy as np
 from .._blas import with_single_threaded_blas
 from ..shape import Shape
 from .config import LandmarkConfig, RefineConfig
-from .overlap import assign_by_overlap, best_overlap, global_repair
+from .overlap import assign_by_overlap, best_overlap, global_repair, hop_limit
 from .progress import StageLog, step_detail
 from .refine_steps import (
     Landmarks,
@@ -42,13 +42,6 @@ __all__ = [
     "pass_schedule",
     "refine",
 ]
-
-
-def hop_limit(a: Shape, b: Shape, k_max: int | None) -> int:
-    """The largest hop radius a refinement of ``a`` and ``b`` runs: ``k_max`` (the match's
-    setting), at most the radius both shapes hold balls for."""
-    held = min(a.k_max, b.k_max)
-    return held if k_max is None else min(int(k_max), held)
 
 
 def default_schedule(k_max: int) -> list[int]:

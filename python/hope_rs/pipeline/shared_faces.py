@@ -33,7 +33,7 @@ from ..shape import Shape
 from .config import FinishConfig, RefineConfig
 from .growth import grow
 from .handles import face_handles, large_patches
-from .overlap import assign_by_overlap
+from .overlap import assign_by_overlap, hop_limit
 from .state import MatchState, Stage, StepClock
 
 
@@ -110,15 +110,17 @@ def finish(
     *,
     refine: RefineConfig = RefineConfig(),
     clock: StepClock | None = None,
+    k_max: int | None = None,
 ) -> tuple[np.ndarray, int]:
     """The map after the finishing rounds and, if any ran, the growth from their trusted
     patches (:func:`hope_rs.pipeline.growth.grow`), in the internal numbering; and how many
     rounds ran. ``refine``: the settings of the HOPE steps after each round (``top_k``...);
-    ``clock``: adds up those steps' seconds (see :func:`~hope_rs.pipeline.overlap.assign_by_overlap`)."""
+    ``clock``: adds up those steps' seconds (see :func:`~hope_rs.pipeline.overlap.assign_by_overlap`);
+    ``k_max``: the match's largest hop radius (``MatchConfig.k_max``), which caps ``step_k``."""
     cfg = config
     f = np.asarray(f, dtype=np.int64)
     n_a = a.n_vertices
-    k = min(cfg.step_k, a.k_max, b.k_max)
+    k = min(cfg.step_k, hop_limit(a, b, k_max))
     every = np.ones(n_a, dtype=bool)
     arap = tree = None  # built by the first round that runs
     last = 0.0
@@ -186,7 +188,9 @@ class FinishStage(Stage):
         a, b, cfg = state.a, state.b, state.config.finish
         t = state.log.start("faces", detail="shared-face finish")
         clock = StepClock()
-        f, rounds = finish(a, b, state.f, cfg, refine=state.config.refine, clock=clock)
+        f, rounds = finish(
+            a, b, state.f, cfg, refine=state.config.refine, clock=clock, k_max=state.config.k_max
+        )
         if rounds:
             state.timings["faces"] = time.perf_counter() - t
             clock.record(state.timings, "faces")

@@ -40,6 +40,13 @@ def sigterm_raises() -> Iterator[None]:
         signal.signal(signal.SIGTERM, previous)
 
 
+def keep_sigterm(before) -> None:
+    """Put :class:`Terminated` back as the SIGTERM handler when it was ``before`` (the handler
+    read before a library, such as ``ray.init()``, installed its own)."""
+    if before is _raise_terminated and threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, before)
+
+
 def interrupted_status(error: KeyboardInterrupt) -> int:
     """The exit status of a command ended by ``error``: 143 after SIGTERM, 130 after Ctrl-C."""
     return TERMINATED_STATUS if isinstance(error, Terminated) else 130
