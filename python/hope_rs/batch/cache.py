@@ -91,10 +91,9 @@ def code_fingerprint() -> str:
     return f"{__version__}-{core}"
 
 
-#: The numbering cached arrays are in: Morton order, coincident vertices by their neighbours
-#: (:func:`hope_rs.geometry.numbering.canonical_order`). A new name when that order changes,
-#: so entries in an older order are computed again.
-NUMBERING = "morton-coincident-by-neighbours"
+#: The numbering cached arrays are in (:func:`hope_rs.geometry.numbering.canonical_order`).
+#: A new name when that order changes, so entries in an older order are computed again.
+NUMBERING = "morton"
 
 
 def descriptor_params(kind: str, config: DescriptorConfig = DescriptorConfig()) -> dict:

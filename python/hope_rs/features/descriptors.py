@@ -342,5 +342,5 @@ def spectral_descriptors(kind: str, evals: np.ndarray, evecs: np.ndarray, mesh: 
     column norms sum over every row, and the matrix product's last bits can depend on a row's
     position, so this is what makes relabelling the mesh relabel the result bit for bit.
     """
-    order = canonical_order(mesh.vertices, mesh.faces)
+    order = canonical_order(mesh.vertices)
     return (wks if kind == "wks" else hks)(evals, evecs[order])[inverse_permutation(order)]

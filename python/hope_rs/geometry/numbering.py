@@ -57,56 +57,13 @@ def morton_codes(vertices: np.ndarray) -> np.ndarray:
     return _spread_bits(q[:, 0]) | (_spread_bits(q[:, 1]) << one) | (_spread_bits(q[:, 2]) << two)
 
 
-def canonical_order(vertices: np.ndarray, faces: np.ndarray | None = None) -> np.ndarray:
+def canonical_order(vertices: np.ndarray) -> np.ndarray:
     """Vertex ids sorted by Morton code, then by exact coordinates: ``order[i]`` is the vertex
-    that gets number ``i``. Vertices at exactly the same position are ordered by their
-    neighbours' positions through ``faces`` (:func:`coincident_ranks`); only those whose
-    neighbourhoods also coincide keep their relative input order."""
+    that gets number ``i``. Only vertices at exactly the same position keep their relative
+    input order (they are interchangeable to every kernel except through their faces)."""
     v = np.asarray(vertices, dtype=np.float64)
     n = v.shape[0]
-    order = np.lexsort((np.arange(n), v[:, 2], v[:, 1], v[:, 0], morton_codes(v)))
-    if faces is None or n < 2:
-        return order
-    tie = coincident_ranks(v, np.asarray(faces, dtype=np.int64), order)
-    if tie is None:
-        return order
-    return np.lexsort((np.arange(n), tie, v[:, 2], v[:, 1], v[:, 0], morton_codes(v)))
-
-
-def coincident_ranks(v: np.ndarray, faces: np.ndarray, order: np.ndarray) -> np.ndarray | None:
-    """For vertices at exactly the same position (``order`` sorts by position), a rank within
-    each such group that depends on the geometry only: by the number of neighbours, then by the
-    sorted coordinates of the neighbours (edges of ``faces``). ``None`` when no two vertices
-    coincide. Without it, which of two coincident vertices got the lower number followed the
-    input's labels, and every later tie-break with it."""
-    same = np.all(v[order[1:]] == v[order[:-1]], axis=1)
-    if not same.any():
-        return None
-    # Group starts along the sorted order; groups of one are not ties.
-    start = np.flatnonzero(np.r_[True, ~same])
-    size = np.diff(np.r_[start, order.size])
-    groups = [order[s : s + k] for s, k in zip(start[size > 1], size[size > 1])]
-    tied = np.concatenate(groups)
-    edges = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2) if faces.size else np.zeros((0, 2), int)
-    edges = np.concatenate([edges, edges[:, ::-1]])
-    edges = edges[np.isin(edges[:, 0], tied)]
-    edges = edges[np.argsort(edges[:, 0], kind="stable")]
-    lo = np.searchsorted(edges[:, 0], tied, side="left")
-    hi = np.searchsorted(edges[:, 0], tied, side="right")
-    span = dict(zip(tied.tolist(), zip(lo.tolist(), hi.tolist())))
-    rank = np.zeros(v.shape[0], dtype=np.int64)
-    for group in groups:
-        keys = []
-        for u in group.tolist():
-            a, b = span[u]
-            nbrs = np.unique(edges[a:b, 1])
-            pts = v[nbrs]
-            pts = pts[np.lexsort((pts[:, 2], pts[:, 1], pts[:, 0]))]
-            keys.append((len(nbrs), tuple(map(tuple, pts.tolist()))))
-        # sorted() is stable: equal keys keep the input order, as before.
-        by_key = sorted(range(len(group)), key=lambda i: keys[i])
-        rank[group[by_key]] = np.arange(len(group))
-    return rank
+    return np.lexsort((np.arange(n), v[:, 2], v[:, 1], v[:, 0], morton_codes(v)))
 
 
 def inverse_permutation(order: np.ndarray) -> np.ndarray:
@@ -140,7 +97,7 @@ def canonical_mesh(mesh: Mesh, *, orient: bool = True) -> tuple[Mesh, np.ndarray
     """
     k = scale_exponent(mesh.vertices)
     v = np.ldexp(mesh.vertices, 2 * k) if k else mesh.vertices
-    order = canonical_order(v, mesh.faces)
+    order = canonical_order(v)
     rank = inverse_permutation(order)
     v = v[order]
     f = canonical_faces(mesh.faces, rank)
