@@ -47,11 +47,11 @@ def test_help_documents_exit_statuses_and_the_environment(capsys):
     for args in ([], ["batch"], ["match"]):
         print_help(*args)
         out = capsys.readouterr().out
-        for code in (0, 1, 2, 130):
+        for code in (0, 1, 2, 130, 143):
             assert re.search(rf"^\s+{code}\s+\S", out, re.MULTILINE), (args, code)
         for name in ENVIRONMENT:
             assert re.search(rf"^\s+{name}\s+\S", out, re.MULTILINE), (args, name)
-    assert set(EXIT_STATUS) == {0, 1, 2, 130}
+    assert set(EXIT_STATUS) == {0, 1, 2, 130, 143}
 
 
 def test_every_environment_variable_the_readme_names_is_in_the_help():
