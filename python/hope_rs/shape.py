@@ -127,9 +127,6 @@ class Shape:
         out.__dict__.update(self.__dict__)
         return out
 
-    def __setstate__(self, state: dict) -> None:
-        self.__dict__.update(state)
-
     @property
     def points(self) -> np.ndarray:
         """Vertex positions in the internal numbering."""

@@ -9,7 +9,6 @@ Worker processes end with the batch, even when it is killed.
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import tempfile
 import warnings
@@ -204,10 +203,8 @@ def batch_config(config: MatchConfig | None, init, options: dict) -> MatchConfig
             f"not an option of hope_rs.match_many: {unknown[0]!r}; its own options are "
             f"{', '.join(BATCH_OPTIONS)}, and hope_rs.match's {', '.join(KEYWORDS)}"
         )
-    cfg = check_match_options(config=config, init=init, **options)
-    if init is not None:
-        cfg = dataclasses.replace(cfg, initial=dataclasses.replace(cfg.initial, descriptor=init))
-    return cfg
+    # check_match_options records init in cfg.initial.descriptor, as match does.
+    return check_match_options(config=config, init=init, **options)
 
 
 def _open_cache(cache, need: int) -> tuple[ShapeCache, tempfile.TemporaryDirectory | None]:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import os
 import sys
 import textwrap
@@ -103,12 +102,8 @@ def config_from_args(args) -> MatchConfig:
         options["spectral"] = False
     if args.no_shared_faces:
         options["shared_faces"] = False
-    config = check_match_options(config=config, init=args.init, **options)
-    if args.init is not None:
-        config = dataclasses.replace(
-            config, initial=dataclasses.replace(config.initial, descriptor=args.init)
-        )
-    return config
+    # The init kind is recorded in config.initial.descriptor, as match records it.
+    return check_match_options(config=config, init=args.init, **options)
 
 
 def add_batch_parser(sub) -> None:
@@ -211,7 +206,7 @@ def cmd_batch(args) -> int:
             counts["skipped" if r.skipped else ("matched" if r.ok else "failed")] += 1
             if not r.ok:
                 failures.append(f"{r.a} -> {r.b}: {r.error}")
-    except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM (cli.termination)
+    except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM (hope_rs._terminate)
         interrupted, started = e, True
     finally:
         results.close()  # on any early exit: end the workers now
