@@ -88,10 +88,14 @@ def environment(tag=None):
 
 
 def kill_after_first_map(cmd, out: Path, tag: str, timeout: float = 600) -> list[Path]:
-    """Start ``cmd``, SIGKILL it as soon as a map file appears; the maps present after."""
+    """Start ``cmd``, SIGKILL it as soon as a map file appears; the maps present after.
+    Its temporary folders, which a killed process cannot remove, go under ``out``'s parent."""
+    scratch = out.parent / "tmp"
+    scratch.mkdir(exist_ok=True)
     proc = subprocess.Popen(
-        cmd, env=environment(tag), stdout=subprocess.PIPE, stderr=subprocess.PIPE
-    )
+        cmd, env={**environment(tag), "TMPDIR": str(scratch)}, stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )  # fmt: skip
     t0 = time.monotonic()
     try:
         while not list(out.glob("*.txt")):

@@ -158,6 +158,21 @@ def test_with_landmarks_the_lifted_map_is_refined_at_full_resolution_too(faust_p
 
 
 @pytest.mark.slow
+def test_landmarks_keep_a_same_triangulation_pair_exact_at_another_resolution(faust_pair):
+    """Two poses of one triangulation, B subdivided once, with four right landmarks: the
+    refinement at full resolution ends as exact on the original vertices as without them (its
+    short pass leaves the right handle patches small, and the finish seeds from them)."""
+    a, b = faust_pair
+    dense = subdivide(b, 1)
+    n = a.n_vertices
+    marks = np.array([412, 3350, 5500, 6600])
+    res = hope_rs.match(a, dense, landmarks=np.column_stack([marks, marks]))
+    assert "refined at full resolution" in res.stage("resolution").reason
+    np.testing.assert_array_equal(res.map[marks], marks)
+    assert np.mean(res.map == np.arange(n)) > 0.95
+
+
+@pytest.mark.slow
 def test_a_much_denser_a_is_judged_at_the_common_resolution(faust_pair):
     """A body subdivided twice (16x the vertices) against itself: the lifted map is many-to-one,
     so at full resolution it keeps few 2-rings' distances however right it is. The pair is

@@ -497,13 +497,16 @@ class ResolutionConfig:
         face into four, as often as brings its density nearest the denser one's), the
         pair matched from the lifted map with one pass of ``refine_schedule`` and the
         shared-face finish, and the map carried back to the sparser shape's own vertices.
-        Not with landmarks.
     refine_schedule : tuple of int
         Hop radii of that pass.
     refine_min_handles : float
         The pass runs only when this share of the vertices are handles of the lifted map
         (:func:`~hope_rs.pipeline.handles.face_handles`): shapes remeshed independently have
         almost none, and there the pass would cost time for nothing.
+    refine_seed_share : float
+        The shared-face finish of that pass takes handle patches of at least this share of
+        the vertices as seeds (``GrowthConfig.seed_share`` there): after one short pass the
+        right patches are many and small.
     follow_density : bool
         When A is the denser shape, match again (from the descriptors, or a given start map
         carried there) at a copy of A whose
@@ -542,6 +545,7 @@ class ResolutionConfig:
     refine: bool = True
     refine_schedule: tuple[int, ...] = (3, 2, 1)
     refine_min_handles: float = field(default=0.04, metadata={"range": (0.0, 1.0)})
+    refine_seed_share: float = field(default=0.005, metadata={"range": (0.0, 1.0)})
     follow_density: bool = True
     smooth_rougher: float = field(default=1.5, metadata={"range": (1.0, None)})
     collapse_excess: float = field(default=1.25, metadata={"range": (1.0, None)})

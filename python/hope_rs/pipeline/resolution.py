@@ -443,6 +443,12 @@ class ResolutionStage(Stage):
             spectral=dataclasses.replace(cfg.spectral, enabled=False),
             orient=dataclasses.replace(cfg.orient, enabled=False),
             confidence=dataclasses.replace(cfg.confidence, enabled=False),
+            finish=dataclasses.replace(
+                cfg.finish,
+                growth=dataclasses.replace(
+                    cfg.finish.growth, seed_share=cfg.resolution.refine_seed_share
+                ),
+            ),
         )
         assert state.run is not None
         points = up.points[up.rank]  # in the subdivided mesh's own numbering
