@@ -87,15 +87,17 @@ def environment(tag=None):
     return env
 
 
-def kill_after_first_map(cmd, out: Path, tag: str, timeout: float = 600) -> list[Path]:
+def kill_after_first_map(
+    cmd, out: Path, tag: str, timeout: float = 600, *, scratch: bool = True
+) -> list[Path]:
     """Start ``cmd``, SIGKILL it as soon as a map file appears; the maps present after.
-    Its temporary folders, which a killed process cannot remove, go under ``out``'s parent."""
-    scratch = out.parent / "tmp"
-    scratch.mkdir(exist_ok=True)
-    proc = subprocess.Popen(
-        cmd, env={**environment(tag), "TMPDIR": str(scratch)}, stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-    )  # fmt: skip
+    With ``scratch``, its temporary folders, which a killed process cannot remove, go under
+    ``out``'s parent (not for Ray: its socket paths there would pass the 107-byte limit)."""
+    env = environment(tag)
+    if scratch:
+        (out.parent / "tmp").mkdir(exist_ok=True)
+        env["TMPDIR"] = str(out.parent / "tmp")
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     t0 = time.monotonic()
     try:
         while not list(out.glob("*.txt")):
@@ -152,7 +154,7 @@ def test_sigkill_of_a_ray_driver_leaves_no_ray_process(pairs_file, tmp_path):
     cmd = batch_command(pairs, out, tmp_path / "cache", 1, ["--backend", "ray"])
     cmd.remove("-j")
     cmd.remove("1")
-    done = kill_after_first_map(cmd, out, tag)
+    done = kill_after_first_map(cmd, out, tag, scratch=False)
     assert_whole(done)
     # Ray's fate sharing ends the instance it started; its agents poll for the lost raylet,
     # slowly when the machine is busy.

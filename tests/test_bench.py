@@ -166,6 +166,31 @@ def test_bench_refuses_bad_arguments(identity_set, tmp_path, capsys):
     assert "no data set nope" in capsys.readouterr().err
     assert main(["bench", str(tmp_path / "missing"), "--out", str(tmp_path)]) == 2
     assert main(["bench", str(identity_set), "--out", str(tmp_path), "--max-pairs", "0"]) == 2
+    capsys.readouterr()
+    # Checked before any work: nothing is written.
+    for up in ("Z", "spheres=q", "=x"):
+        out = tmp_path / f"up{len(up)}"
+        assert main(["bench", str(identity_set), "--out", str(out), "--up", up, "-q"]) == 2
+        assert "--up" in capsys.readouterr().err and not out.exists()
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    assert main(["bench", str(identity_set), "--out", str(afile), "--methods", "init", "-q"]) == 2
+    assert "exists and is not a folder" in capsys.readouterr().err
+    lonely = tmp_path / "lonely" / "one"
+    lonely.mkdir(parents=True)
+    write_off(lonely / "a.off", *bumpy_sphere(100, 0))
+    assert main(["bench", str(lonely.parent), "--out", str(tmp_path / "o"), "-q"]) == 2
+    assert "no pair to run" in capsys.readouterr().err
+
+
+def test_bench_leaves_other_csv_files_alone(identity_set, tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "mine.csv").write_text("a,b\n1,2\n")
+    argv = ["bench", str(identity_set), "--out", str(out), "--methods", "init", "--max-pairs", "1"]
+    assert main([*argv, "--no-render", "-q"]) == 0
+    assert (out / "mine.csv").read_text() == "a,b\n1,2\n" and not (out / "mine.md").exists()
+    assert "spheres" in (out / "summary.md").read_text()
 
 
 def test_colour_transfer_pulls_back_and_fills_gaps():

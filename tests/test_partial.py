@@ -134,6 +134,33 @@ def test_partial_sets_bad_input(tmp_path, sphere):
         write_partial_sets(tmp_path, tmp_path / "out", conditions=["cut99"])
 
 
+def test_derived_set_commands_refuse_sources_that_give_nothing_or_clash(tmp_path, sphere, capsys):
+    """Before any work: no source, a source with no pair, and two sources of one folder name
+    (whose sets would replace each other's) are refused, each in one line."""
+    one, two = tmp_path / "x" / "set", tmp_path / "y" / "set"
+    for folder in (one, two):
+        (folder / "corres").mkdir(parents=True)
+        for name in ("a", "b"):
+            write_off(folder / f"{name}.off", sphere.vertices, sphere.faces)
+            (folder / "corres" / f"{name}.vts").write_text("1\n2\n3\n")
+        (folder / "pairs.txt").write_text("a b\n")
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    write_off(empty / "a.off", sphere.vertices, sphere.faces)
+    (empty / "pairs.txt").write_text("")
+    for cmd in ("partial-set", "perturb-set", "resolution-set"):
+        for sources, why in (
+            (",", "names no data-set folder"),
+            (str(empty), "has no pair"),
+            (f"{one},{two}", "the same folder name"),
+        ):
+            out = tmp_path / f"out-{cmd}"
+            assert main([cmd, str(out), "--from", sources]) == 2
+            err = capsys.readouterr().err
+            assert why in err and err.count("\n") == 1, err
+            assert not out.exists() or not any(out.iterdir())
+
+
 def test_detect_part_by_boundary(sphere):
     whole = Shape(sphere)
     part = Shape(cut_by_plane(sphere, plane_normal(0), 0.3).mesh)

@@ -65,6 +65,7 @@ def test_coarsening_hits_the_vertex_count(target):
         ({"count_tolerance": 0.0}, r"count_tolerance must be a number in \(0.0, 1.0\)"),
         ({"count_tolerance": 1.0}, r"count_tolerance must be a number in \(0.0, 1.0\)"),
         ({"refine_min_handles": 1.5}, r"refine_min_handles must be a number in \[0.0, 1.0\]"),
+        ({"refine_seed_share": -0.1}, r"refine_seed_share must be a number in \[0.0, 1.0\]"),
     ],
 )
 def test_the_setting_is_checked_before_any_work(bad, why):

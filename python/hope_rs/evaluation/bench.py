@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..geometry.map_io import check_writable_folder
 from ..geometry.mesh import load_mesh
 from .datasets import Pair, datasets_in, pairs_of
 from .evaluate import confidence_auroc, error_curve, geodesic_errors, score, smoothness
@@ -230,20 +231,32 @@ def write_tables(out) -> None:
     parts = ["# Benchmark results\n"]
     for path in sorted(out.glob("*.csv")):
         rows = _read_csv(path)
-        if rows:
+        # Only this module's tables (another CSV in the folder is left alone).
+        if rows and {"method", "pair", "dataset"} <= rows[0].keys():
             md = _set_markdown(path.stem, rows, list(dict.fromkeys(r["method"] for r in rows)))
             path.with_suffix(".md").write_text(md)
             parts.append(md)
     (out / "summary.md").write_text("\n".join(parts))
 
 
+#: The render's up axes (:func:`hope_rs.evaluation.show.render_pair`).
+UP_AXES = ("auto", "x", "y", "z")
+
+
 def _parse_up(up: str) -> dict[str, str]:
-    if "=" not in up:
-        return {"*": up}
-    out = {}
-    for item in up.split(","):
-        k, _, v = item.partition("=")
-        out[k.strip()] = v.strip()
+    """``--up``: one axis for every set, or ``SET=AXIS,...``; checked before any work."""
+    out = {"*": up.strip()} if "=" not in up else {}
+    if "=" in up:
+        for item in up.split(","):
+            k, _, v = item.partition("=")
+            if not k.strip():
+                raise ValueError(f"--up {up!r}: each item must be SET=AXIS")
+            out[k.strip()] = v.strip()
+    bad = [v for v in out.values() if v not in UP_AXES]
+    if bad:
+        raise ValueError(
+            f"--up must be one of {', '.join(UP_AXES)} (or SET=AXIS,...), got {bad[0]!r}"
+        )
     return out
 
 
@@ -303,8 +316,9 @@ def run_bench(
                 or (folder.name in abl_sets and (ablation_pairs is None or i < ablation_pairs))
             ]
             plan.append((pair, ms))
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    if not plan:
+        raise ValueError(f"no pair to run in {str(data_dir)!r} (its data sets list none)")
+    out = check_writable_folder(out, create=True)
     bar = BenchProgress(sum(len(ms) for _, ms in plan), enabled=progress)
     all_rows: list[dict] = []
     try:

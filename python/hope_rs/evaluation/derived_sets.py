@@ -41,16 +41,27 @@ def set_jobs(
     vts_needed: str | None = None,
 ) -> list[tuple[Path, list[Pair]]]:
     """``(source folder, its first max_pairs pairs)`` per source, checked before any work:
-    every condition a key of ``known``; with ``vts_needed`` (the reason), every pair with
-    ``.vts`` ground truth."""
+    at least one source, each with pairs and a folder name no other source has (the sets
+    are named after it); every condition a key of ``known``; with ``vts_needed`` (the
+    reason), every pair with ``.vts`` ground truth."""
     if isinstance(sources, (str, os.PathLike)):
         sources = [sources]
+    if not sources:
+        raise ValueError("--from names no data-set folder; give one or more, comma-separated")
     bad = [c for c in conditions if c not in known]
     if bad:
         raise ValueError(f"unknown {what} {', '.join(bad)}; the {what}s are {', '.join(known)}")
-    jobs = []
+    jobs: list[tuple[Path, list[Pair]]] = []
     for src in sources:
+        same = [s for s, _ in jobs if s.name == Path(src).name]
+        if same:
+            raise ValueError(
+                f"{str(same[0])!r} and {str(src)!r} have the same folder name, and the sets "
+                "written from each would replace the other's; rename one, or run them apart"
+            )
         pairs = pairs_of(src)
+        if not pairs:
+            raise ValueError(f"{str(src)!r} has no pair to derive sets from")
         if vts_needed is not None and any(p.a_vts is None for p in pairs):
             raise ValueError(f"{str(src)!r} has identity ground truth; {vts_needed}")
         jobs.append((Path(src), pairs[:max_pairs]))
