@@ -2,10 +2,14 @@
 a rerun finishes the rest. Each batch runs as a subprocess whose environment carries a tag, so
 every process it starts (pool workers, Ray's processes) can be found in /proc afterwards."""
 
+from __future__ import annotations
+
 import os
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 import uuid
 from pathlib import Path
@@ -88,15 +92,14 @@ def environment(tag=None):
 
 
 def kill_after_first_map(
-    cmd, out: Path, tag: str, timeout: float = 600, *, scratch: bool = True
+    cmd, out: Path, tag: str, timeout: float = 600, *, scratch: Path | None = None
 ) -> list[Path]:
-    """Start ``cmd``, SIGKILL it as soon as a map file appears; the maps present after.
-    With ``scratch``, its temporary folders, which a killed process cannot remove, go under
-    ``out``'s parent (not for Ray: its socket paths there would pass the 107-byte limit)."""
-    env = environment(tag)
-    if scratch:
-        (out.parent / "tmp").mkdir(exist_ok=True)
-        env["TMPDIR"] = str(out.parent / "tmp")
+    """Start ``cmd``, SIGKILL it as soon as a map file appears; the maps present after. Its
+    temporary folders, which a killed process cannot remove, go in ``scratch`` (by default
+    ``out``'s parent / "tmp")."""
+    scratch = scratch or out.parent / "tmp"
+    scratch.mkdir(exist_ok=True)
+    env = {**environment(tag), "TMPDIR": str(scratch)}
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     t0 = time.monotonic()
     try:
@@ -154,11 +157,16 @@ def test_sigkill_of_a_ray_driver_leaves_no_ray_process(pairs_file, tmp_path):
     cmd = batch_command(pairs, out, tmp_path / "cache", 1, ["--backend", "ray"])
     cmd.remove("-j")
     cmd.remove("1")
-    done = kill_after_first_map(cmd, out, tag, scratch=False)
-    assert_whole(done)
-    # Ray's fate sharing ends the instance it started; its agents poll for the lost raylet,
-    # slowly when the machine is busy.
-    assert_no_survivors(tag, grace=240)
+    # A short folder: Ray's socket paths under it must stay within 107 bytes.
+    short = Path(tempfile.mkdtemp(prefix="hr-"))
+    try:
+        done = kill_after_first_map(cmd, out, tag, scratch=short)
+        assert_whole(done)
+        # Ray's fate sharing ends the instance it started; its agents poll for the lost
+        # raylet, slowly when the machine is busy.
+        assert_no_survivors(tag, grace=240)
+    finally:
+        shutil.rmtree(short, ignore_errors=True)
 
 
 def test_ctrl_c_of_a_pool_batch_prints_the_summary_and_ends_its_workers(many_pairs_file, tmp_path):

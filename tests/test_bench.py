@@ -168,8 +168,8 @@ def test_bench_refuses_bad_arguments(identity_set, tmp_path, capsys):
     assert main(["bench", str(identity_set), "--out", str(tmp_path), "--max-pairs", "0"]) == 2
     capsys.readouterr()
     # Checked before any work: nothing is written.
-    for up in ("Z", "spheres=q", "=x"):
-        out = tmp_path / f"up{len(up)}"
+    for i, up in enumerate(("Z", "spheres=q", "=x", "sphres=z", "z,spheres=")):
+        out = tmp_path / f"up{i}"
         assert main(["bench", str(identity_set), "--out", str(out), "--up", up, "-q"]) == 2
         assert "--up" in capsys.readouterr().err and not out.exists()
     afile = tmp_path / "afile"
@@ -186,10 +186,18 @@ def test_bench_refuses_bad_arguments(identity_set, tmp_path, capsys):
 def test_bench_leaves_other_csv_files_alone(identity_set, tmp_path):
     out = tmp_path / "out"
     out.mkdir()
-    (out / "mine.csv").write_text("a,b\n1,2\n")
+    others = {
+        "mine.csv": b"a,b\n1,2\n",
+        "latin1.csv": "caf\xe9,b\n1,2\n".encode("latin-1"),
+        "alike.csv": b"dataset,pair,method\nx,y,z\n",
+    }
+    for name, data in others.items():
+        (out / name).write_bytes(data)
     argv = ["bench", str(identity_set), "--out", str(out), "--methods", "init", "--max-pairs", "1"]
-    assert main([*argv, "--no-render", "-q"]) == 0
-    assert (out / "mine.csv").read_text() == "a,b\n1,2\n" and not (out / "mine.md").exists()
+    assert main([*argv, "--no-render", "-q", "--up", "z,spheres=y,"]) == 0
+    for name, data in others.items():
+        assert (out / name).read_bytes() == data
+        assert not (out / name).with_suffix(".md").exists()
     assert "spheres" in (out / "summary.md").read_text()
 
 

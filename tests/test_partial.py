@@ -150,7 +150,8 @@ def test_derived_set_commands_refuse_sources_that_give_nothing_or_clash(tmp_path
     (empty / "pairs.txt").write_text("")
     for cmd in ("partial-set", "perturb-set", "resolution-set"):
         for sources, why in (
-            (",", "names no data-set folder"),
+            (",", "no data-set folder given"),
+            (f"{one},{one}", "is given twice"),
             (str(empty), "has no pair"),
             (f"{one},{two}", "the same folder name"),
         ):

@@ -7,8 +7,8 @@ Writes to the results folder, per data set ``SET``:
 * ``SET_curves.png`` — % correspondences within geodesic error, 0..0.25 and 0..0.10;
 * ``SET_best.png``, ``SET_worst.png`` — colour transfer of HOPE's best and worst pair;
 
-and ``summary.md``, every data set's table in one file (rebuilt from all ``*.csv`` present, so
-separate runs into one folder add up). Errors use surface geodesics (``method="surface"`` of
+and ``summary.md``, every data set's table in one file (rebuilt from all the ``SET.csv`` tables
+present, so separate runs into one folder add up; other CSV files are left alone). Errors use surface geodesics (``method="surface"`` of
 :func:`hope_rs.evaluation.evaluate.geodesic_errors`), normalised by sqrt(area) of the target.
 
 A (pair, method) that raises (a mesh the method or the scoring cannot handle) gets a row with
@@ -110,6 +110,21 @@ def _write_csv(path: Path, rows: list[dict]) -> None:
         for r in rows:
             w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
     os.replace(tmp, path)
+
+
+#: Columns a results table has (an older table may lack later ones); a CSV file without them
+#: is not one of this module's tables.
+TABLE_COLUMNS = {"dataset", "pair", "method", "n_scored", "failed"}
+
+
+def _is_table(path: Path) -> bool:
+    """Whether ``path`` is one of this module's tables, read from its header only."""
+    try:
+        with open(path, newline="") as fh:
+            header = next(csv.reader(fh), [])
+    except (OSError, UnicodeDecodeError, csv.Error):
+        return False
+    return set(header) >= TABLE_COLUMNS
 
 
 def _read_csv(path: Path) -> list[dict]:
@@ -229,10 +244,9 @@ def write_tables(out) -> None:
     """(Re)write ``SET.md`` and ``summary.md`` from the ``SET.csv`` files in ``out``."""
     out = Path(out)
     parts = ["# Benchmark results\n"]
-    for path in sorted(out.glob("*.csv")):
+    for path in sorted(p for p in out.glob("*.csv") if _is_table(p)):
         rows = _read_csv(path)
-        # Only this module's tables (another CSV in the folder is left alone).
-        if rows and {"method", "pair", "dataset"} <= rows[0].keys():
+        if rows:
             md = _set_markdown(path.stem, rows, list(dict.fromkeys(r["method"] for r in rows)))
             path.with_suffix(".md").write_text(md)
             parts.append(md)
@@ -243,20 +257,23 @@ def write_tables(out) -> None:
 UP_AXES = ("auto", "x", "y", "z")
 
 
-def _parse_up(up: str) -> dict[str, str]:
-    """``--up``: one axis for every set, or ``SET=AXIS,...``; checked before any work."""
-    out = {"*": up.strip()} if "=" not in up else {}
-    if "=" in up:
-        for item in up.split(","):
-            k, _, v = item.partition("=")
-            if not k.strip():
-                raise ValueError(f"--up {up!r}: each item must be SET=AXIS")
-            out[k.strip()] = v.strip()
-    bad = [v for v in out.values() if v not in UP_AXES]
-    if bad:
-        raise ValueError(
-            f"--up must be one of {', '.join(UP_AXES)} (or SET=AXIS,...), got {bad[0]!r}"
-        )
+def _parse_up(up: str, names) -> dict[str, str]:
+    """``--up``: comma-separated items, each an axis (for every set) or ``SET=AXIS`` for the
+    data set ``SET``, one of ``names``; checked before any work."""
+    out = {}
+    for item in (s.strip() for s in up.split(",")):
+        if not item:
+            continue
+        k, eq, v = item.partition("=")
+        if not eq:
+            k, v = "*", k
+        elif k.strip() not in names:
+            raise ValueError(
+                f"--up {item!r}: no data set {k.strip()!r}; found {', '.join(sorted(names))}"
+            )
+        if v.strip() not in UP_AXES:
+            raise ValueError(f"--up {item!r}: the axis must be one of {', '.join(UP_AXES)}")
+        out[k.strip()] = v.strip()
     return out
 
 
@@ -302,9 +319,10 @@ def run_bench(
     """
 
     methods = check_methods(methods)
-    folders = _select(datasets_in(data_dir), sets, data_dir)
+    found = datasets_in(data_dir)
+    folders = _select(found, sets, data_dir)
     abl_sets = {f.name for f in _select(folders, ablation_sets, data_dir)}
-    ups = _parse_up(up)
+    ups = _parse_up(up, {f.name for f in found})
     plan = []
     for folder in folders:
         pairs = pairs_of(folder)[:max_pairs]
@@ -317,7 +335,10 @@ def run_bench(
             ]
             plan.append((pair, ms))
     if not plan:
-        raise ValueError(f"no pair to run in {str(data_dir)!r} (its data sets list none)")
+        raise ValueError(
+            f"no pair to run in {str(data_dir)!r}: give a data set a pairs.txt of 'SOURCE "
+            "TARGET' lines, or two or more meshes with one vertex count (identity ground truth)"
+        )
     out = check_writable_folder(out, create=True)
     bar = BenchProgress(sum(len(ms) for _, ms in plan), enabled=progress)
     all_rows: list[dict] = []

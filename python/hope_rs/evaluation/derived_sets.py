@@ -47,13 +47,15 @@ def set_jobs(
     if isinstance(sources, (str, os.PathLike)):
         sources = [sources]
     if not sources:
-        raise ValueError("--from names no data-set folder; give one or more, comma-separated")
+        raise ValueError("no data-set folder given (--from): give one or more, comma-separated")
     bad = [c for c in conditions if c not in known]
     if bad:
         raise ValueError(f"unknown {what} {', '.join(bad)}; the {what}s are {', '.join(known)}")
     jobs: list[tuple[Path, list[Pair]]] = []
     for src in sources:
         same = [s for s, _ in jobs if s.name == Path(src).name]
+        if same and same[0].resolve() == Path(src).resolve():
+            raise ValueError(f"{str(src)!r} is given twice; list it once")
         if same:
             raise ValueError(
                 f"{str(same[0])!r} and {str(src)!r} have the same folder name, and the sets "
@@ -61,7 +63,10 @@ def set_jobs(
             )
         pairs = pairs_of(src)
         if not pairs:
-            raise ValueError(f"{str(src)!r} has no pair to derive sets from")
+            raise ValueError(
+                f"{str(src)!r} has no pair to derive sets from: give it a pairs.txt of 'SOURCE "
+                "TARGET' lines, or two or more meshes with one vertex count"
+            )
         if vts_needed is not None and any(p.a_vts is None for p in pairs):
             raise ValueError(f"{str(src)!r} has identity ground truth; {vts_needed}")
         jobs.append((Path(src), pairs[:max_pairs]))
