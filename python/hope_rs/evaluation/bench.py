@@ -7,8 +7,9 @@ Writes to the results folder, per data set ``SET``:
 * ``SET_curves.png`` — % correspondences within geodesic error, 0..0.25 and 0..0.10;
 * ``SET_best.png``, ``SET_worst.png`` — colour transfer of HOPE's best and worst pair;
 
-and ``summary.md``, every data set's table in one file (rebuilt from all the ``SET.csv`` tables
-present, so separate runs into one folder add up; other CSV files are left alone). Errors use surface geodesics (``method="surface"`` of
+and ``summary.md``, every data set's table in one file (rebuilt from all the ``SET.csv``
+tables present, so separate runs into one folder add up; other CSV files are left alone).
+Errors use surface geodesics (``method="surface"`` of
 :func:`hope_rs.evaluation.evaluate.geodesic_errors`), normalised by sqrt(area) of the target.
 
 A (pair, method) that raises (a mesh the method or the scoring cannot handle) gets a row with
@@ -28,7 +29,7 @@ import numpy as np
 
 from ..geometry.map_io import check_writable_folder
 from ..geometry.mesh import load_mesh
-from .datasets import Pair, datasets_in, pairs_of
+from .datasets import GIVE_PAIRS, Pair, datasets_in, pairs_of
 from .evaluate import confidence_auroc, error_curve, geodesic_errors, score, smoothness
 from .methods import ABLATIONS, DEFAULT_METHODS, METHODS, PairContext, check_methods, run_method
 from .perturbed import shortcut_errors
@@ -264,16 +265,14 @@ def _parse_up(up: str, names) -> dict[str, str]:
     for item in (s.strip() for s in up.split(",")):
         if not item:
             continue
-        k, eq, v = item.partition("=")
+        k, eq, v = (x.strip() for x in item.partition("="))
         if not eq:
             k, v = "*", k
-        elif k.strip() not in names:
-            raise ValueError(
-                f"--up {item!r}: no data set {k.strip()!r}; found {', '.join(sorted(names))}"
-            )
-        if v.strip() not in UP_AXES:
+        elif k not in names:
+            raise ValueError(f"--up {item!r}: no data set {k!r}; found {', '.join(sorted(names))}")
+        if v not in UP_AXES:
             raise ValueError(f"--up {item!r}: the axis must be one of {', '.join(UP_AXES)}")
-        out[k.strip()] = v.strip()
+        out[k] = v
     return out
 
 
@@ -335,10 +334,7 @@ def run_bench(
             ]
             plan.append((pair, ms))
     if not plan:
-        raise ValueError(
-            f"no pair to run in {str(data_dir)!r}: give a data set a pairs.txt of 'SOURCE "
-            "TARGET' lines, or two or more meshes with one vertex count (identity ground truth)"
-        )
+        raise ValueError(f"no pair to run in {str(data_dir)!r}; for each data set, {GIVE_PAIRS}")
     out = check_writable_folder(out, create=True)
     bar = BenchProgress(sum(len(ms) for _, ms in plan), enabled=progress)
     all_rows: list[dict] = []

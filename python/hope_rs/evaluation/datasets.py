@@ -26,6 +26,12 @@ MESH_SUFFIXES = (".off", ".obj", ".ply")
 #: vertices (one surface geodesic per wrong vertex would otherwise dominate the run time).
 MAX_IDENTITY_POINTS = 7000
 
+#: How a data-set folder lists pairs, for the messages of commands that found none.
+GIVE_PAIRS = (
+    "give it a pairs.txt of 'SOURCE TARGET' lines, or two or more meshes with one vertex count "
+    "(identity ground truth)"
+)
+
 
 @dataclass(frozen=True)
 class Pair:

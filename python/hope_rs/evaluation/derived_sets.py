@@ -13,7 +13,7 @@ import numpy as np
 
 from ..geometry.map_io import check_writable_folder
 from ..geometry.mesh import Mesh
-from .datasets import Pair, pairs_of
+from .datasets import GIVE_PAIRS, Pair, pairs_of
 
 __all__ = ["add_set_parser", "run_set_command", "set_jobs", "write_off", "write_sets", "write_vts"]
 
@@ -63,10 +63,7 @@ def set_jobs(
             )
         pairs = pairs_of(src)
         if not pairs:
-            raise ValueError(
-                f"{str(src)!r} has no pair to derive sets from: give it a pairs.txt of 'SOURCE "
-                "TARGET' lines, or two or more meshes with one vertex count"
-            )
+            raise ValueError(f"{str(src)!r} has no pair to derive sets from: {GIVE_PAIRS}")
         if vts_needed is not None and any(p.a_vts is None for p in pairs):
             raise ValueError(f"{str(src)!r} has identity ground truth; {vts_needed}")
         jobs.append((Path(src), pairs[:max_pairs]))
