@@ -461,4 +461,5 @@ def cmd_bench(args) -> int:
         print(f"{len(failed)} failed (listed in the tables):", file=sys.stderr)
         for r in failed:
             print(f"  {r['dataset']} {r['pair']} {r['method']}: {r['failed']}", file=sys.stderr)
-    return 0
+    # Like a batch: the tables are written either way, the status says that a pair failed.
+    return 1 if failed else 0
