@@ -1,6 +1,6 @@
-"""Vertices that no face uses are left out of the match: never a target on B; on A they take
-the image of the nearest vertex faces use, with confidence 0; the rest of the map is the match
-of the meshes without them."""
+"""Vertices that no face uses and small loose pieces (scan debris) are left out of the match:
+never a target on B; on A they take the image of the nearest kept vertex, with confidence 0;
+the rest of the map is the match of the meshes without them."""
 
 import numpy as np
 import pytest
@@ -71,3 +71,53 @@ def test_a_given_map_and_landmarks_are_carried_over(pair):
     loose_b = np.setdiff1d(np.arange(len(wb)), old_b)
     with pytest.raises(ValueError, match=f"landmark vertex {loose_b[0]} of B is in no face"):
         hope_rs.match((wa, ga), (wb, gb), landmarks=[[old_a[0], loose_b[0]]])
+
+
+def with_debris(v, f, n_pieces: int, seed: int, size: float = 0.01):
+    """(v, f) with ``n_pieces`` loose triangles of side ``size`` (the sphere's radius is
+    about 1) appended, placed beside the surface."""
+    rng = np.random.default_rng(seed)
+    corner = v[rng.integers(0, len(v), n_pieces)] * 1.3
+    tri = corner[:, None] + size * np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]])[None]
+    extra = len(v) + np.arange(3 * n_pieces).reshape(-1, 3)
+    return np.r_[v, tri.reshape(-1, 3)], np.r_[f, extra]
+
+
+def test_small_loose_pieces_are_left_out(pair):
+    # Scan debris: thirty small triangles beside B (under 0.1% of its area) make B an open
+    # surface of thirty-one pieces, whose constant functions fill the spectral basis.
+    (va, fa), (vb, fb) = pair
+    wb, gb = with_debris(vb, fb, 30, 6)
+    res = hope_rs.match((va, fa), (wb, gb))
+    plain = hope_rs.match((va, fa), (vb, fb))
+    np.testing.assert_array_equal(res.map, plain.map)
+    np.testing.assert_array_equal(res.confidence, plain.confidence)
+    assert "90 of B's vertices in small loose pieces left out" in res.stage("shapes").reason
+    assert not res.stage("partial").ran
+    # On A: the debris takes its nearest kept vertex's image, with confidence 0.
+    wa, ga = with_debris(va, fa, 30, 7)
+    res = hope_rs.match((wa, ga), (vb, fb))
+    np.testing.assert_array_equal(res.map[:N], plain.map)
+    assert (res.confidence[N:] == 0).all()
+    # min_piece = 0 keeps every piece, and the debris moves most of the map.
+    cfg = hope_rs.MatchConfig(shape=hope_rs.ShapeConfig(min_piece=0.0))
+    kept = hope_rs.match((va, fa), (wb, gb), config=cfg)
+    assert "loose" not in kept.stage("shapes").reason
+    assert (kept.map != plain.map).mean() > 0.5
+
+
+def test_which_pieces_are_loose_does_not_depend_on_their_number_or_order():
+    from hope_rs.geometry.mesh import Mesh
+    from hope_rs.pipeline.unreferenced import _loose
+
+    (v, f) = bumpy_sphere(N, 0)
+    # Pieces of one area are kept together whatever the share: none is smaller than the rest.
+    twice = Mesh(np.r_[v, v], np.r_[f, f + len(v)])
+    assert not _loose(twice, 0.9).any()
+    # Ten equal debris triangles go together or stay together, in any order.
+    wv, wf = with_debris(v, f, 10, 8)
+    loose = _loose(Mesh(wv, wf), 0.005)
+    assert loose.sum() == 10 and loose[len(f):].all()
+    perm = np.random.default_rng(9).permutation(len(wf))
+    np.testing.assert_array_equal(_loose(Mesh(wv, wf[perm]), 0.005), loose[perm])
+    assert not _loose(Mesh(wv, wf), 1e-9).any()

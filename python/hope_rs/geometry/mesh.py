@@ -19,6 +19,8 @@ import warnings
 from functools import cached_property
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 
 from .._validate import as_faces, as_vertices
 from .readers import READERS, LineError, one_line
@@ -165,6 +167,13 @@ def _edge_counts(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def unique_edges(faces: np.ndarray) -> np.ndarray:
     """The undirected edges of ``faces``, each once as ``(low, high)``, sorted."""
     return _edge_counts(faces)[0]
+
+
+def vertex_components(n: int, edges: np.ndarray) -> np.ndarray:
+    """Component label (int64) per vertex of the graph of ``n`` vertices and ``edges``
+    ((m, 2) vertex pairs); a vertex in no edge is a component of its own."""
+    graph = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    return connected_components(graph, directed=False)[1].astype(np.int64)
 
 
 def boundary_edges(faces: np.ndarray) -> np.ndarray:

@@ -21,22 +21,14 @@ of the cost it minimises, and the core its ``"torn"`` hypothesis re-places the r
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
-from ..geometry.mesh import boundary_edges
+from ..geometry.mesh import boundary_edges, vertex_components
 from ..shape import Shape
 from .anchors import anchor_step
 from .config import RepairConfig
 from .partial import mean_edge
 
 __all__ = ["TornRegions", "replaced"]
-
-
-def _pieces(n: int, edges: np.ndarray) -> np.ndarray:
-    """Component label per vertex of the graph of ``n`` vertices and these edges."""
-    graph = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
-    return connected_components(graph, directed=False)[1].astype(np.int64)
 
 
 class TornRegions:
@@ -66,7 +58,7 @@ class TornRegions:
         #: Each vertex's share of A's area (a third of its faces'; a Shape has a positive area).
         self.area = area / area.sum()
         #: Per vertex of A, its component of A's mesh.
-        self.mesh_part = _pieces(self.n, self.edges)
+        self.mesh_part = vertex_components(self.n, self.edges)
         #: The edges of A with an end on its boundary, never cut: a part's rim vertices,
         #: their 2-rings incomplete, land loosely, and a narrow strip beside a hole would
         #: tear a limb off a right map.
@@ -88,7 +80,7 @@ class TornRegions:
         f = np.asarray(f)
         kept = np.linalg.norm(pb[f[e[:, 0]]] - pb[f[e[:, 1]]], axis=1) <= self.max_length
         kept |= self.on_rim
-        label = _pieces(self.n, e[kept])
+        label = vertex_components(self.n, e[kept])
         size = np.bincount(label, self.area)
         # Per mesh component, its largest piece (ties to the lowest label).
         part = np.zeros(size.size, dtype=np.int64)

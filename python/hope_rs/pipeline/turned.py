@@ -19,10 +19,8 @@ refinement's witnesses when ``RefineConfig.max_turned`` is set (a part's matches
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
-from ..geometry.mesh import boundary_edges
+from ..geometry.mesh import boundary_edges, vertex_components
 from ..geometry.normals import face_normals, vertex_normal_sums
 from ..shape import Shape
 
@@ -37,13 +35,10 @@ def vertex_normals(s: Shape) -> np.ndarray:
 def _components(s: Shape) -> tuple[np.ndarray, np.ndarray]:
     """(component of each vertex, int64; whether each component has an edge of one face only)
     of the internal mesh, components linked through its edges."""
-    n = s.n_vertices
-    e = s.edges
-    graph = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
-    _, comp = connected_components(graph, directed=False)
+    comp = vertex_components(s.n_vertices, s.edges)
     is_open = np.zeros(int(comp.max()) + 1, dtype=bool)
     is_open[comp[boundary_edges(s.internal.faces)[:, 0]]] = True
-    return comp.astype(np.int64), is_open
+    return comp, is_open
 
 
 class TurnedFaces:

@@ -1,11 +1,18 @@
-"""Vertices that no face uses: left out of the match, given a map afterwards.
+"""Vertices that no face uses, and small loose pieces: left out of the match, given a map
+afterwards.
 
 A mesh may carry vertices in no face (a part cut out of a scan with the removed faces'
-vertices kept, points left over from cleaning). They have no surface around them to match
-by, so the pair is matched on the vertices that faces use (:func:`referenced`), and the
-result is expanded to the meshes' own numbering (:meth:`Referenced.expand`): a vertex of B
-in no face is never a target, and a vertex of A in no face takes the image of the nearest
-(in space) vertex of A that faces use, with confidence 0.
+vertices kept, points left over from cleaning), and a scan may carry loose pieces of a few
+triangles (debris). Neither has a surface to match by: a piece of debris has long open
+edges for its size, no place in the body's spectrum and nothing to correspond to, and a few
+of them would make a closed body count as a part, fill the spectral basis with their own
+constant functions and send body vertices onto them. So the pair is matched on the vertices
+of the pieces that matter (:func:`referenced`): the smallest pieces (connected components)
+that together hold less than ``ShapeConfig.min_piece`` of a mesh's area are left out (never
+its largest piece), and so are the vertices in no face. The result is expanded to the
+meshes' own numbering (:meth:`Referenced.expand`): a left-out vertex of B is never a target,
+and a left-out vertex of A takes the image of the nearest (in space) kept vertex of A, with
+confidence 0.
 """
 
 from __future__ import annotations
@@ -15,7 +22,7 @@ import dataclasses
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..geometry.mesh import Mesh
+from ..geometry.mesh import Mesh, unique_edges, vertex_components
 from .result import MatchResult
 
 __all__ = ["Referenced", "referenced"]
@@ -30,15 +37,40 @@ def _index(keep: np.ndarray | None, n: int) -> np.ndarray:
     return out
 
 
-def _compact(mesh: Mesh) -> tuple[Mesh, np.ndarray] | None:
-    """``mesh`` without the vertices no face uses and the indices of those it keeps, or
-    ``None`` when faces use every vertex."""
+def _loose(mesh: Mesh, min_piece: float) -> np.ndarray:
+    """Bool per face: in one of the smallest pieces (connected components) that together
+    hold less than ``min_piece`` of the mesh's area. A piece goes with every piece of its
+    area or less, so that which pieces go does not depend on the numbering; the largest
+    piece always stays."""
+    faces = mesh.faces
+    piece = vertex_components(mesh.n_vertices, unique_edges(faces))[faces[:, 0]]
+    if min_piece <= 0.0 or piece.min() == piece.max():
+        return np.zeros(len(faces), dtype=bool)
+    area = np.bincount(piece, mesh.face_areas)
+    ranked = np.sort(area)
+    upto = np.cumsum(ranked)[np.searchsorted(ranked, area, side="right") - 1]
+    small = (upto < min_piece * area.sum()) & (area < area.max())
+    return small[piece]
+
+
+def _compact(mesh: Mesh, min_piece: float) -> tuple[Mesh, np.ndarray, int] | None:
+    """``mesh`` without its small loose pieces (:func:`_loose`) and the vertices no face
+    uses, the indices of the vertices it keeps and how many vertices of loose pieces went;
+    ``None`` when it keeps every vertex."""
+    loose = _loose(mesh, min_piece)
+    faces = mesh.faces[~loose]
     used = np.zeros(mesh.n_vertices, dtype=bool)
-    used[mesh.faces.ravel()] = True
+    used[faces.ravel()] = True
     if used.all():
         return None
+    in_loose = np.zeros(mesh.n_vertices, dtype=bool)
+    in_loose[mesh.faces[loose].ravel()] = True
     keep = np.flatnonzero(used)
-    return Mesh(mesh.vertices[keep], _index(keep, mesh.n_vertices)[mesh.faces]), keep
+    return (
+        Mesh(mesh.vertices[keep], _index(keep, mesh.n_vertices)[faces]),
+        keep,
+        int(in_loose.sum()),
+    )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -55,14 +87,22 @@ class Referenced:
     #: The compact meshes (``None``: that mesh as it was).
     mesh_a: Mesh | None = None
     mesh_b: Mesh | None = None
+    #: How many vertices of A and of B were in small loose pieces.
+    loose: tuple[int, int] = (0, 0)
 
     def note(self) -> str:
         """What was left out, for the shapes' log line ("" when nothing)."""
-        parts = [
-            f"{n - keep.size} of {name}'s vertices in no face left out"
-            for name, keep, n in (("A", self.keep_a, self.n_a), ("B", self.keep_b, self.n_b))
-            if keep is not None
-        ]
+        parts = []
+        for name, keep, n, loose in (
+            ("A", self.keep_a, self.n_a, self.loose[0]),
+            ("B", self.keep_b, self.n_b, self.loose[1]),
+        ):
+            if keep is None:
+                continue
+            if loose:
+                parts.append(f"{loose} of {name}'s vertices in small loose pieces left out")
+            if n - keep.size > loose:
+                parts.append(f"{n - keep.size - loose} of {name}'s vertices in no face left out")
         return "; ".join(parts)
 
     def init_in(self, init: np.ndarray) -> np.ndarray:
@@ -78,7 +118,7 @@ class Referenced:
         return idx
 
     def landmarks_in(self, landmarks: np.ndarray | None) -> np.ndarray | None:
-        """Landmarks in the compact numbering; one on a vertex in no face is refused."""
+        """Landmarks in the compact numbering; one on a vertex left out is refused."""
         if landmarks is None:
             return None
         out = landmarks.copy()
@@ -92,7 +132,8 @@ class Referenced:
             if (mapped < 0).any():
                 v = int(landmarks[np.argmax(mapped < 0), col])
                 raise ValueError(
-                    f"landmark vertex {v} of {name} is in no face; give a vertex of the surface"
+                    f"landmark vertex {v} of {name} is in no face or in a small loose piece "
+                    "left out of the match; give a vertex of the surface"
                 )
             out[:, col] = mapped
         return out
@@ -125,10 +166,12 @@ class Referenced:
         )
 
 
-def referenced(ma: Mesh, mb: Mesh) -> Referenced | None:
-    """The two meshes without their vertices in no face (``mesh_a``, ``mesh_b``) and how to
-    carry maps between the numberings; ``None`` when faces use every vertex of both."""
-    ca, cb = _compact(ma), _compact(mb)
+def referenced(ma: Mesh, mb: Mesh, min_piece: float = 0.0) -> Referenced | None:
+    """The two meshes without their vertices in no face and their smallest loose pieces
+    (together under ``min_piece`` of the area, ``ShapeConfig.min_piece``) (``mesh_a``,
+    ``mesh_b``) and how to carry maps between the numberings; ``None`` when nothing is left
+    out."""
+    ca, cb = _compact(ma, min_piece), _compact(mb, min_piece)
     if ca is None and cb is None:
         return None
     return Referenced(
@@ -140,4 +183,5 @@ def referenced(ma: Mesh, mb: Mesh) -> Referenced | None:
         mb.vertices,
         None if ca is None else ca[0],
         None if cb is None else cb[0],
+        (0 if ca is None else ca[2], 0 if cb is None else cb[2]),
     )
