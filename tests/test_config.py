@@ -19,6 +19,7 @@ from hope_rs.pipeline.config import (
     KEYWORDS,
     ConfidenceConfig,
     FinishConfig,
+    GrowthConfig,
     InitialConfig,
     LandmarkConfig,
     OrientConfig,
@@ -293,3 +294,21 @@ def test_counts_that_cannot_run_are_refused_before_any_work(bundled, stage, name
     search = dataclasses.replace(base.initial.search, pca_dims=0)
     with pytest.raises(ValueError, match=r"initial\.search\.pca_dims must be an integer >= 1"):
         hope_rs.match(a, b, config=MatchConfig(initial=InitialConfig(search=search)))
+
+
+@pytest.mark.parametrize(
+    "fields, message",
+    [
+        ({"faces_first": ("bogus",)}, r"faces_first must be a sequence of steps"),
+        ({"affine_first": (0, 7)}, r"affine_first must be .*\('faces', 0, 1, 2\), got \(0, 7\)"),
+        ({"agreement_order": "faces"}, r"agreement_order must be a sequence"),
+        ({"faces_first": (True,)}, r"faces_first must be"),
+        ({"affine_stages": ((0.3,),)}, r"affine_stages must be \(accept, ratio\) pairs"),
+        ({"affine_stages": ((0.3, 2.0),), "faces_first": ("faces", 1)}, r"\('faces', 0\)"),
+    ],
+)
+def test_growth_step_orders_are_checked_when_made(fields, message):
+    # They were read only inside the shared-face finish, after the match's work.
+    with pytest.raises(ValueError, match=message):
+        GrowthConfig(**fields)
+    assert GrowthConfig(faces_first=["faces", 2]).faces_first == ("faces", 2)

@@ -208,6 +208,10 @@ def test_cli_reads_a_landmark_file(tmp_path, spheres):
     [
         ("0 5\n1 2 3\n", r"lm.txt:2: expected two 0-based vertex indices .*'1 2 3'"),
         ("0 x\n", r"lm.txt:1: expected two .*'0 x'"),
+        ("1_0 2\n", r"lm.txt:1: expected two .*'1_0 2'"),  # int() reads it as 10
+        ("\u0661 2\n", r"lm.txt:1: expected two"),  # an Arabic-Indic one
+        # It raised OverflowError, an internal error in a batch.
+        ("99999999999999999999999 0\n", r"lm.txt:1: vertex index too large"),
         ("0 5\n0 6\n", r"contradict.*vertex 0 of A is paired with vertices 5 and 6 of B"),
         ("0 999\n", r"vertex 999 is not a vertex of B, which has 450"),
     ],

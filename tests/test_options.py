@@ -39,9 +39,9 @@ BAD = [
     ({"top_k": 2**40}, ValueError, r"top_k must be an integer in \[1, 2147483647\]"),
     ({"top_k": 4.0}, TypeError, r"top_k must be an integer .*got float"),
     ({"top_k": True}, TypeError, r"top_k must be an integer .*not a bool"),
-    ({"polish_k": -1}, ValueError, r"polish_k must be None or an integer in \[1, k_max=8\]"),
-    ({"polish_k": 0}, ValueError, r"polish_k must be None or an integer in \[1, k_max=8\]"),
-    ({"polish_k": 9}, ValueError, r"polish_k must be None or an integer in \[1, k_max=8\]"),
+    ({"polish_k": -1}, ValueError, r"polish_k must be None or an integer in \[1, 64\]"),
+    ({"polish_k": 0}, ValueError, r"polish_k must be None or an integer in \[1, 64\]"),
+    ({"polish_k": 65}, ValueError, r"polish_k must be None or an integer in \[1, 64\]"),
     ({"polish_k": False}, TypeError, r"polish_k .*not a bool"),
     ({"schedule": "8"}, TypeError, r"schedule must be a non-empty list .*got the string '8'"),
     ({"schedule": [8, 0]}, ValueError, r"hop radii in \[1, k_max=8\], got the entry 0"),
@@ -99,6 +99,9 @@ def test_good_options_pass_the_checks(pair, no_shapes):
         {"schedule": (8, 4, 1), "max_passes": 1, "min_consistent": 0, "k_max": 8},
         {"min_consistent": np.float32(1.0), "spectral": np.bool_(False), "callback": print},
         {"init": np.arange(N, dtype=np.int32), "k_max": 2, "polish_k": 2},
+        # The default polish_k (3) runs at k_max = 2: a k_max the range allows is never refused.
+        {"k_max": 2},
+        {"polish_k": 9},
         {"progress": True},
         {"progress": False, "callback": None},
         {"progress": lambda event: None},
@@ -153,6 +156,9 @@ def test_cli_rejects_k_max_with_one_line(pair, tmp_path, capsys, k_max):
         ({"bogus": 1}, TypeError, "not an option of hope_rs.match_many: 'bogus'"),
         # A mistyped batch option: the message lists the batch's own options too.
         ({"jbos": 1}, TypeError, "'jbos'; its own options are out_dir, jobs, backend, cache"),
+        ({"progress": 5}, TypeError, "progress must be None, True, False or callable"),
+        # One line, not the array's repr.
+        ({"init": np.arange(N)}, ValueError, "in a batch, got ndarray \\(a pair's own initial map"),
     ],
 )
 def test_a_batch_checks_match_options_before_any_work(
@@ -162,9 +168,22 @@ def test_a_batch_checks_match_options_before_any_work(
         raise AssertionError("the batch prepared a shape before checking the match options")
 
     monkeypatch.setattr(hope_rs.batch.scheduler, "prepare_task", forbidden)
-    with pytest.raises(exc, match=message):
+    with pytest.raises(exc, match=message) as info:
         hope_rs.match_many(list(pair), out_dir=tmp_path / "maps", jobs=1, cache=False, **options)
+    assert "\n" not in str(info.value)
     assert not (tmp_path / "maps").exists()
+
+
+def test_numpy_scalars_set_options_as_python_numbers_do(pair, no_shapes):
+    # MatchConfig.key(), which a batch names its settings by, failed on NumPy scalars.
+    plain = hope_rs.MatchConfig().with_options(top_k=32, spectral=True)
+    numpy = hope_rs.MatchConfig().with_options(top_k=np.int64(32), spectral=np.True_)
+    assert numpy == plain and numpy.key() == plain.key()
+    # with_options stores what it is given; match refuses it as the option itself.
+    for schedule, message in (([3.7, 2.2], "got the entry 3.7"), ("321", "got the string")):
+        cfg = hope_rs.MatchConfig().with_options(schedule=schedule)
+        with pytest.raises(TypeError, match=message):
+            hope_rs.match(*pair, config=cfg)
 
 
 def test_the_batch_options_listed_are_its_keyword_arguments():

@@ -193,7 +193,12 @@ def batch_config(config: MatchConfig | None, init, options: dict) -> MatchConfig
     keyword ``options`` set through :meth:`MatchConfig.with_options`, as :func:`hope_rs.match`
     does; every value checked by the same function as ``match``'s."""
     if init is not None and (not isinstance(init, str) or init not in INIT_KINDS):
-        raise ValueError(f"init must be 'shot', 'wks' or 'hks' in a batch, got {init!r}")
+        # A map's repr runs over many lines: say what it is instead.
+        what = repr(init) if isinstance(init, str) else type(init).__name__
+        raise ValueError(
+            f"init must be 'shot', 'wks' or 'hks' in a batch, got {what} (a pair's own initial "
+            "map: match that pair with hope_rs.match)"
+        )
     for name in ("callback", "progress"):
         if name in options:
             raise TypeError(f"{name} is not an option of a batch's pairs")
@@ -267,6 +272,11 @@ def imatch_many(
         raise ValueError("no shapes given")
     if map_format not in MAP_FORMATS:
         raise ValueError(f"map_format must be one of {sorted(MAP_FORMATS)}, got {map_format!r}")
+    if not (progress is None or isinstance(progress, (bool, np.bool_)) or callable(progress)):
+        raise TypeError(
+            "progress must be None, True, False or callable (it is called with each "
+            f"PairResult), got {type(progress).__name__}"
+        )
     cfg = batch_config(config, init, match_options)
     check_backend(backend, jobs)
     ij = _resolve_pairs(pairs, names)

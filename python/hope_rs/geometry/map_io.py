@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import io
 import os
+import re
 import shutil
 import tempfile
 from collections.abc import Callable
@@ -43,6 +44,11 @@ MAP_SUFFIXES = {".txt": "text", ".csv": "text", "": "text", ".npy": "npy"}
 TEMP_PREFIX = ".hope-rs-"
 
 _NPY_MAGIC = b"\x93NUMPY"
+#: A text map's characters: signed decimal integers in ASCII, separated by white space.
+_INTEGERS = re.compile(r"[\s0-9+-]*")
+#: One index of a landmark file.
+_INTEGER = re.compile(r"[+-]?[0-9]+")
+_INT64_MAX = int(np.iinfo(np.int64).max)
 
 
 def map_format(path: str | os.PathLike) -> str:
@@ -266,8 +272,10 @@ def read_map(
         arr = arr.astype(np.int64)
     else:
         try:
-            tokens = without_bom(data).decode("ascii").split()
-            arr = np.array([int(t) for t in tokens], dtype=np.int64)
+            text = without_bom(data).decode("ascii")
+            if not _INTEGERS.fullmatch(text):  # int() would take "1_0" for 10
+                raise ValueError
+            arr = np.array([int(t) for t in text.split()], dtype=np.int64)
         except (UnicodeDecodeError, ValueError, OverflowError):
             raise ValueError(
                 f"map {name!r} is not a map file (expected one 0-based integer index per line, "
@@ -321,15 +329,16 @@ def read_landmarks(path: str | os.PathLike) -> np.ndarray:
         words = line.split("#", 1)[0].replace(",", " ").split()
         if not words:
             continue
-        try:
-            if len(words) != 2:
-                raise ValueError
-            rows.append((int(words[0]), int(words[1])))
-        except ValueError:
+        # ASCII digits only: int() would take "1_0" for 10 and other scripts' digits.
+        if len(words) != 2 or not all(_INTEGER.fullmatch(w) for w in words):
             raise ValueError(
                 f"{name}:{n}: expected two 0-based vertex indices 'A_VERTEX B_VERTEX', got "
                 f"{line.strip()!r}"
-            ) from None
+            )
+        pair = (int(words[0]), int(words[1]))
+        if max(abs(v) for v in pair) > _INT64_MAX:
+            raise ValueError(f"{name}:{n}: vertex index too large, got {line.strip()!r}")
+        rows.append(pair)
     return np.array(rows, dtype=np.int64).reshape(-1, 2)
 
 

@@ -25,6 +25,8 @@ import numbers
 from dataclasses import dataclass, field
 from types import ModuleType
 
+import numpy as np
+
 from ..kernels.search import SearchConfig
 from ..shape import ShapeConfig
 
@@ -205,8 +207,8 @@ class RefineConfig:
     min_witness_fraction : float
         Below this share of witnesses every vertex votes.
     polish_k : int or None
-        Hop radius of the last, not one-to-one step; ``None``: no polish
-        (docs/decisions.md#polish).
+        Hop radius of the last, not one-to-one step (at most ``MatchConfig.k_max``: a larger
+        one runs at ``k_max``); ``None``: no polish (docs/decisions.md#polish).
     global_step : bool
         Start each pass with the global repair (docs/decisions.md#global-repair).
     converged_fraction : float
@@ -390,6 +392,35 @@ class GrowthConfig:
     affine_first: tuple = (0, 1, 2, "faces")
     agreement_order: tuple = (0, 1, "faces", 2)
     agreement_rounds: int = field(default=3, metadata={"range": (0, 1000)})
+
+    def __post_init__(self):
+        stages = self.affine_stages
+        ok = isinstance(stages, (tuple, list)) and all(
+            isinstance(s, (tuple, list)) and len(s) == 2 and all(_is_number(x) for x in s)
+            for s in stages
+        )
+        if not ok:
+            raise ValueError(
+                "GrowthConfig.affine_stages must be (accept, ratio) pairs of numbers, got "
+                f"{stages!r}"
+            )
+        object.__setattr__(self, "affine_stages", tuple(tuple(s) for s in stages))
+        steps = ("faces", *range(len(stages)))
+        for name in ("faces_first", "affine_first", "agreement_order"):
+            order = getattr(self, name)
+            if (
+                isinstance(order, (str, bytes))
+                or not isinstance(order, (tuple, list))
+                or not all(
+                    (x == "faces" if isinstance(x, str) else _is_count(x) and 0 <= x < len(stages))
+                    for x in order
+                )
+            ):
+                raise ValueError(
+                    f'GrowthConfig.{name} must be a sequence of steps, each "faces" or an index '
+                    f"of affine_stages ({', '.join(map(repr, steps))}), got {order!r}"
+                )
+            object.__setattr__(self, name, tuple(order))
 
 
 @dataclass(frozen=True)
@@ -639,6 +670,12 @@ def read_config(path) -> MatchConfig:
         return MatchConfig.from_dict(data)
     except (TypeError, ValueError) as e:
         raise type(e)(f"settings file {str(path)!r}: {e}") from None
+
+
+def _plain(x):
+    """A value ``json`` cannot write as the equal value it can: a NumPy scalar as its Python
+    number (``np.int64(32)`` keys like ``32``), another sequence as a list."""
+    return x.item() if isinstance(x, np.generic) else list(x)
 
 
 def _is_number(x) -> bool:
@@ -1103,8 +1140,6 @@ class MatchConfig:
                     f"unknown option {name!r}; the options are {', '.join(sorted(KEYWORDS))}"
                 )
             stage, attr = KEYWORDS[name]
-            if name == "schedule" and value is not None:
-                value = tuple(int(k) for k in value)
             if stage is None:
                 cfg = dataclasses.replace(cfg, **{attr: value})
             else:
@@ -1134,5 +1169,5 @@ class MatchConfig:
 
     def key(self) -> str:
         """A SHA-256 (hex) of every setting: equal configs, equal keys."""
-        text = json.dumps(self.to_dict(), sort_keys=True, default=list)
+        text = json.dumps(self.to_dict(), sort_keys=True, default=_plain)
         return hashlib.sha256(text.encode()).hexdigest()

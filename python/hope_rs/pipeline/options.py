@@ -59,7 +59,9 @@ def check_options(
     allowed = f"an integer in [1, {TOP_K_LIMIT}] (candidates kept per vertex)"
     _integer("top_k", top_k, 1, TOP_K_LIMIT, allowed)
     if polish_k is not None:
-        _integer("polish_k", polish_k, 1, k_max, f"None or an integer in [1, k_max={k_max}]")
+        # It runs at min(polish_k, k_max): the default 3 serves k_max = 2 too.
+        p_lo, p_hi = declared("polish_k")["range"]
+        _integer("polish_k", polish_k, p_lo, p_hi, f"None or an integer in [{p_lo}, {p_hi}]")
     if not (multiscale is None or isinstance(multiscale, (bool, np.bool_))):
         raise TypeError(
             f"multiscale must be None (chosen by size), True or False, got {multiscale!r}"
