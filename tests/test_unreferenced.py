@@ -117,7 +117,7 @@ def test_which_pieces_are_loose_does_not_depend_on_their_number_or_order():
     # Ten equal debris triangles go together or stay together, in any order.
     wv, wf = with_debris(v, f, 10, 8)
     loose = _loose(Mesh(wv, wf), 0.005)
-    assert loose.sum() == 10 and loose[len(f):].all()
+    assert loose.sum() == 10 and loose[len(f) :].all()
     perm = np.random.default_rng(9).permutation(len(wf))
     np.testing.assert_array_equal(_loose(Mesh(wv, wf[perm]), 0.005), loose[perm])
     assert not _loose(Mesh(wv, wf), 1e-9).any()
