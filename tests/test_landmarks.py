@@ -19,12 +19,14 @@ from hope_rs.evaluation.datasets import pairs_of
 from hope_rs.evaluation.evaluate import geodesic_errors
 from hope_rs.evaluation.partial import cut_by_plane, plane_normal
 from hope_rs.geometry.map_io import read_landmarks
+from hope_rs.pipeline import landmarks as landmarks_module
 from hope_rs.pipeline import spectral as spectral_module
 from hope_rs.pipeline.anchors import distance_fields, farthest_witnesses
 from hope_rs.pipeline.config import LandmarkConfig, MatchConfig, SpectralConfig
 from hope_rs.pipeline.landmarks import (
     check_landmarks,
     coarse_landmarks,
+    coordinate_landmarks,
     landmark_embedding,
     landmark_initial_map,
 )
@@ -408,3 +410,35 @@ def test_multiscale_match_keeps_the_landmarks():
     np.testing.assert_array_equal(res.map[lm], lm)
     err = geodesic_errors(b, res.map, a_idx=np.arange(0, a.n_vertices, 7))
     assert err.mean() < 0.03
+
+
+def test_many_landmarks_are_all_pinned_and_a_spread_few_give_coordinates(spheres, monkeypatch):
+    # Hundreds of landmarks gave as many coordinates: 900 ran a 5k match for a minute.
+    a, b = spheres
+    sa, sb = hope_rs.Shape(a), hope_rs.Shape(a)
+    lm = np.c_[np.arange(0, 500, 2), np.arange(0, 500, 2)]  # 250 rows, a sphere to itself
+    internal = np.c_[sa.rank[lm[:, 0]], sb.rank[lm[:, 1]]]
+    some = coordinate_landmarks(sa, internal, 16)
+    assert len(some) == 16 and len(np.unique(some[:, 0])) == 16
+    assert np.isin(some[:, 0], internal[:, 0]).all()
+    np.testing.assert_array_equal(coordinate_landmarks(sa, internal, 250), internal)
+    # Farthest points: the 16 are spread, each farther from the others than a random 16's
+    # nearest pair.
+    p = sa.points[some[:, 0]]
+    gap = np.min(np.linalg.norm(p[:, None] - p[None], axis=2) + 9 * np.eye(16))
+    q = sa.points[internal[:16, 0]]
+    assert gap > np.min(np.linalg.norm(q[:, None] - q[None], axis=2) + 9 * np.eye(16))
+    # In a match: every landmark mapped exactly, the coordinates from the capped rows only.
+    seen = []
+    real = landmarks_module.LandmarkCoordinates.__init__
+
+    def spy(self, a, b, landmarks, *args, **kwargs):
+        seen.append(len(landmarks))
+        real(self, a, b, landmarks, *args, **kwargs)
+
+    monkeypatch.setattr(landmarks_module.LandmarkCoordinates, "__init__", spy)
+    cfg = MatchConfig(landmarks=LandmarkConfig(max_coordinates=16))
+    res = hope_rs.match(a, a, landmarks=lm, config=cfg, spectral=False)
+    np.testing.assert_array_equal(res.map[lm[:, 0]], lm[:, 1])
+    assert seen and set(seen) == {16}
+    assert "250 landmarks (16 of them as coordinates)" in res.stage("landmarks").reason

@@ -125,6 +125,14 @@ class LandmarkConfig:
         their distance from it. 0: none. Used only when ``zoomout_weight > 0``.
     near_radius : float
         The radius above (sqrt(area) units, the scaled fields').
+    max_coordinates : int
+        At most this many landmarks give the landmark coordinates (of the "landmarks" stage,
+        the refinement's trust and swapped-region anchors, ZoomOut's extra columns): farthest
+        points among A's landmarks, the one farthest from A's centroid first. Every landmark
+        stays mapped exactly. Each coordinate costs a distance field on both shapes and a
+        dimension of every search, so hundreds of landmarks (a sparse correspondence) would
+        slow a match many times over while a few dozen spread ones already tell every
+        region apart.
     """
 
     max_gap: float = 0.25
@@ -137,6 +145,7 @@ class LandmarkConfig:
     zoomout_weight: float = field(default=3.0, metadata={"finite": True})
     near_weight: float = field(default=90.0, metadata={"finite": True})
     near_radius: float = field(default=0.2, metadata={"finite": True})
+    max_coordinates: int = field(default=128, metadata={"range": (1, 100_000)})
 
 
 @dataclass(frozen=True)

@@ -34,6 +34,7 @@ from .state import QUIET, MatchState, Stage
 __all__ = [
     "LandmarkCoordinates",
     "LandmarkStage",
+    "coordinate_landmarks",
     "check_landmarks",
     "coarse_landmarks",
     "input_landmarks",
@@ -136,6 +137,22 @@ def pin(f: np.ndarray, landmarks: np.ndarray | None) -> np.ndarray:
     g = f.copy()
     g[landmarks[:, 0]] = landmarks[:, 1]
     return g
+
+
+def coordinate_landmarks(a: Shape, landmarks: np.ndarray, cap: int) -> np.ndarray:
+    """The rows of ``landmarks`` (internal numbering) that give landmark coordinates
+    (``LandmarkConfig.max_coordinates``): all of them up to ``cap``, else ``cap`` farthest
+    points among their vertices on A (in space), the one farthest from A's centroid first;
+    in the order of ``landmarks``."""
+    if len(landmarks) <= cap:
+        return landmarks
+    p = a.points[landmarks[:, 0]]
+    pick = [int(np.argmax(np.linalg.norm(p - a.points.mean(axis=0), axis=1)))]
+    d = np.linalg.norm(p - p[pick[0]], axis=1)
+    while len(pick) < cap:
+        pick.append(int(np.argmax(d)))
+        d = np.minimum(d, np.linalg.norm(p - p[pick[-1]], axis=1))
+    return landmarks[np.sort(pick)]
 
 
 class LandmarkCoordinates:
@@ -286,6 +303,8 @@ class LandmarkStage(Stage):
         assert lm is not None  # skip_reason skips the stage without landmarks
         assert state.f0 is not None  # the initial map, made before
         detail = f"{len(lm)} landmarks"
+        if len(lm) > state.config.landmarks.max_coordinates:
+            detail += f" ({state.config.landmarks.max_coordinates} of them as coordinates)"
         t = state.log.start("landmarks", detail=detail)
         kind = state.init if isinstance(state.init, str) else None
         desc = None
@@ -294,7 +313,8 @@ class LandmarkStage(Stage):
         cfg = state.config
         f0 = pin(state.f0, lm)
         if cfg.landmarks.init:
-            coords = LandmarkCoordinates(a, b, lm, cfg.refine.repair)
+            some = coordinate_landmarks(a, lm, cfg.landmarks.max_coordinates)
+            coords = LandmarkCoordinates(a, b, some, cfg.refine.repair)
             f0 = landmark_initial_map(a, b, state.f0, lm, desc, cfg.landmarks, coords)
         moved = int(np.count_nonzero(f0 != state.f0))
         state.f0 = f0

@@ -26,7 +26,7 @@ from ..shape import Shape
 from . import overlap
 from .anchors import swapped_regions
 from .config import LandmarkConfig, RefineConfig
-from .landmarks import LandmarkCoordinates, pin
+from .landmarks import LandmarkCoordinates, coordinate_landmarks, pin
 from .lmd import LmdTracker
 from .state import Iteration, StepClock
 from .turned import TurnedFaces
@@ -83,7 +83,8 @@ class Landmarks:
         self.pairs, self.config = landmarks, landmark_config
         self.coords = None
         if landmarks is not None:
-            self.coords = LandmarkCoordinates(a, b, landmarks, config.repair)
+            some = coordinate_landmarks(a, landmarks, landmark_config.max_coordinates)
+            self.coords = LandmarkCoordinates(a, b, some, config.repair)
 
     def pin(self, f: np.ndarray) -> np.ndarray:
         """``f`` with every landmark mapped exactly (``f`` itself when it is already)."""

@@ -36,7 +36,7 @@ from ..kernels.search import nearest_one
 from ..shape import Shape
 from .anchors import distance_fields, farthest_witnesses, reachable
 from .config import RefineConfig, RepairConfig, SpectralConfig
-from .landmarks import landmark_embedding
+from .landmarks import coordinate_landmarks, landmark_embedding
 from .lmd import local_map_distortion
 from .state import Background, MatchState, Stage
 
@@ -434,7 +434,7 @@ class SpectralBackground(Background):
             self.extra = landmark_embedding(
                 state.a,
                 state.b,
-                state.landmarks,
+                coordinate_landmarks(state.a, state.landmarks, lm.max_coordinates),
                 lm.zoomout_weight,
                 state.config.refine.repair,
                 near_weight=lm.near_weight,
