@@ -99,11 +99,13 @@ def _remove(paths) -> None:
             f.unlink()
 
 
-def bench(argv: list) -> None:
-    """``hope-rs bench ARGV``; a failed pair (exit status 1) is listed in its tables and in
-    the document, so only another status stops the run."""
+def bench(argv: list, names) -> None:
+    """``hope-rs bench ARGV`` writing the tables of the sets ``names``. A failed pair (exit
+    status 1 with every table written) is listed in its table and in the document; any other
+    failure stops the run."""
     done = subprocess.run([sys.executable, "-m", "hope_rs.cli", "bench", *map(str, argv)])
-    if done.returncode not in (0, 1):
+    written = all((RUN / f"{n}.csv").is_file() for n in names)
+    if done.returncode not in (0, 1) or not written:
         raise subprocess.CalledProcessError(done.returncode, done.args)
 
 
@@ -112,7 +114,7 @@ def run_shared() -> None:
     _remove(RUN.glob("*"))
     start = header()
     bench([DATA, "--methods", ",".join(METHODS), "--sets", ",".join(SETS), "--no-render",
-           "--out", RUN])  # fmt: skip
+           "--out", RUN], SETS)  # fmt: skip
     (RUN / "provenance.txt").write_text(start + f"{load()} at the end\n")
 
 
@@ -141,7 +143,7 @@ def run_derived(
     start = header()
     write_derived(command, folder, sources, conditions, max_pairs)
     bench([folder, "--methods", ",".join(methods), "--sets", ",".join(names), "--no-render",
-           "--out", RUN])  # fmt: skip
+           "--out", RUN], names)  # fmt: skip
     (RUN / f"provenance_{kind}.txt").write_text(start + f"{load()} at the end\n")
 
 
@@ -260,7 +262,9 @@ def run_partial_resolution() -> None:
          PARTIAL_RESOLUTION_CONDITION, "--max-pairs", str(RESOLUTION_PAIRS), "--no-reverse"],
         check=True,
     )  # fmt: skip
-    bench([parts, "--methods", "hope", "--sets", ",".join(names), "--no-render", "--out", RUN])
+    bench(
+        [parts, "--methods", "hope", "--sets", ",".join(names), "--no-render", "--out", RUN], names
+    )
     _remove([folder])
     (RUN / "provenance_partial_resolution.txt").write_text(start + f"{load()} at the end\n")
 

@@ -308,7 +308,7 @@ def test_counts_that_cannot_run_are_refused_before_any_work(bundled, stage, name
     ],
 )
 def test_growth_step_orders_are_checked_when_made(fields, message):
-    # They were read only inside the shared-face finish, after the match's work.
+    # Checked when made, before any match's work (the finish reads them last).
     with pytest.raises(ValueError, match=message):
         GrowthConfig(**fields)
     assert GrowthConfig(faces_first=["faces", 2]).faces_first == ("faces", 2)

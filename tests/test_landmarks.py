@@ -212,8 +212,9 @@ def test_cli_reads_a_landmark_file(tmp_path, spheres):
         ("0 x\n", r"lm.txt:1: expected two .*'0 x'"),
         ("1_0 2\n", r"lm.txt:1: expected two .*'1_0 2'"),  # int() reads it as 10
         ("\u0661 2\n", r"lm.txt:1: expected two"),  # an Arabic-Indic one
-        # It raised OverflowError, an internal error in a batch.
+        # Beyond int64, and past int()'s digit limit: the same one-line error.
         ("99999999999999999999999 0\n", r"lm.txt:1: vertex index too large"),
+        ("9" * 5000 + " 0\n", r"lm.txt:1: vertex index too large"),
         ("0 5\n0 6\n", r"contradict.*vertex 0 of A is paired with vertices 5 and 6 of B"),
         ("0 999\n", r"vertex 999 is not a vertex of B, which has 450"),
     ],
@@ -413,7 +414,7 @@ def test_multiscale_match_keeps_the_landmarks():
 
 
 def test_many_landmarks_are_all_pinned_and_a_spread_few_give_coordinates(spheres, monkeypatch):
-    # Hundreds of landmarks gave as many coordinates: 900 ran a 5k match for a minute.
+    # Hundreds of landmarks (a sparse correspondence): all pinned, a spread few as coordinates.
     a, b = spheres
     sa, sb = hope_rs.Shape(a), hope_rs.Shape(a)
     lm = np.c_[np.arange(0, 500, 2), np.arange(0, 500, 2)]  # 250 rows, a sphere to itself

@@ -12,7 +12,9 @@ import hope_rs.batch.driver
 import hope_rs.batch.scheduler
 import hope_rs.batch.tasks
 from hope_rs import cli, matching
+from hope_rs.batch.manifest import settings_key
 from hope_rs.evaluation.demo import demo_pair
+from hope_rs.features.descriptors import DescriptorConfig
 
 
 @pytest.fixture(scope="module")
@@ -175,10 +177,15 @@ def test_a_batch_checks_match_options_before_any_work(
 
 
 def test_numpy_scalars_set_options_as_python_numbers_do(pair, no_shapes):
-    # MatchConfig.key(), which a batch names its settings by, failed on NumPy scalars.
+    # A batch names a pair's settings by MatchConfig.key() and each ShapeConfig's.
     plain = hope_rs.MatchConfig().with_options(top_k=32, spectral=True)
     numpy = hope_rs.MatchConfig().with_options(top_k=np.int64(32), spectral=np.True_)
     assert numpy == plain and numpy.key() == plain.key()
+    shapes = [
+        hope_rs.ShapeConfig(descriptors=DescriptorConfig(n_eigen=n)) for n in (100, np.int64(100))
+    ]
+    keys = [settings_key(plain.key(), s, s) for s in shapes]
+    assert keys[0] == keys[1]
     # with_options stores what it is given; match refuses it as the option itself.
     for schedule, message in (([3.7, 2.2], "got the entry 3.7"), ("321", "got the string")):
         cfg = hope_rs.MatchConfig().with_options(schedule=schedule)

@@ -100,7 +100,7 @@ def test_small_loose_pieces_are_left_out(pair):
     np.testing.assert_array_equal(res.map[:N], plain.map)
     assert (res.confidence[N:] == 0).all()
     # min_piece = 0 keeps every piece, and the debris moves most of the map.
-    cfg = hope_rs.MatchConfig(shape=hope_rs.ShapeConfig(min_piece=0.0))
+    cfg = hope_rs.MatchConfig(min_piece=0.0)
     kept = hope_rs.match((va, fa), (wb, gb), config=cfg)
     assert "loose" not in kept.stage("shapes").reason
     assert (kept.map != plain.map).mean() > 0.5
@@ -114,6 +114,10 @@ def test_which_pieces_are_loose_does_not_depend_on_their_number_or_order():
     # Pieces of one area are kept together whatever the share: none is smaller than the rest.
     twice = Mesh(np.r_[v, v], np.r_[f, f + len(v)])
     assert not _loose(twice, 0.9).any()
+    # A triangle soup (every face its own piece, of unequal areas) has no body to be debris
+    # around: every piece stays.
+    soup = Mesh(v[f].reshape(-1, 3), np.arange(3 * len(f)).reshape(-1, 3))
+    assert not _loose(soup, 0.5).any()
     # Ten equal debris triangles go together or stay together, in any order.
     wv, wf = with_debris(v, f, 10, 8)
     loose = _loose(Mesh(wv, wf), 0.005)

@@ -149,7 +149,7 @@ def match(
     landmarks = check_landmarks(landmarks, ma.n_vertices, mb.n_vertices)
     # Vertices in no face and small loose pieces have no surface to match by: the pair is
     # matched without them.
-    ref = referenced(_mesh_of(ma), _mesh_of(mb), config.shape.min_piece)
+    ref = referenced(_mesh_of(ma), _mesh_of(mb), config.min_piece)
     if ref is not None:
         ma = ma if ref.mesh_a is None else ref.mesh_a
         mb = mb if ref.mesh_b is None else ref.mesh_b

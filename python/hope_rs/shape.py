@@ -37,16 +37,11 @@ class ShapeConfig:
         Eigenbases of dense meshes seeded from their coarse copies.
     coarsen : CoarsenConfig
         The coarse copy (multiscale matching, basis seeding).
-    min_piece : float
-        :func:`hope_rs.match` leaves out of the match a mesh's smallest pieces (connected
-        components) that together hold less than this share of its area, never its largest
-        (scan debris; :mod:`hope_rs.pipeline.unreferenced`); 0 keeps every piece.
     """
 
     descriptors: DescriptorConfig = field(default_factory=DescriptorConfig)
     basis: BasisConfig = field(default_factory=BasisConfig)
     coarsen: CoarsenConfig = field(default_factory=CoarsenConfig)
-    min_piece: float = field(default=0.005, metadata={"range": (0.0, 1.0)})
 
 
 class Shape:

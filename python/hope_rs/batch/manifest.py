@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..geometry.map_io import atomic_write
+from ..pipeline.config import json_default
 
 __all__ = ["MANIFEST", "Manifest", "landmarks_digest", "settings_key"]
 
@@ -47,7 +48,7 @@ FIELDS = {
 def settings_key(match_key: str, config_a, config_b) -> str:
     """The settings of one pair: the MatchConfig key and the ShapeConfig of each shape."""
     parts = [match_key] + [
-        json.dumps(dataclasses.asdict(c), sort_keys=True, default=list)
+        json.dumps(dataclasses.asdict(c), sort_keys=True, default=json_default)
         for c in (config_a, config_b)
     ]
     return hashlib.sha256("\n".join(parts).encode("utf-8")).hexdigest()

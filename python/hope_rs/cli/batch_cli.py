@@ -37,8 +37,8 @@ ENVIRONMENT = {
 #: Exit statuses of every subcommand.
 EXIT_STATUS = {
     0: "success",
-    1: "a runtime failure: a pair of a batch failed, an output could not be written, or an "
-    "internal error",
+    1: "a runtime failure: a pair of a batch or of bench failed, an output could not be "
+    "written, or an internal error",
     2: "a usage or input error: bad arguments, an unreadable or malformed input file, an "
     "unwritable output folder (nothing is computed)",
     130: "interrupted (Ctrl-C); a batch keeps the maps already written",

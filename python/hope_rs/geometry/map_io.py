@@ -335,9 +335,10 @@ def read_landmarks(path: str | os.PathLike) -> np.ndarray:
                 f"{name}:{n}: expected two 0-based vertex indices 'A_VERTEX B_VERTEX', got "
                 f"{line.strip()!r}"
             )
-        pair = (int(words[0]), int(words[1]))
-        if max(abs(v) for v in pair) > _INT64_MAX:
-            raise ValueError(f"{name}:{n}: vertex index too large, got {line.strip()!r}")
+        # Past 19 digits no index fits int64 (and int() refuses past 4,300).
+        pair = tuple(int(w) if len(w.lstrip("+-")) <= 19 else _INT64_MAX + 1 for w in words)
+        if not all(-_INT64_MAX - 1 <= v <= _INT64_MAX for v in pair):
+            raise ValueError(f"{name}:{n}: vertex index too large, got {line.strip()[:80]!r}")
         rows.append(pair)
     return np.array(rows, dtype=np.int64).reshape(-1, 2)
 

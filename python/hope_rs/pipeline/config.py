@@ -131,8 +131,7 @@ class LandmarkConfig:
         points among A's landmarks, the one farthest from A's centroid first. Every landmark
         stays mapped exactly. Each coordinate costs a distance field on both shapes and a
         dimension of every search, so hundreds of landmarks (a sparse correspondence) would
-        slow a match many times over while a few dozen spread ones already tell every
-        region apart.
+        slow a match many times over (docs/decisions.md#landmarks).
     """
 
     max_gap: float = 0.25
@@ -681,9 +680,10 @@ def read_config(path) -> MatchConfig:
         raise type(e)(f"settings file {str(path)!r}: {e}") from None
 
 
-def _plain(x):
-    """A value ``json`` cannot write as the equal value it can: a NumPy scalar as its Python
-    number (``np.int64(32)`` keys like ``32``), another sequence as a list."""
+def json_default(x):
+    """What ``json`` writes for a value it cannot (``json.dumps(..., default=json_default)``):
+    a NumPy scalar as its Python number (``np.int64(32)`` like ``32``), another sequence as a
+    list."""
     return x.item() if isinstance(x, np.generic) else list(x)
 
 
@@ -1103,6 +1103,11 @@ class MatchConfig:
     ----------
     k_max : int
         Largest hop radius, in [2, 64].
+    min_piece : float
+        A mesh's smallest pieces (connected components) that together hold less than this
+        share of its area are left out of the match, never its largest, and only when its
+        largest holds at least half the area (scan debris around a body, not a mesh of many
+        pieces; :mod:`hope_rs.pipeline.unreferenced`); 0 keeps every piece.
     shape : ShapeConfig
         Per-shape precomputation (descriptors, eigenbases, coarse copies) of shapes built
         from meshes; a :class:`~hope_rs.Shape` passed in keeps its own.
@@ -1127,6 +1132,7 @@ class MatchConfig:
 
     # LMD reads 2-rings; the hop balls of much larger radii cover most of a mesh.
     k_max: int = field(default=8, metadata={"range": (2, 64)})
+    min_piece: float = field(default=0.005, metadata={"range": (0.0, 1.0)})
     shape: ShapeConfig = field(default_factory=ShapeConfig)
     initial: InitialConfig = field(default_factory=InitialConfig)
     refine: RefineConfig = field(default_factory=RefineConfig)
@@ -1178,5 +1184,5 @@ class MatchConfig:
 
     def key(self) -> str:
         """A SHA-256 (hex) of every setting: equal configs, equal keys."""
-        text = json.dumps(self.to_dict(), sort_keys=True, default=_plain)
+        text = json.dumps(self.to_dict(), sort_keys=True, default=json_default)
         return hashlib.sha256(text.encode()).hexdigest()

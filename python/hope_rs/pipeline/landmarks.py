@@ -149,7 +149,7 @@ def coordinate_landmarks(a: Shape, landmarks: np.ndarray, cap: int) -> np.ndarra
     p = a.points[landmarks[:, 0]]
     pick = [int(np.argmax(np.linalg.norm(p - a.points.mean(axis=0), axis=1)))]
     d = np.linalg.norm(p - p[pick[0]], axis=1)
-    while len(pick) < cap:
+    while len(pick) < cap and d.max() > 0.0:  # coincident vertices add nothing
         pick.append(int(np.argmax(d)))
         d = np.minimum(d, np.linalg.norm(p - p[pick[-1]], axis=1))
     return landmarks[np.sort(pick)]

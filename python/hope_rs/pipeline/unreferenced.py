@@ -8,8 +8,9 @@ edges for its size, no place in the body's spectrum and nothing to correspond to
 of them would make a closed body count as a part, fill the spectral basis with their own
 constant functions and send body vertices onto them. So the pair is matched on the vertices
 of the pieces that matter (:func:`referenced`): the smallest pieces (connected components)
-that together hold less than ``ShapeConfig.min_piece`` of a mesh's area are left out (never
-its largest piece), and so are the vertices in no face. The result is expanded to the
+that together hold less than ``MatchConfig.min_piece`` of a mesh's area are left out (never
+its largest piece, and only when that holds at least half the area: a mesh of many pieces,
+such as a triangle soup, is not debris around a body), and so are the vertices in no face. The result is expanded to the
 meshes' own numbering (:meth:`Referenced.expand`): a left-out vertex of B is never a target,
 and a left-out vertex of A takes the image of the nearest (in space) kept vertex of A, with
 confidence 0.
@@ -41,12 +42,14 @@ def _loose(mesh: Mesh, min_piece: float) -> np.ndarray:
     """Bool per face: in one of the smallest pieces (connected components) that together
     hold less than ``min_piece`` of the mesh's area. A piece goes with every piece of its
     area or less, so that which pieces go does not depend on the numbering; the largest
-    piece always stays."""
+    piece always stays, and nothing goes when it holds less than half the area."""
     faces = mesh.faces
     piece = vertex_components(mesh.n_vertices, unique_edges(faces))[faces[:, 0]]
     if min_piece <= 0.0 or piece.min() == piece.max():
         return np.zeros(len(faces), dtype=bool)
     area = np.bincount(piece, mesh.face_areas)
+    if area.max() < 0.5 * area.sum():  # no body for the pieces to be debris around
+        return np.zeros(len(faces), dtype=bool)
     ranked = np.sort(area)
     upto = np.cumsum(ranked)[np.searchsorted(ranked, area, side="right") - 1]
     small = (upto < min_piece * area.sum()) & (area < area.max())
@@ -133,7 +136,8 @@ class Referenced:
                 v = int(landmarks[np.argmax(mapped < 0), col])
                 raise ValueError(
                     f"landmark vertex {v} of {name} is in no face or in a small loose piece "
-                    "left out of the match; give a vertex of the surface"
+                    "left out of the match; give a vertex of the surface (or keep every piece "
+                    "with MatchConfig(min_piece=0))"
                 )
             out[:, col] = mapped
         return out
@@ -168,7 +172,7 @@ class Referenced:
 
 def referenced(ma: Mesh, mb: Mesh, min_piece: float = 0.0) -> Referenced | None:
     """The two meshes without their vertices in no face and their smallest loose pieces
-    (together under ``min_piece`` of the area, ``ShapeConfig.min_piece``) (``mesh_a``,
+    (together under ``min_piece`` of the area, ``MatchConfig.min_piece``) (``mesh_a``,
     ``mesh_b``) and how to carry maps between the numberings; ``None`` when nothing is left
     out."""
     ca, cb = _compact(ma, min_piece), _compact(mb, min_piece)
