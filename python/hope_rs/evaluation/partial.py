@@ -31,9 +31,9 @@ from pathlib import Path
 
 import numpy as np
 from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components, dijkstra
+from scipy.sparse.csgraph import dijkstra
 
-from ..geometry.mesh import Mesh, boundary_edges, load_mesh
+from ..geometry.mesh import Mesh, boundary_edges, load_mesh, unique_edges, vertex_components
 from .derived_sets import (
     add_set_parser,
     run_set_command,
@@ -100,10 +100,7 @@ def _largest_component(mesh: Mesh, keep: np.ndarray) -> Part:
     if faces.shape[0] == 0:
         raise ValueError("the cut removes every face of the mesh")
     n = mesh.n_vertices
-    rows = faces[:, [0, 1, 2]].reshape(-1)
-    cols = faces[:, [1, 2, 0]].reshape(-1)
-    graph = coo_matrix((np.ones(rows.size), (rows, cols)), shape=(n, n)).tocsr()
-    _, label = connected_components(graph, directed=False)
+    label = vertex_components(n, unique_edges(faces))
     used = np.zeros(n, dtype=bool)
     used[faces.reshape(-1)] = True
     sizes = np.bincount(label[used], minlength=label.max() + 1)
