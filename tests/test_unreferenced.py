@@ -125,3 +125,16 @@ def test_which_pieces_are_loose_does_not_depend_on_their_number_or_order():
     perm = np.random.default_rng(9).permutation(len(wf))
     np.testing.assert_array_equal(_loose(Mesh(wv, wf[perm]), 0.005), loose[perm])
     assert not _loose(Mesh(wv, wf), 1e-9).any()
+
+
+def test_a_shape_with_loose_pieces_is_matched_as_it_was_built(pair):
+    # The Shape made without the left-out vertices keeps the given one's settings: here its
+    # faces as given (orient=False), wound inward.
+    (va, fa), (vb, fb) = pair
+    inward = fb[:, ::-1]
+    wb, gb = with_debris(vb, inward, 30, 6)
+    plain = hope_rs.match((va, fa), hope_rs.Shape((vb, inward), orient=False), spectral=False)
+    res = hope_rs.match((va, fa), hope_rs.Shape((wb, gb), orient=False), spectral=False)
+    np.testing.assert_array_equal(res.map, plain.map)
+    oriented = hope_rs.match((va, fa), hope_rs.Shape((vb, inward)), spectral=False)
+    assert (oriented.map != plain.map).any()
