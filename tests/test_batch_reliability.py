@@ -309,3 +309,57 @@ def test_a_script_without_the_main_guard_fails_with_the_fix_instead_of_hanging(t
     last = res.stderr.strip().splitlines()[-1]
     assert last.startswith("RuntimeError: the batch's worker processes died while starting")
     assert 'if __name__ == "__main__":' in last and "jobs=1" in last
+
+
+def test_a_cache_that_cannot_be_written_leaves_the_pairs_right(folder, reference, tmp_path, capfd):
+    # The cache root is checked up front; an entry that cannot be written later (a full disk,
+    # a read-only subfolder) is left out with a warning and the pair goes on.
+    cache = tmp_path / "cache"
+    (cache / "v2").parent.mkdir(parents=True)
+    (cache / "v2").write_text("not a folder")  # every entry's folder lies below it
+    shapes, pairs = shapes_and_pairs(folder)
+    # Two workers: a pair task cannot read the shapes from the cache, so they come with it.
+    res = hope_rs.match_many(shapes, pairs, out_dir=tmp_path / "o", jobs=2, cache=cache)
+    assert "cannot be written (Not a directory); going on without it" in capfd.readouterr().err
+    assert all(r.ok for r in res)
+    for r in res:
+        np.testing.assert_array_equal(r.map, reference[r.path.name])
+
+
+def test_a_mesh_file_replaced_while_it_is_read_cannot_poison_the_cache(
+    folder, tmp_path, monkeypatch
+):
+    # The digest and the parse come from one read of the file.
+    path = tmp_path / "m.off"
+    shutil.copy(folder / "s0.off", path)
+    first = hope_rs.load_mesh(path)
+    real = hope_rs.batch.cache.parse_mesh
+
+    def swap_then_parse(p, data, **kw):
+        shutil.copy(folder / "s1.off", path)  # another writer replaces the file
+        return real(p, data, **kw)
+
+    monkeypatch.setattr(hope_rs.batch.cache, "parse_mesh", swap_then_parse)
+    cache = ShapeCache(tmp_path / "cache")
+    mesh, digest = cache.mesh(shutil.copy(folder / "s0.off", path))
+    np.testing.assert_array_equal(mesh.vertices, first.vertices)
+    stored = cache.get(digest, "mesh", {})
+    np.testing.assert_array_equal(stored["vertices"], first.vertices)
+
+
+def test_a_batch_describes_a_shape_itself_and_refuses_a_view(folder, tmp_path):
+    # Descriptors set on a Shape by hand are not written into the shared cache under its
+    # mesh; a Shape measured at another scale has no place in a batch.
+    shapes, pairs = shapes_and_pairs(folder)
+    s0 = hope_rs.Shape(hope_rs.load_mesh(shapes[0]))
+    s0.set_descriptors("shot", np.zeros_like(s0.descriptors("shot")))
+    cache = tmp_path / "cache"
+    got = hope_rs.match_many([s0, shapes[1]], [(0, 1)], jobs=1, cache=cache)[0]
+    plain = hope_rs.match_many(shapes[:2], [(0, 1)], jobs=1, cache=False)[0]
+    np.testing.assert_array_equal(got.map, plain.map)
+    mesh = hope_rs.load_mesh(shapes[0])
+    stored = ShapeCache(cache).descriptors(mesh, "shot")
+    assert np.abs(stored).sum() > 0
+    view = hope_rs.Shape(mesh).at_scale(2.0)
+    with pytest.raises(ValueError, match="at another scale .* cannot be batched"):
+        hope_rs.match_many([view, shapes[1]], [(0, 1)], jobs=1, cache=False)

@@ -128,6 +128,13 @@ def test_1_2_map_names_are_unique_plain_and_short_for_any_shape_names(pairs):
         assert len(n.encode("utf-8")) <= 255 and n.endswith(".txt")
 
 
+def test_1_3_a_path_of_undecodable_bytes_is_named_like_any_other():
+    # os.fsdecode keeps such bytes as lone surrogates, which UTF-8 cannot encode.
+    path = os.fsdecode(b"/data/d\xff/x y.off")
+    names = map_names([("x y", "b")], [(path, "/data/b.off")], "txt")
+    assert names[0].startswith("x_y__b-") and names[0].endswith(".txt")
+
+
 def test_3_a_hash_inside_a_pairs_file_path_is_part_of_the_path(tmp_path):
     (tmp_path / "p.txt").write_text("tmpl scan#2\n# a comment\ntmpl 'b #c'  # trailing\n")
     pairs = read_pairs(tmp_path / "p.txt", ext=".off")

@@ -45,7 +45,7 @@ from ..features.descriptors import (
     spectral_descriptors,
 )
 from ..geometry.map_io import atomic_write
-from ..geometry.mesh import Mesh, load_mesh
+from ..geometry.mesh import Mesh, load_mesh, parse_mesh, read_mesh_file
 from ..geometry.numbering import canonical_mesh
 from ..shape import Shape, ShapeConfig
 
@@ -143,12 +143,15 @@ class ShapeCache:
     ----------
     hits, misses : int
         Lookups served from disk / computed, in this process.
+    unwritten : int
+        Entries that could not be written, in this process.
     """
 
     def __init__(self, root: str | os.PathLike | None = None):
         self.root = Path(root) if root is not None else default_cache_dir()
         self.hits = 0
         self.misses = 0
+        self.unwritten = 0
 
     def __repr__(self) -> str:
         return f"ShapeCache({str(self.root)!r})"
@@ -167,7 +170,7 @@ class ShapeCache:
         try:
             with np.load(path, allow_pickle=False) as z:
                 out = {k: z[k] for k in z.files}
-        except FileNotFoundError:
+        except (FileNotFoundError, NotADirectoryError):  # absent (a file where a folder goes)
             return None
         except MemoryError:
             raise  # says nothing about the entry: keep it
@@ -195,22 +198,37 @@ class ShapeCache:
             path.unlink()
 
     def put(self, digest: str, what: str, params: dict, arrays: dict[str, np.ndarray]) -> None:
+        """Store an entry; one that cannot be written (a full disk, a read-only or damaged
+        folder) is left out with a warning: the caller has its arrays, and later lookups
+        compute them again."""
         self.misses += 1
         path, key = self._key(digest, what, params)
         arrays = {k: np.asarray(v) for k, v in arrays.items()}
-        _atomic_save(path, {**arrays, _KEY: np.array(key), _SUM: np.array(_checksum(arrays))})
+        try:
+            _atomic_save(path, {**arrays, _KEY: np.array(key), _SUM: np.array(_checksum(arrays))})
+        except OSError as e:
+            self.unwritten += 1
+            warnings.warn(
+                f"hope_rs cache entry {str(path)!r} cannot be written ({e.strerror or e}); "
+                "going on without it",
+                RuntimeWarning,
+                stacklevel=2,
+            )
 
     # -- the three kinds of entries -------------------------------------------------------------
 
-    def mesh(self, path: str | os.PathLike, digest: str | None = None) -> Mesh:
-        """The mesh of a file, parsed once."""
-        digest = digest or file_digest(path)
+    def mesh(self, path: str | os.PathLike) -> tuple[Mesh, str]:
+        """The mesh of a file, parsed once, and the digest of the file's bytes: both from one
+        read, so that a file replaced meanwhile cannot store one version's mesh under the
+        other's digest."""
+        data = read_mesh_file(path)
+        digest = hashlib.sha256(data).hexdigest()
         got = self.get(digest, "mesh", {})
         if got is not None:
-            return Mesh(got["vertices"], got["faces"])
-        m = load_mesh(path)
+            return Mesh(got["vertices"], got["faces"]), digest
+        m = parse_mesh(path, data)
         self.put(digest, "mesh", {}, {"vertices": m.vertices, "faces": m.faces})
-        return m
+        return m, digest
 
     def descriptors(
         self,
@@ -289,8 +307,7 @@ def cached_shape(
     elif cache is None:
         mesh = load_mesh(source)
     else:
-        digest = digest or file_digest(source)
-        mesh = cache.mesh(source, digest)
+        mesh, digest = cache.mesh(source)
     shape = Shape(mesh, k_max=k_max, config=config)
     for kind in kinds:
         if cache is not None:

@@ -81,10 +81,15 @@ def _spec(s, config) -> dict:
     if isinstance(s, (str, os.PathLike)):
         return {"kind": "path", "path": os.fspath(s), "config": config}
     if isinstance(s, Shape):
-        return {
-            "kind": "mesh", "vertices": s.mesh.vertices, "faces": s.mesh.faces,
-            "descriptors": {k: s.descriptors(k) for k in s._descriptors}, "config": s.config,
-        }  # fmt: skip
+        if not s.at_own_scale:
+            raise ValueError(
+                "a Shape measured at another scale (Shape.at_scale) cannot be batched: give the "
+                "Shape itself (match measures a part at its whole's scale)"
+            )
+        # Its mesh and settings only: the batch describes it and caches that under the mesh's
+        # content, so descriptors set by hand (set_descriptors) never reach the shared cache.
+        return {"kind": "mesh", "vertices": s.mesh.vertices, "faces": s.mesh.faces,
+                "config": s.config}  # fmt: skip
     try:
         m = as_mesh(s)
     except TypeError:

@@ -56,7 +56,9 @@ def map_names(names: list[tuple[str, str]], identities: list[tuple[str, str]], m
     out = []
     for p, c, ident in zip(plain, changed, identities):
         if c or seen[p.casefold()] > 1:
-            digest = hashlib.sha256("\0".join(map(str, ident)).encode("utf-8")).hexdigest()
+            digest = hashlib.sha256(
+                "\0".join(map(str, ident)).encode("utf-8", "surrogatepass")
+            ).hexdigest()
             p = f"{p}-{digest[:8]}"
         out.append(p + suffix)
     first: dict[str, int] = {}

@@ -13,7 +13,7 @@ from ..geometry.mesh import Mesh
 from ..matching import match
 from ..pipeline.spectral import applies_to_size
 from ..shape import Shape
-from .cache import ShapeCache, cached_shape, descriptor_params, file_digest, mesh_digest
+from .cache import ShapeCache, cached_shape, mesh_digest
 
 __all__ = ["error_text", "limit_threads", "pair_task", "prepare_task"]
 
@@ -49,31 +49,28 @@ def prepare_task(
         if spec["kind"] == "path":
             if not os.path.isfile(spec["path"]):
                 raise FileNotFoundError(f"no such mesh file: {spec['path']!r}")
-            digest = file_digest(spec["path"])
-            mesh = cache.mesh(spec["path"], digest)
+            mesh, digest = cache.mesh(spec["path"])
         else:
             mesh = Mesh(spec["vertices"], spec["faces"])
             digest = mesh_digest(mesh)
             if cache.get(digest, "mesh", {}) is None:
                 cache.put(digest, "mesh", {}, {"vertices": mesh.vertices, "faces": mesh.faces})
-        given = spec.get("descriptors", {})
-        descr = {}
-        for kind in kinds:
-            if kind in given:  # a Shape that already computed them (with its own config)
-                descr[kind] = given[kind]
-                cache.put(
-                    digest, kind, descriptor_params(kind, config.descriptors), {"d": given[kind]}
-                )
-            else:
-                descr[kind] = cache.descriptors(mesh, kind, digest, config.descriptors)
+        descr = {kind: cache.descriptors(mesh, kind, digest, config.descriptors) for kind in kinds}
         if basis and not want_data and applies_to_size(mesh.n_vertices):
             cache.spectral_basis(mesh, digest, basis, config=config)
         out = {"digest": digest, "n_vertices": mesh.n_vertices}
+        data = {
+            "digest": digest, "vertices": mesh.vertices, "faces": mesh.faces,
+            "descriptors": descr, "config": config,
+        }  # fmt: skip
         if want_data:
-            out["data"] = {
-                "digest": digest, "vertices": mesh.vertices, "faces": mesh.faces,
-                "descriptors": descr, "config": config,
-            }  # fmt: skip
+            out["data"] = data
+        elif cache.unwritten:
+            # The cache could not hold the shape: its pairs get the arrays with the task.
+            out["token"] = data
+        elif spec["kind"] == "path":
+            # A pair task reads the file again if the entry is gone (a cache cleared meanwhile).
+            out["token"] = {"digest": digest, "config": config, "path": spec["path"]}
         return out
     except Exception as e:  # noqa: BLE001 - reported per shape, the batch goes on
         return {"error": error_text(e)}
@@ -100,12 +97,20 @@ def _shape(token: dict, cache_root: str | None, kinds: tuple, k_max: int, basis:
         cache = ShapeCache(cache_root)
         digest = token["digest"]
         got = cache.get(digest, "mesh", {})
-        if got is None:
-            raise RuntimeError(f"shape {digest[:12]} vanished from the cache {cache_root}")
+        if got is not None:
+            mesh = Mesh(got["vertices"], got["faces"])
+        elif "path" in token:  # the entry is gone: the file again, if it is the same
+            mesh, now = cache.mesh(token["path"])
+            if now != digest:
+                raise RuntimeError(f"mesh file {token['path']!r} changed during the batch")
+        else:
+            raise RuntimeError(
+                f"shape {digest[:12]} vanished from the cache {cache_root} (cleared during the "
+                "batch?); run the batch again"
+            )
         shape = cached_shape(
-            Mesh(got["vertices"], got["faces"]), cache=cache, kinds=kinds, k_max=k_max,
-            digest=digest, config=config,
-        )  # fmt: skip
+            mesh, cache=cache, kinds=kinds, k_max=k_max, digest=digest, config=config
+        )
         eig = (
             cache.spectral_basis(shape.mesh, digest, basis, compute=False, config=config)
             if basis

@@ -33,9 +33,12 @@ __all__ = [
     "boundary_edges",
     "load_mesh",
     "merge_coincident_vertices",
+    "parse_mesh",
+    "read_mesh_file",
     "scale_exponent",
     "seam_edges",
     "unique_edges",
+    "vertex_components",
 ]
 
 #: File extensions :func:`load_mesh` reads.
@@ -263,6 +266,12 @@ def load_mesh(path: str | os.PathLike, *, merge_duplicates: bool | None = None) 
         If the file cannot be read as a triangle mesh (one line, naming the file and, where
         it helps, the line).
     """
+    return parse_mesh(path, read_mesh_file(path), merge_duplicates=merge_duplicates, stacklevel=3)
+
+
+def read_mesh_file(path: str | os.PathLike) -> bytes:
+    """The bytes of a mesh file, after the checks of :func:`load_mesh` (it exists, is a
+    regular file, has a known suffix); parse them with :func:`parse_mesh`."""
     path = os.fspath(path)
     if not os.path.isfile(path):
         if os.path.isdir(path):
@@ -270,17 +279,36 @@ def load_mesh(path: str | os.PathLike, *, merge_duplicates: bool | None = None) 
         if os.path.exists(path):
             raise ValueError(f"cannot read {path!r}: not a regular file (a device or a pipe)")
         raise FileNotFoundError(f"no such mesh file: {path!r}")
+    _format(path)
+    try:
+        with open(path, "rb") as fh:
+            return fh.read()
+    except OSError as e:
+        raise ValueError(f"cannot read {path!r}: {e.strerror or e}") from None
+
+
+def _format(path: str) -> str:
+    """The reader's key of ``path`` (its lower-case suffix), or a one-line error."""
     ext = os.path.splitext(path)[1].lower()
     if ext not in READERS:
         raise ValueError(
             f"cannot read {path!r}: unknown mesh format {ext or '(no extension)'!r}; "
             f"supported: {', '.join(SUPPORTED_FORMATS)}"
         )
-    try:
-        with open(path, "rb") as fh:
-            data = fh.read()
-    except OSError as e:
-        raise ValueError(f"cannot read {path!r}: {e.strerror or e}") from None
+    return ext
+
+
+def parse_mesh(
+    path: str | os.PathLike,
+    data: bytes,
+    *,
+    merge_duplicates: bool | None = None,
+    stacklevel: int = 2,
+) -> Mesh:
+    """The mesh in ``data``, the bytes of the file ``path`` (its suffix picks the reader;
+    see :func:`load_mesh` for ``merge_duplicates`` and the errors)."""
+    path = os.fspath(path)
+    ext = _format(path)
     try:
         if not data.strip():
             raise ValueError("the file is empty")
@@ -301,6 +329,6 @@ def load_mesh(path: str | os.PathLike, *, merge_duplicates: bool | None = None) 
                 "for texture coordinates or normals?); the vertices there stay separate to "
                 "keep the file's numbering, so the surface is cut along them. If the numbering "
                 "does not matter, pass merge_duplicates=True",
-                stacklevel=2,
+                stacklevel=stacklevel,
             )
     return mesh
