@@ -363,3 +363,19 @@ def test_a_batch_describes_a_shape_itself_and_refuses_a_view(folder, tmp_path):
     view = hope_rs.Shape(mesh).at_scale(2.0)
     with pytest.raises(ValueError, match="at another scale .* cannot be batched"):
         hope_rs.match_many([view, shapes[1]], [(0, 1)], jobs=1, cache=False)
+
+
+def test_empty_and_tilde_folders(folder, tmp_path, monkeypatch):
+    # An empty path is the current folder to pathlib; "~" in a variable is the home folder.
+    shapes, pairs = shapes_and_pairs(folder)
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(ValueError, match="names no folder"):
+        hope_rs.match_many(shapes, pairs, jobs=1, cache="")
+    with pytest.raises(ValueError, match="output folder names no folder"):
+        hope_rs.match_many(shapes, pairs, jobs=1, cache=False, out_dir="")
+    assert list(tmp_path.iterdir()) == []
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    monkeypatch.setenv("HOPE_RS_CACHE", "~/c")
+    assert hope_rs.batch.cache.default_cache_dir() == tmp_path / "home" / "c"
+    with pytest.raises(ValueError, match="k must be a positive integer"):
+        hope_rs.Shape(hope_rs.load_mesh(shapes[0])).spectral_basis(0)

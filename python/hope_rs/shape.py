@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import numbers
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -272,6 +273,8 @@ class Shape:
         area and its lumped vertex masses ``(n,)``, in the internal numbering; computed once
         (again only when a larger ``k`` is asked for). Fewer columns when the mesh has fewer
         than ``k + 2`` vertices."""
+        if isinstance(k, bool) or not isinstance(k, numbers.Integral) or k < 1:
+            raise ValueError(f"k must be a positive integer (eigenvectors), got {k!r}")
         if not self.has_spectral_basis(k):
             self._basis = self.solve_spectral_basis(k)
         assert self._basis is not None

@@ -57,10 +57,11 @@ _KEY, _SUM = "__key__", "__sha256__"
 
 def default_cache_dir() -> Path:
     """``$HOPE_RS_CACHE``, else ``$XDG_CACHE_HOME/hope_rs``, else ``~/.cache/hope_rs``."""
+    # "~" expanded as a shell would (a quoted "~/c" made a folder named "~").
     if os.environ.get("HOPE_RS_CACHE"):
-        return Path(os.environ["HOPE_RS_CACHE"])
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "hope_rs"
+        return Path(os.path.expanduser(os.environ["HOPE_RS_CACHE"]))
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join("~", ".cache")
+    return Path(os.path.expanduser(base)) / "hope_rs"
 
 
 def file_digest(path: str | os.PathLike) -> str:
@@ -148,6 +149,11 @@ class ShapeCache:
     """
 
     def __init__(self, root: str | os.PathLike | None = None):
+        if root is not None and os.fspath(root) == "":  # Path("") is the current folder
+            raise ValueError(
+                "the cache folder names no folder (an empty path); give a folder, or None for "
+                "the default"
+            )
         self.root = Path(root) if root is not None else default_cache_dir()
         self.hits = 0
         self.misses = 0

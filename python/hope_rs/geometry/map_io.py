@@ -141,6 +141,8 @@ def check_writable_folder(
     """Fail early, with a one-line ValueError naming ``folder``, unless files can be created in
     it (a probe file is created and removed) and its disk has ``need_bytes`` free. With
     ``create``, a missing folder is made first. ``what`` names the folder in the message."""
+    if os.fspath(folder) == "":  # Path("") is the current folder
+        raise ValueError(f"{what} folder names no folder (an empty path)")
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
         raise ValueError(f"{what} {str(folder)!r} exists and is not a folder")
