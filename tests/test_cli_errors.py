@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import trimesh
 from conftest import data_path, unwritable_folder
 from meshes import bumpy_sphere_files
 
@@ -243,3 +244,19 @@ def test_derived_set_commands_check_their_output_folder_first(tmp_path, capsys):
         assert "exists and is not a folder" in one_line_error(capsys.readouterr().err)
     with pytest.raises(ValueError, match="not a regular file"):
         hope_rs.load_mesh("/dev/null")
+
+
+def test_show_never_writes_over_one_of_its_inputs(tmp_path, capsys):
+    # --ply OUT writes OUT_A.ply and OUT_B.ply: an input of that name is refused, unread.
+    folder = tmp_path / "in"
+    folder.mkdir()
+    a, b = (str(p) for p in bumpy_sphere_files(folder, 2, N))
+    ply_a = folder / "out_A.ply"
+    mesh = hope_rs.load_mesh(a)
+    trimesh.Trimesh(mesh.vertices, mesh.faces, process=False).export(ply_a)
+    (tmp_path / "m.txt").write_text("0\n" * N)
+    before = ply_a.read_bytes()
+    code = main(["show", str(ply_a), b, str(tmp_path / "m.txt"), "--ply", str(folder / "out.ply")])
+    assert code == 2
+    assert "one of the inputs" in one_line_error(capsys.readouterr().err)
+    assert ply_a.read_bytes() == before

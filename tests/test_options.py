@@ -208,3 +208,13 @@ def test_batch_cli_rejects_k_max_with_one_line(pair, tmp_path, capsys):
     err = capsys.readouterr().err
     assert err == "hope-rs: error: k_max must be an integer in [2, 64] (LMD reads 2-rings), got 1\n"
     assert not out.exists()
+
+
+def test_imatch_many_checks_its_inputs_when_called(pair, tmp_path):
+    # A generator function would check nothing until the first result is asked for.
+    with pytest.raises(TypeError, match="not an option of hope_rs.match_many: 'bogus'"):
+        hope_rs.batch.driver.imatch_many(list(pair), bogus=1)
+    with pytest.raises(ValueError, match="k_max must be an integer"):
+        hope_rs.batch.driver.imatch_many(list(pair), k_max=1)
+    with pytest.raises(ValueError, match="output folder names no folder"):
+        hope_rs.batch.driver.imatch_many(list(pair), out_dir="")

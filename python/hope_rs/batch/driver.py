@@ -264,8 +264,10 @@ def imatch_many(
     **match_options,
 ) -> Generator[PairResult, None, None]:
     """Like :func:`match_many`, but yields each :class:`PairResult` as soon as it is done
-    (finished pairs first, in no particular order). Closing the generator early (or an
-    exception, Ctrl-C) ends the workers at once; the maps already written stay."""
+    (finished pairs first, in no particular order). The inputs and the output folder are
+    checked when it is called; the cache, the workers and the matches start with the first
+    result asked for. Closing the generator early (or an exception, Ctrl-C) ends the workers
+    at once; the maps already written stay."""
     if isinstance(shapes, dict):
         keys = list(shapes)
         names, shapes = [str(k) for k in keys], list(shapes.values())
@@ -300,33 +302,36 @@ def imatch_many(
         out = check_writable_folder(out_dir, create=True, need_bytes=21 * largest + 2**16)
         paths = [out / f for f in files]
         manifest = Manifest(out)
-    cache, tmp = _open_cache(cache, CACHE_BYTES_PER_VERTEX * largest)
-    report = progress if callable(progress) else BatchProgress(len(ij), enabled=bool(progress))
-    try:
-        ex = make_backend(backend, jobs, ray_options)
-    except BaseException:  # e.g. Ray missing or unreachable: no temporary cache left behind
-        if tmp is not None:
-            tmp.cleanup()
-        raise
     basis = cfg.spectral.k_end if cfg.spectral.enabled else 0
     key = cfg.key()
-    plan = Plan(
-        names=names, specs=specs, pairs=ij, paths=paths, landmarks=marks,
-        settings=[
-            settings_key(key, specs[i]["config"], specs[j]["config"]) for i, j in ij
-        ],
-        job={"cache_root": str(cache.root), "config": cfg,
-             "threads": getattr(ex, "threads", None), "basis": basis},
-        kinds=(cfg.initial.descriptor,), basis=basis, code=code_fingerprint(), manifest=manifest,
-    )  # fmt: skip
-    finished = False
-    try:
-        yield from run(plan, ex, report)
-        finished = True
-    finally:
-        ex.close(abort=not finished)
-        if tmp is not None:
-            tmp.cleanup()
+    settings = [settings_key(key, specs[i]["config"], specs[j]["config"]) for i, j in ij]
+
+    def results() -> Generator[PairResult, None, None]:
+        shape_cache, tmp = _open_cache(cache, CACHE_BYTES_PER_VERTEX * largest)
+        report = progress if callable(progress) else BatchProgress(len(ij), enabled=bool(progress))
+        try:
+            ex = make_backend(backend, jobs, ray_options)
+        except BaseException:  # e.g. Ray missing or unreachable: no temporary cache left behind
+            if tmp is not None:
+                tmp.cleanup()
+            raise
+        plan = Plan(
+            names=names, specs=specs, pairs=ij, paths=paths, landmarks=marks, settings=settings,
+            job={"cache_root": str(shape_cache.root), "config": cfg,
+                 "threads": getattr(ex, "threads", None), "basis": basis},
+            kinds=(cfg.initial.descriptor,), basis=basis, code=code_fingerprint(),
+            manifest=manifest,
+        )  # fmt: skip
+        finished = False
+        try:
+            yield from run(plan, ex, report)
+            finished = True
+        finally:
+            ex.close(abort=not finished)
+            if tmp is not None:
+                tmp.cleanup()
+
+    return results()
 
 
 def match_many(
