@@ -377,8 +377,7 @@ def vertex_errors(a: Mesh, b: Mesh, mapping, a_idx, b_idx) -> np.ndarray:
 def _not_an_input(target: str, inputs: list, option: str) -> None:
     """Refuse an output file that is one of the command's inputs (it would be overwritten)."""
     for x in inputs:
-        same = os.path.exists(target) and os.path.exists(x) and os.path.samefile(target, x)
-        if same or os.path.abspath(target) == os.path.abspath(x):
+        if os.path.exists(target) and os.path.exists(x) and os.path.samefile(target, x):
             raise ValueError(
                 f"{option} would write {target!r}, one of the inputs; name another file"
             )

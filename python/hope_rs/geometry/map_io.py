@@ -48,7 +48,7 @@ _NPY_MAGIC = b"\x93NUMPY"
 _INTEGERS = re.compile(r"[\s0-9+-]*")
 #: One index of a landmark file.
 _INTEGER = re.compile(r"[+-]?[0-9]+")
-_INT64_MAX = int(np.iinfo(np.int64).max)
+_INT64 = range(int(np.iinfo(np.int64).min), int(np.iinfo(np.int64).max) + 1)
 
 
 def map_format(path: str | os.PathLike) -> str:
@@ -337,11 +337,10 @@ def read_landmarks(path: str | os.PathLike) -> np.ndarray:
                 f"{name}:{n}: expected two 0-based vertex indices 'A_VERTEX B_VERTEX', got "
                 f"{line.strip()!r}"
             )
-        # Past 19 digits no index fits int64 (and int() refuses past 4,300).
-        pair = tuple(int(w) if len(w.lstrip("+-")) <= 19 else _INT64_MAX + 1 for w in words)
-        if not all(-_INT64_MAX - 1 <= v <= _INT64_MAX for v in pair):
+        # Past 19 digits no index fits int64 (and int() refuses past 4,300 digits).
+        if any(len(w.lstrip("+-")) > 19 or int(w) not in _INT64 for w in words):
             raise ValueError(f"{name}:{n}: vertex index too large, got {line.strip()[:80]!r}")
-        rows.append(pair)
+        rows.append((int(words[0]), int(words[1])))
     return np.array(rows, dtype=np.int64).reshape(-1, 2)
 
 

@@ -302,18 +302,19 @@ class LandmarkStage(Stage):
         a, b, lm = state.a, state.b, state.landmarks
         assert lm is not None  # skip_reason skips the stage without landmarks
         assert state.f0 is not None  # the initial map, made before
-        detail = f"{len(lm)} landmarks"
-        if len(lm) > state.config.landmarks.max_coordinates:
-            detail += f" ({state.config.landmarks.max_coordinates} of them as coordinates)"
+        cfg = state.config
+        cap = cfg.landmarks.max_coordinates
+        detail = f"{len(lm)} landmarks" + (
+            f" ({cap} of them as coordinates)" if len(lm) > cap else ""
+        )
         t = state.log.start("landmarks", detail=detail)
         kind = state.init if isinstance(state.init, str) else None
         desc = None
         if kind is not None and a.has_descriptors(kind) and b.has_descriptors(kind):
             desc = a.internal_descriptors(kind), b.internal_descriptors(kind)
-        cfg = state.config
         f0 = pin(state.f0, lm)
         if cfg.landmarks.init:
-            some = coordinate_landmarks(a, lm, cfg.landmarks.max_coordinates)
+            some = coordinate_landmarks(a, lm, cap)
             coords = LandmarkCoordinates(a, b, some, cfg.refine.repair)
             f0 = landmark_initial_map(a, b, state.f0, lm, desc, cfg.landmarks, coords)
         moved = int(np.count_nonzero(f0 != state.f0))

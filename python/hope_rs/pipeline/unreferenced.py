@@ -10,10 +10,10 @@ constant functions and send body vertices onto them. So the pair is matched on t
 of the pieces that matter (:func:`referenced`): the smallest pieces (connected components)
 that together hold less than ``MatchConfig.min_piece`` of a mesh's area are left out (never
 its largest piece, and only when that holds at least half the area: a mesh of many pieces,
-such as a triangle soup, is not debris around a body), and so are the vertices in no face. The result is expanded to the
-meshes' own numbering (:meth:`Referenced.expand`): a left-out vertex of B is never a target,
-and a left-out vertex of A takes the image of the nearest (in space) kept vertex of A, with
-confidence 0.
+such as a triangle soup, is not debris around a body), and so are the vertices in no face.
+The result is expanded to the meshes' own numbering (:meth:`Referenced.expand`): a left-out
+vertex of B is never a target, and a left-out vertex of A takes the image of the nearest (in
+space) kept vertex of A, with confidence 0.
 """
 
 from __future__ import annotations
