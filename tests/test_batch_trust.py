@@ -260,7 +260,22 @@ def test_7_a_rerun_redoes_pairs_whose_settings_or_meshes_changed(files, tmp_path
         (r,) = hope_rs.match_many(shapes, [(0, 1)], **run, **FAST)
     assert r.ok and not r.skipped
     entry = Manifest(out).entries["s0__s1.txt"]
-    assert set(entry) >= {"a_digest", "b_digest", "landmarks", "settings", "code"}
+    assert set(entry) >= {"a_digest", "b_digest", "landmarks", "settings", "code", "map_digest"}
+
+
+def test_7b_a_rerun_redoes_a_map_file_changed_after_the_batch_wrote_it(files, tmp_path):
+    shapes, out = [files / "s0.off", files / "s1.off"], tmp_path / "out"
+    run = {"out_dir": out, "jobs": 1, "cache": tmp_path / "c"}
+    (first,) = hope_rs.match_many(shapes, [(0, 1)], **run, **FAST)
+    path = out / "s0__s1.txt"
+    # Well formed (right length, indices in range, whole last line), but not the batch's map.
+    hope_rs.write_map(path, np.roll(first.map, 1))
+    with pytest.warns(RuntimeWarning, match="s0__s1.txt: the map file is not the one the batch"):
+        (r,) = hope_rs.match_many(shapes, [(0, 1)], **run, **FAST)
+    assert r.ok and not r.skipped
+    np.testing.assert_array_equal(hope_rs.read_map(path), first.map)
+    (again,) = hope_rs.match_many(shapes, [(0, 1)], **run, **FAST)
+    assert again.skipped
 
 
 # -- 8-11: one failure stays local -------------------------------------------------------------

@@ -2,7 +2,8 @@
 
 ``OUT/hope-rs-manifest.jsonl`` records, per map file, the two shapes' names and content
 digests, the landmarks' digest, the settings key (:meth:`~hope_rs.MatchConfig.key` and both
-shapes' :class:`~hope_rs.ShapeConfig`) and the code version. A rerun skips a pair only when its
+shapes' :class:`~hope_rs.ShapeConfig`), the code version and the digest of the map written
+(a map file edited or replaced afterwards is computed again). A rerun skips a pair only when its
 map file is whole and its entry matches the pair in every field; :meth:`Manifest.why_redo`
 says what differs.
 
@@ -28,7 +29,7 @@ import numpy as np
 from ..geometry.map_io import atomic_write
 from ..pipeline.config import json_default
 
-__all__ = ["MANIFEST", "Manifest", "landmarks_digest", "settings_key"]
+__all__ = ["MANIFEST", "Manifest", "landmarks_digest", "map_digest", "settings_key"]
 
 #: The manifest's file name in an output folder.
 MANIFEST = "hope-rs-manifest.jsonl"
@@ -42,6 +43,7 @@ FIELDS = {
     "landmarks": "its landmarks changed",
     "settings": "the settings changed",
     "code": "it was computed by another version of hope_rs",
+    "map_digest": "the map file is not the one the batch wrote",
 }
 
 
@@ -60,6 +62,12 @@ def landmarks_digest(landmarks) -> str | None:
         return None
     arr = np.ascontiguousarray(np.asarray(landmarks, dtype=np.int64))
     return hashlib.sha256(repr(arr.shape).encode() + arr.tobytes()).hexdigest()
+
+
+def map_digest(mapping) -> str:
+    """SHA-256 of a map's indices as little-endian int64 (the same whatever its file format)."""
+    arr = np.ascontiguousarray(np.asarray(mapping, dtype="<i8"))
+    return hashlib.sha256(arr.tobytes()).hexdigest()
 
 
 def _line(obj: dict) -> bytes:

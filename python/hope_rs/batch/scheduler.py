@@ -21,7 +21,7 @@ import numpy as np
 from ..geometry.map_io import read_map, text_map_is_complete, write_map
 from ..pipeline.landmarks import check_landmarks
 from .backends import Backend
-from .manifest import Manifest, landmarks_digest
+from .manifest import Manifest, landmarks_digest, map_digest
 from .tasks import error_text, pair_task, prepare_task
 
 __all__ = ["PairResult", "Plan", "existing_map", "run"]
@@ -182,7 +182,9 @@ def run(plan: Plan, ex: Backend, report: Callable) -> Iterator[PairResult]:
                 return result(n, error=f"cannot write the map {str(path)!r}: {e.strerror or e}")
             if manifest is not None:
                 try:
-                    manifest.record(path.name, entry(n))
+                    manifest.record(
+                        path.name, entry(n) | {"map_digest": map_digest(value["map"])}
+                    )
                 except OSError as e:
                     warnings.warn(
                         f"cannot update the batch manifest {str(manifest.path)!r} "
@@ -228,7 +230,9 @@ def run(plan: Plan, ex: Backend, report: Callable) -> Iterator[PairResult]:
                         assert path is not None  # a pair to check has a map file
                         m, why = existing_map(path, sizes[i], sizes[j])
                         if why is None and manifest is not None:
-                            why = manifest.why_redo(path.name, entry(n))
+                            why = manifest.why_redo(
+                                path.name, entry(n) | {"map_digest": map_digest(m)}
+                            )
                         if why is None:
                             yield result(n, map=m, skipped=True)
                             continue
