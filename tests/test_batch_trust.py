@@ -87,11 +87,40 @@ def test_1_names_joined_alike_and_keys_alike_get_their_own_map_files(meshes, tmp
         np.testing.assert_array_equal(s.map, r.map)
     # Dict keys 1 and "1" name two shapes: two files.
     keyed = {1: meshes[0], "1": meshes[1], "c": meshes[2]}
-    res = hope_rs.match_many(keyed, [(0, 2), (1, 2)], out_dir=tmp_path / "k", jobs=1,
+    res = hope_rs.match_many(keyed, [(1, "c"), ("1", "c")], out_dir=tmp_path / "k", jobs=1,
                              cache=False, **FAST)  # fmt: skip
     assert res[0].path != res[1].path and len(maps_in(tmp_path / "k")) == 2
-    with pytest.raises(ValueError, match="more than one shape is named '1'"):
-        hope_rs.match_many(keyed, [("1", "c")], out_dir=tmp_path / "k", jobs=1, cache=False)
+    assert (res[0].map == hope_rs.match(meshes[0], meshes[2], **FAST).map).all()
+    assert (res[1].map == hope_rs.match(meshes[1], meshes[2], **FAST).map).all()
+
+
+def test_1c_one_file_spelled_two_ways_keeps_its_name_and_only_shared_stems_are_qualified(
+    files, tmp_path
+):
+    other = tmp_path / "other"
+    other.mkdir()
+    shutil.copy(files / "s1.off", other / "s1.off")
+    twice = files / ".." / files.name / "s1.off"  # the same file as files / "s1.off"
+    shapes = [files / "s0.off", files / "s1.off", twice, files / "s2.off"]
+    res = hope_rs.match_many(shapes, [(0, 1), (1, 3)], out_dir=tmp_path / "o", jobs=1,
+                             cache=False, **FAST)  # fmt: skip
+    assert [r.path.name for r in res] == ["s0__s1.txt", "s1__s2.txt"]
+    # Two files with one stem: those two are named by their folder too, the others are not.
+    res = hope_rs.match_many([*shapes, other / "s1.off"], [(0, 1), (0, 4), (0, 3)],
+                             out_dir=tmp_path / "p", jobs=1, cache=False, **FAST)  # fmt: skip
+    assert [r.path.name for r in res] == [
+        f"s0__{files.name}_s1.txt", "s0__other_s1.txt", "s0__s2.txt"
+    ]
+
+
+def test_1b_pairs_of_a_dict_with_int_keys_name_its_keys_not_positions(meshes, tmp_path):
+    keyed = {1: meshes[0], 0: meshes[1], 7: meshes[2]}
+    (r,) = hope_rs.match_many(keyed, [(0, 1)], jobs=1, cache=False, **FAST)
+    assert (r.a, r.b) == ("0", "1")
+    np.testing.assert_array_equal(r.map, hope_rs.match(meshes[1], meshes[0], **FAST).map)
+    for bad in [(0, 2), (True, 0), ([1], 0)]:
+        with pytest.raises(ValueError, match="is not a key of the shapes dict"):
+            hope_rs.match_many(keyed, [bad], jobs=1, cache=False)
 
 
 def test_2_map_files_stay_inside_out_dir(meshes, tmp_path):

@@ -67,11 +67,16 @@ def _names_of(shapes: list) -> tuple[list[str], list[str]]:
         else:
             names.append(str(i))
             idents.append(f"#{i}")
-    if len(set(names)) < len(names):  # same stem in two folders: qualify by the folder
-        names = [
-            f"{Path(s).parent.name}_{Path(s).stem}" if isinstance(s, (str, os.PathLike)) else n
-            for s, n in zip(shapes, names)
-        ]
+    # A stem shared by different files (one file spelled two ways is one file): those
+    # files are qualified by their folder, the other names stay as they are.
+    files: dict[str, set[str]] = {}
+    for s, n, ident in zip(shapes, names, idents):
+        if isinstance(s, (str, os.PathLike)):
+            files.setdefault(n, set()).add(ident)
+    names = [
+        f"{Path(ident).parent.name}_{n}" if len(files.get(n, ())) > 1 else n
+        for n, ident in zip(names, idents)
+    ]
     return names, idents
 
 
@@ -131,10 +136,16 @@ def _vertex_bound(spec: dict) -> int:
         return 0  # a missing file fails its own pairs later
 
 
-def _resolve_pairs(pairs, names: list[str]) -> list[tuple[int, int]]:
+def _resolve_pairs(pairs, names: list[str], keys: list | None = None) -> list[tuple[int, int]]:
+    """Pairs as positions. Pairs give positions or names, except for a dict of shapes with a
+    key that is not a string (``keys``): its pairs give keys, and an int is a key, never a
+    position."""
     if pairs is None:
         return all_pairs(len(names))
     index = {n: i for i, n in enumerate(names)}
+    if keys is not None and all(isinstance(k, str) for k in keys):
+        keys = None  # names are the keys themselves
+    by_key = {} if keys is None else {k: i for i, k in enumerate(keys)}
     twice = {n for n in names if names.count(n) > 1}
     out = []
     for p in pairs:
@@ -142,7 +153,18 @@ def _resolve_pairs(pairs, names: list[str]) -> list[tuple[int, int]]:
             raise ValueError(f"each pair must have two entries, got {p!r}")
         ij = []
         for x in p:
-            if isinstance(x, (int, np.integer)) and not isinstance(x, bool):
+            if keys is not None:
+                try:
+                    if isinstance(x, (bool, np.bool_)):
+                        raise KeyError(x)  # True == 1, yet not the key 1
+                    ij.append(by_key[x])
+                except (KeyError, TypeError):
+                    raise ValueError(
+                        f"pair {p!r}: {x!r} is not a key of the shapes dict (its pairs name "
+                        f"its keys, not positions: {list(by_key)[:5]}"
+                        f"{'...' if len(by_key) > 5 else ''})"
+                    ) from None
+            elif keys is None and isinstance(x, (int, np.integer)) and not isinstance(x, bool):
                 if not 0 <= x < len(names):
                     raise ValueError(f"pair {p!r}: index {x} is outside [0, {len(names)})")
                 ij.append(int(x))
@@ -273,7 +295,7 @@ def imatch_many(
         names, shapes = [str(k) for k in keys], list(shapes.values())
         idents = [f"key {k!r}" for k in keys]
     else:
-        shapes = list(shapes)
+        shapes, keys = list(shapes), None
         names, idents = _names_of(shapes)
     if not shapes:
         raise ValueError("no shapes given")
@@ -286,7 +308,7 @@ def imatch_many(
         )
     cfg = batch_config(config, init, match_options)
     check_backend(backend, jobs)
-    ij = _resolve_pairs(pairs, names)
+    ij = _resolve_pairs(pairs, names, keys)
     marks = _pair_landmarks(landmarks, pairs, len(ij))
     specs = [_spec(s, cfg.shape) for s in shapes]
     _same_settings(ij, names, specs)
@@ -358,7 +380,8 @@ def match_many(
         Mesh file paths, :class:`~hope_rs.Mesh` or :class:`~hope_rs.Shape` objects (a dict maps
         names to them). Path shapes are named by their file stem, others by their position.
     pairs : list of (a, b), optional
-        Indices into ``shapes`` or names; default every pair (i, j) with i < j.
+        Positions in ``shapes`` or names; for a dict with a key that is not a string, its
+        keys (an int is then a key, not a position). Default every pair (i, j) with i < j.
     out_dir : path, keyword-only, optional
         Write each map to ``out_dir/<a>__<b>.txt`` (one B index per line) as soon as it is done,
         atomically, and record it in ``out_dir/hope-rs-manifest.jsonl`` (both meshes' content
