@@ -3,6 +3,7 @@
 import os
 import re
 import stat
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -260,3 +261,24 @@ def test_show_never_writes_over_one_of_its_inputs(tmp_path, capsys):
     assert code == 2
     assert "one of the inputs" in one_line_error(capsys.readouterr().err)
     assert ply_a.read_bytes() == before
+
+
+def test_no_output_file_is_the_standard_output_that_carries_the_json_or_the_map(
+    meshes, tmp_path
+):
+    a, b = meshes
+    for args, option in [
+        (["-o", "/dev/stdout", "--json"], "-o '/dev/stdout'"),
+        (["--confidence-out", "/dev/stdout"], "--confidence-out '/dev/stdout'"),
+    ]:
+        res = _cli("match", a, b, "-q", *args)
+        assert res.returncode == 2 and res.stdout == b""
+        assert f"{option} is the standard output" in one_line_error(res.stderr.decode())
+    # Standard output redirected to the file -o names: the same file.
+    out = tmp_path / "out.txt"
+    with open(out, "wb") as fh:
+        res = _cli("match", a, b, "-q", "--json", "-o", str(out), stdout=fh)
+    assert res.returncode == 2 and out.read_bytes() == b""
+    # The map alone on standard output is fine (test above); so is the JSON with -o a file.
+    res = _cli("match", a, b, "-q", "--json", "-o", str(tmp_path / "m.txt"))
+    assert res.returncode == 0 and "map" not in json.loads(res.stdout)

@@ -65,8 +65,29 @@ def max_vertices(a, b) -> int:
     return max(a.n_vertices, b.n_vertices)
 
 
+def _is_standard_output(path: str) -> bool:
+    """Whether the file ``path`` is where standard output goes (``/dev/stdout``, or the file
+    standard output is redirected to)."""
+    try:
+        st, out = os.stat(path), os.fstat(sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):
+        return False
+    return (st.st_dev, st.st_ino) == (out.st_dev, out.st_ino)
+
+
 def cmd_match(args) -> int:
     config = config_from_args(args)  # before any work, like the outputs below
+    # Standard output carries the JSON, or the map when there is no -o: no file may go there too.
+    for option, path, printed in [
+        ("-o", args.output, args.json),
+        ("--confidence-out", args.confidence_out, args.json or not args.output),
+    ]:
+        if path and printed and _is_standard_output(path):
+            raise ValueError(
+                f"{option} {path!r} is the standard output, which already carries "
+                f"{'the JSON summary' if args.json else 'the map'}; give a file name "
+                f"{'(without -o the JSON holds the map)' if option == '-o' else ''}".rstrip()
+            )
     if args.output is not None and not args.output.strip():
         raise ValueError("-o names no file (an empty path); leave -o out to print the map")
     if args.output:  # before any work: a known suffix, a folder we can write to
