@@ -109,7 +109,9 @@ def test_1c_one_file_spelled_two_ways_keeps_its_name_and_only_shared_stems_are_q
     res = hope_rs.match_many([*shapes, other / "s1.off"], [(0, 1), (0, 4), (0, 3)],
                              out_dir=tmp_path / "p", jobs=1, cache=False, **FAST)  # fmt: skip
     assert [r.path.name for r in res] == [
-        f"s0__{files.name}_s1.txt", "s0__other_s1.txt", "s0__s2.txt"
+        f"s0__{files.name}_s1.txt",
+        "s0__other_s1.txt",
+        "s0__s2.txt",
     ]
 
 

@@ -1,9 +1,9 @@
 """The command line's exit statuses, one-line errors, early output checks and help texts."""
 
+import json
 import os
 import re
 import stat
-import json
 import subprocess
 import sys
 from pathlib import Path
@@ -263,9 +263,7 @@ def test_show_never_writes_over_one_of_its_inputs(tmp_path, capsys):
     assert ply_a.read_bytes() == before
 
 
-def test_no_output_file_is_the_standard_output_that_carries_the_json_or_the_map(
-    meshes, tmp_path
-):
+def test_no_output_file_is_the_standard_output_that_carries_the_json_or_the_map(meshes, tmp_path):
     a, b = meshes
     for args, option in [
         (["-o", "/dev/stdout", "--json"], "-o '/dev/stdout'"),

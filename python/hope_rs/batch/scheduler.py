@@ -182,9 +182,7 @@ def run(plan: Plan, ex: Backend, report: Callable) -> Iterator[PairResult]:
                 return result(n, error=f"cannot write the map {str(path)!r}: {e.strerror or e}")
             if manifest is not None:
                 try:
-                    manifest.record(
-                        path.name, entry(n) | {"map_digest": map_digest(value["map"])}
-                    )
+                    manifest.record(path.name, entry(n) | {"map_digest": map_digest(value["map"])})
                 except OSError as e:
                     warnings.warn(
                         f"cannot update the batch manifest {str(manifest.path)!r} "
