@@ -375,3 +375,23 @@ def test_meshes_too_small_for_a_spectrum_match_without_warnings(init):
             res = hope_rs.match(a, b, init=init)
             assert res.map.shape == (a.n_vertices,)
             assert ((res.map >= 0) & (res.map < b.n_vertices)).all()
+
+
+def test_a_scale_far_from_the_shapes_own_and_maps_out_of_range_are_refused():
+    s = hope_rs.Shape(bumpy_sphere(200, 1))
+    own = s.scale
+    for scale in (own * 1e-300, own * 1e9, 1e-300):
+        with pytest.raises(ValueError, match="is not within a factor"):
+            s.at_scale(scale)
+    assert s.at_scale(own * 1e3).scale == own * 1e3
+    identity = np.arange(s.n_vertices)
+    np.testing.assert_array_equal(s.map_out(s, s.map_in(s, identity)), identity)
+    for bad, what in [
+        (np.r_[-1, identity[1:]], r"must lie in \[0, 200\), got -1"),
+        (np.r_[identity[:-1], 200], r"must lie in \[0, 200\), got 0 to 200"),
+        (identity[:-1], "needs 200 integer indices"),
+        (identity.astype(float), "needs 200 integer indices"),
+    ]:
+        for method in (s.map_in, s.map_out):
+            with pytest.raises(ValueError, match=what):
+                method(s, bad)

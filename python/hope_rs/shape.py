@@ -25,6 +25,10 @@ from .geometry.sites import shot_sites
 
 __all__ = ["Shape", "ShapeConfig"]
 
+#: :meth:`Shape.at_scale` takes scales within this factor of the shape's own sqrt(area) and
+#: its inverse: a part is measured at its whole's scale, never a million times off.
+MIN_SCALE_RATIO = 1e-6
+
 
 @dataclass(frozen=True)
 class ShapeConfig:
@@ -225,6 +229,13 @@ class Shape:
         copy, :meth:`derived`) are measured at the view's scale too."""
         if not (np.isfinite(scale) and scale > 0):
             raise ValueError(f"a shape's scale must be a positive number, got {scale}")
+        own = self.internal.scale
+        if not MIN_SCALE_RATIO <= scale / own <= 1 / MIN_SCALE_RATIO:
+            raise ValueError(
+                f"a shape's scale {scale:g} is not within a factor {1 / MIN_SCALE_RATIO:g} of "
+                f"its own sqrt(area) {own:g} (distances in its units would underflow or "
+                "overflow); is it in the mesh's units?"
+            )
         view = copy.copy(self)
         view.scale = float(scale)
         view._descriptors = {}
@@ -319,11 +330,26 @@ class Shape:
 
     def map_in(self, other: Shape, f: np.ndarray) -> np.ndarray:
         """A map from this shape to ``other`` in input numbering, in internal numbering."""
-        return other.rank[np.asarray(f)[self.order]]
+        return other.rank[self._checked_map(other, f)[self.order]]
 
     def map_out(self, other: Shape, g: np.ndarray) -> np.ndarray:
         """A map from this shape to ``other`` in internal numbering, in input numbering."""
-        return other.order[np.asarray(g)][self.rank]
+        return other.order[self._checked_map(other, g)][self.rank]
+
+    def _checked_map(self, other: Shape, f) -> np.ndarray:
+        """``f`` as an array, refused unless it has one vertex of ``other`` per vertex (a
+        negative index would wrap around)."""
+        f = np.asarray(f)
+        if f.shape != (self.n_vertices,) or not np.issubdtype(f.dtype, np.integer):
+            raise ValueError(
+                f"a map from this shape needs {self.n_vertices} integer indices, got "
+                f"{f.dtype} of shape {f.shape}"
+            )
+        if f.size and not (0 <= f.min() and f.max() < other.n_vertices):
+            raise ValueError(
+                f"a map's indices must lie in [0, {other.n_vertices}), got {f.min()} to {f.max()}"
+            )
+        return f
 
     def __repr__(self) -> str:
         return f"Shape(n_vertices={self.n_vertices}, k_max={self.k_max})"
