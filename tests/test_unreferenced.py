@@ -138,3 +138,15 @@ def test_a_shape_with_loose_pieces_is_matched_as_it_was_built(pair):
     np.testing.assert_array_equal(res.map, plain.map)
     oriented = hope_rs.match((va, fa), hope_rs.Shape((vb, inward)), spectral=False)
     assert (oriented.map != plain.map).any()
+
+
+def test_spectral_descriptors_of_a_mesh_in_two_pieces_are_finite(pair):
+    """A piece large enough to stay (here 25% of the area) adds a second null eigenvalue:
+    HKS and WKS leave out every null one (HKS divided by the second, which is 0)."""
+    (va, fa), _ = pair
+    v = np.vstack([va, va * 0.5 + [5.0, 0, 0]])
+    f = np.vstack([fa, fa + len(va)])
+    with np.errstate(divide="raise", invalid="raise"):
+        for kind in ("hks", "wks"):
+            d = hope_rs.Shape((v, f)).descriptors(kind)
+            assert np.isfinite(d).all() and d.std(axis=0).max() > 0

@@ -276,9 +276,13 @@ def _spectral_basis_of(
     return laplacian_basis_as_numbered(mesh, k, stop=stop)
 
 
+#: Laplacian eigenvalues below this are null (their eigenvectors are constant on each piece).
+NULL_EIGENVALUE = 1e-10
+
+
 def hks(evals: np.ndarray, evecs: np.ndarray, n_scales: int = 100) -> np.ndarray:
     """Heat kernel signature at log-spaced times (Sun et al. 2009), each scale normalised."""
-    lam = evals[1:] if evals[0] < 1e-10 else evals
+    lam = evals[evals >= NULL_EIGENVALUE]  # one null eigenvalue per piece of the mesh
     if lam.size == 0:
         # A mesh too small to have a non-constant eigenfunction: every vertex alike.
         return np.full((evecs.shape[0], n_scales), 1.0 / np.sqrt(evecs.shape[0]))
@@ -291,7 +295,8 @@ def hks(evals: np.ndarray, evecs: np.ndarray, n_scales: int = 100) -> np.ndarray
 def wks(evals: np.ndarray, evecs: np.ndarray, n_energies: int = 100) -> np.ndarray:
     """Wave kernel signature (Aubry et al. 2011) with the usual log-energy Gaussian bands."""
     lam = np.maximum(evals, 1e-12)
-    log_e = np.log(lam[1:] if evals[0] < 1e-10 else lam)
+    null = evals < NULL_EIGENVALUE  # one per piece of the mesh
+    log_e = np.log(lam[~null])
     if log_e.size == 0:
         # A mesh too small to have a non-constant eigenfunction: every vertex alike.
         return np.full((evecs.shape[0], n_energies), 1.0 / np.sqrt(evecs.shape[0]))
@@ -304,8 +309,7 @@ def wks(evals: np.ndarray, evecs: np.ndarray, n_energies: int = 100) -> np.ndarr
         sigma, e_min, e_max = 1.0, e_min - 1.0, e_max + 1.0
     energies = np.linspace(e_min, e_max, n_energies)
     coefs = np.exp(-((energies[None, :] - np.log(lam)[:, None]) ** 2) / (2 * sigma**2))
-    if evals[0] < 1e-10:
-        coefs[0] = 0.0  # the constant eigenvector carries no shape information
+    coefs[null] = 0.0  # the constant eigenvectors (per piece) carry no shape information
     d = (evecs**2) @ coefs / np.maximum(coefs.sum(axis=0), 1e-300)
     return d / np.maximum(np.linalg.norm(d, axis=0, keepdims=True), 1e-300)
 
