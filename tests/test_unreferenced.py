@@ -140,6 +140,28 @@ def test_a_shape_with_loose_pieces_is_matched_as_it_was_built(pair):
     assert (oriented.map != plain.map).any()
 
 
+def test_a_shape_with_loose_pieces_is_described_once_for_many_matches(pair, monkeypatch):
+    (va, fa), (vb, fb) = pair
+    wb, gb = with_debris(vb, fb, 30, 6)
+    shape = hope_rs.Shape((wb, gb))
+    described = []
+    real = hope_rs.shape.shot_as_numbered
+    monkeypatch.setattr(
+        hope_rs.shape,
+        "shot_as_numbered",
+        lambda mesh, *args: described.append(mesh.vertices.tobytes()) or real(mesh, *args),
+    )
+    maps = [hope_rs.match((va, fa), shape, spectral=False).map for _ in range(2)]
+    np.testing.assert_array_equal(maps[0], maps[1])
+    # B without its debris, described by the first match only.
+    kept = shape.without(shape.mesh, 0.005).internal.vertices.tobytes()
+    assert described.count(kept) == 1
+    # A view at another scale keeps that scale without its debris.
+    view = shape.at_scale(2 * shape.scale)
+    assert view.without(shape.mesh, 0.005).scale == view.scale
+    assert shape.without(shape.mesh, 0.005).scale != view.scale
+
+
 def test_spectral_descriptors_of_a_mesh_in_two_pieces_are_finite(pair):
     """A piece large enough to stay (here 25% of the area) adds a second null eigenvalue:
     HKS and WKS leave out every null one (HKS divided by the second, which is 0)."""

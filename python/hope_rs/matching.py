@@ -39,14 +39,10 @@ def _mesh_of(x: Shape | Mesh) -> Mesh:
     return x.mesh if isinstance(x, Shape) else x
 
 
-def _like(x: Shape | Mesh, mesh: Mesh) -> Shape | Mesh:
-    """``mesh`` (``x``'s mesh with vertices left out) as a Shape built as ``x`` was (its hop
-    radius and face orientation), or as a Mesh when ``x`` is one."""
-    return (
-        Shape(mesh, k_max=x.k_max, orient=x.orient, config=x.config)
-        if isinstance(x, Shape)
-        else mesh
-    )
+def _like(x: Shape | Mesh, mesh: Mesh, min_piece: float) -> Shape | Mesh:
+    """``mesh`` (``x``'s mesh with vertices left out, as ``min_piece`` decided) as a Shape
+    built as ``x`` was (:meth:`Shape.without`), or as a Mesh when ``x`` is one."""
+    return x.without(mesh, min_piece) if isinstance(x, Shape) else mesh
 
 
 def _as_shape(x: Shape | Mesh, config: MatchConfig) -> Shape:
@@ -161,8 +157,8 @@ def match(
     # matched without them.
     ref = referenced(_mesh_of(ma), _mesh_of(mb), config.min_piece)
     if ref is not None:
-        ma = ma if ref.mesh_a is None else _like(ma, ref.mesh_a)
-        mb = mb if ref.mesh_b is None else _like(mb, ref.mesh_b)
+        ma = ma if ref.mesh_a is None else _like(ma, ref.mesh_a, config.min_piece)
+        mb = mb if ref.mesh_b is None else _like(mb, ref.mesh_b, config.min_piece)
         if not isinstance(init, str):
             init = ref.init_in(init)
         landmarks = ref.landmarks_in(landmarks)

@@ -117,6 +117,7 @@ class Shape:
         self._edges: np.ndarray | None = None
         self._euler: int | None = None
         self._ring: sp.csr_matrix | None = None
+        self._without: tuple[object, Shape] | None = None  # see without()
 
     def __reduce__(self):
         # The Rust graph cannot be pickled: a copy is built again from the mesh and settings,
@@ -241,6 +242,7 @@ class Shape:
         view._descriptors = {}
         view._sites = False
         view._coarse_view = None
+        view._without = None
         return view
 
     def derived(self, mesh: Mesh, *, orient: bool = False) -> Shape:
@@ -251,6 +253,16 @@ class Shape:
         scale as the part is."""
         out = Shape(mesh, k_max=self.k_max, orient=orient, config=self.config)
         return out if self.at_own_scale else out.at_scale(self.scale)
+
+    def without(self, mesh: Mesh, key) -> Shape:
+        """The Shape of ``mesh``, this shape's mesh with vertices left out (in no face, or in
+        small loose pieces), built as this one was (:meth:`derived`, its face orientation as
+        given); kept, with its descriptors and eigenbasis, for the next call with the same
+        ``key`` (what decided the vertices left out), so a shape matched many times is
+        described once."""
+        if self._without is None or self._without[0] != key:
+            self._without = (key, self.derived(mesh, orient=self.orient))
+        return self._without[1]
 
     def has_descriptors(self, kind: str) -> bool:
         """Whether descriptors of ``kind`` are computed or set already."""
@@ -345,7 +357,7 @@ class Shape:
                 f"a map from this shape needs {self.n_vertices} integer indices, got "
                 f"{f.dtype} of shape {f.shape}"
             )
-        if f.size and not (0 <= f.min() and f.max() < other.n_vertices):
+        if f.size and not (f.min() >= 0 and f.max() < other.n_vertices):
             raise ValueError(
                 f"a map's indices must lie in [0, {other.n_vertices}), got {f.min()} to {f.max()}"
             )
