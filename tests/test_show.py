@@ -172,3 +172,21 @@ def test_up_axis_and_view_frame():
     assert c.shape == (200, 3) and c.min() >= 0 and c.max() <= 1
     # Vivid: most colours well away from grey.
     assert np.median(c.max(axis=1) - c.min(axis=1)) > 0.4
+
+
+def test_scan_debris_neither_frames_the_view_nor_spans_the_colours():
+    """Loose pieces a match leaves out (MatchConfig.min_piece) are drawn, but the view is
+    framed and the colours spread on the body alone."""
+    from hope_rs.evaluation.show import _half_size
+
+    v, f = bumpy_sphere(300, 0)
+    v = v * [1.0, 2.0, 0.5]  # up +y, seen along z
+    tri = np.array([[0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [0.0, 0.01, 0.0]])
+    debris = [tri + [40.0, 0.0, 30.0], tri + [0.0, -50.0, 0.0]]
+    w = np.vstack([v, *debris])
+    g = np.vstack([f, [[300, 301, 302], [303, 304, 305]]])
+    body, scan = hope_rs.Mesh(v, f), hope_rs.Mesh(w, g)
+    frame = view_frame(body)
+    np.testing.assert_array_equal(view_frame(scan), frame)
+    np.testing.assert_allclose(_half_size([scan], frame), _half_size([body], frame))
+    np.testing.assert_allclose(position_colours(scan)[:300], position_colours(body))

@@ -27,6 +27,8 @@ import numpy as np
 from .._validate import as_index_map
 from ..geometry.map_io import atomic_write, check_output_file, read_map
 from ..geometry.mesh import Mesh, load_mesh
+from ..pipeline.config import MatchConfig
+from ..pipeline.unreferenced import body_vertices
 from .evaluate import geodesic_errors, load_vts
 
 __all__ = [
@@ -40,6 +42,12 @@ __all__ = [
 ]
 
 
+def _body(mesh: Mesh) -> np.ndarray:
+    """Bool per vertex: on the surface a match keeps (not in scan debris, small loose pieces,
+    nor in no face), which frames the view and spans the colours."""
+    return body_vertices(mesh, MatchConfig().min_piece)
+
+
 def position_colours(mesh: Mesh, frame: np.ndarray | None = None) -> np.ndarray:
     """(n, 3) RGB in [0, 1]: a vivid, smooth colouring of the vertex positions.
 
@@ -51,8 +59,9 @@ def position_colours(mesh: Mesh, frame: np.ndarray | None = None) -> np.ndarray:
     import colorsys
 
     p = _in_frame(mesh.vertices, view_frame(mesh) if frame is None else frame)
-    lo, hi = p.min(axis=0), p.max(axis=0)
-    t = (p - lo) / np.where(hi > lo, hi - lo, 1.0)  # right, up, depth in [0, 1]
+    body = p[_body(mesh)]
+    lo, hi = body.min(axis=0), body.max(axis=0)
+    t = np.clip((p - lo) / np.where(hi > lo, hi - lo, 1.0), 0.0, 1.0)  # right, up, depth
     # Hue from the top (red) to the bottom (violet), turned by up to a tenth of the wheel
     # from left to right; lightness rises from left to right.
     hue = (0.8 * (1.0 - t[:, 1]) + 0.2 * (t[:, 0] - 0.5)) % 1.0
@@ -99,7 +108,10 @@ def view_frame(shape, up: str = "auto") -> np.ndarray:
     remaining coordinate axis of least extent, so the silhouette is the widest (a standing
     figure from the front, an animal from the side), looking along its negative direction.
     """
-    v = np.asarray(shape.vertices if isinstance(shape, Mesh) else shape, dtype=np.float64)
+    if isinstance(shape, Mesh):
+        v = shape.vertices[_body(shape)]
+    else:
+        v = np.asarray(shape, dtype=np.float64)
     if up == "auto":
         axis, sign = detect_up(v)
     elif up in ("x", "y", "z"):
@@ -121,7 +133,7 @@ def _in_frame(v: np.ndarray, axes: np.ndarray) -> np.ndarray:
 def _half_size(meshes, axes: np.ndarray) -> np.ndarray:
     """Half the largest screen width and height of ``meshes``, plus a margin: one scale for
     every panel, so that shapes of one size look one size."""
-    sizes = [np.ptp(_in_frame(m.vertices, axes)[:, :2], axis=0) for m in meshes]
+    sizes = [np.ptp(_in_frame(m.vertices[_body(m)], axes)[:, :2], axis=0) for m in meshes]
     return 0.52 * np.max(sizes, axis=0)
 
 
@@ -143,7 +155,8 @@ def _draw(ax, mesh: Mesh, colours: np.ndarray, axes: np.ndarray, title: str, hal
             tri[order, :, :2], facecolors=rgb[order], edgecolors=rgb[order], linewidths=0.1
         )
     )
-    mid = (p[:, :2].min(axis=0) + p[:, :2].max(axis=0)) / 2
+    body = p[_body(mesh), :2]
+    mid = (body.min(axis=0) + body.max(axis=0)) / 2
     ax.set_xlim(mid[0] - half[0], mid[0] + half[0])
     ax.set_ylim(mid[1] - half[1], mid[1] + half[1])
     ax.set_aspect("equal")

@@ -26,7 +26,7 @@ from scipy.spatial import cKDTree
 from ..geometry.mesh import Mesh, unique_edges, vertex_components
 from .result import MatchResult
 
-__all__ = ["Referenced", "referenced"]
+__all__ = ["Referenced", "body_vertices", "referenced"]
 
 
 def _index(keep: np.ndarray | None, n: int) -> np.ndarray:
@@ -56,14 +56,21 @@ def _loose(mesh: Mesh, min_piece: float) -> np.ndarray:
     return small[piece]
 
 
+def body_vertices(mesh: Mesh, min_piece: float) -> np.ndarray:
+    """Bool per vertex: used by a face outside the small loose pieces (:func:`_loose`), the
+    vertices a match keeps."""
+    used = np.zeros(mesh.n_vertices, dtype=bool)
+    used[mesh.faces[~_loose(mesh, min_piece)].ravel()] = True
+    return used
+
+
 def _compact(mesh: Mesh, min_piece: float) -> tuple[Mesh, np.ndarray, int] | None:
     """``mesh`` without its small loose pieces (:func:`_loose`) and the vertices no face
     uses, the indices of the vertices it keeps and how many vertices of loose pieces went;
     ``None`` when it keeps every vertex."""
     loose = _loose(mesh, min_piece)
     faces = mesh.faces[~loose]
-    used = np.zeros(mesh.n_vertices, dtype=bool)
-    used[faces.ravel()] = True
+    used = body_vertices(mesh, min_piece)
     if used.all():
         return None
     in_loose = np.zeros(mesh.n_vertices, dtype=bool)
