@@ -162,10 +162,10 @@ def test_unexpected_errors_runtime_failures_and_ctrl_c(meshes, tmp_path, monkeyp
     assert capsys.readouterr().err == "hope-rs: interrupted\n"
     monkeypatch.undo()
 
-    def disk_full(path, mapping):
-        raise OSError(28, "No space left on device", str(path))
+    def disk_full(files):
+        raise OSError(28, "No space left on device", str(files[0][0]))
 
-    monkeypatch.setattr(hope_rs.cli.commands, "write_map", disk_full)
+    monkeypatch.setattr(hope_rs.cli.commands, "atomic_writes", disk_full)
     assert main(["match", a, b, "-q", "-o", str(tmp_path / "m.txt")]) == 1
     assert "No space left on device" in one_line_error(capsys.readouterr().err)
 
@@ -280,3 +280,59 @@ def test_no_output_file_is_the_standard_output_that_carries_the_json_or_the_map(
     # The map alone on standard output is fine (test above); so is the JSON with -o a file.
     res = _cli("match", a, b, "-q", "--json", "-o", str(tmp_path / "m.txt"))
     assert res.returncode == 0 and "map" not in json.loads(res.stdout)
+
+
+def test_dev_stdout_redirected_to_a_file_is_written_through_not_replaced(meshes, tmp_path):
+    a, b = meshes
+    log = tmp_path / "log.txt"
+    log.write_text("earlier line\n")
+    with open(log, "ab") as fh:  # `>> log.txt`
+        res = _cli("match", a, b, "-q", "-o", "/dev/stdout", stdout=fh)
+    assert res.returncode == 0, res.stderr
+    lines = log.read_text().splitlines()
+    assert lines[0] == "earlier line" and len(lines) == 1 + N
+    np.testing.assert_array_equal(np.array(lines[1:], dtype=int), read_map_lines(a, b))
+    res = _cli("match", a, b, "-q", "-o", "/dev/stdout", stdout=subprocess.DEVNULL)
+    assert res.returncode == 0
+    # Standard output closed: refused before any work, whether the map goes there or to -o.
+    for args in ([], ["-o", "/dev/stdout"], ["--json", "-o", str(tmp_path / "m.txt")]):
+        code = "import sys; from hope_rs.cli.commands import main; sys.exit(main(sys.argv[1:]))"
+        res = subprocess.run(
+            [sys.executable, "-c", code, "match", a, b, "-q", *args],
+            stderr=subprocess.PIPE,
+            preexec_fn=lambda: os.close(1),  # `>&-`: the command starts without it
+        )
+        assert res.returncode == 2, res.stderr
+        assert "standard output is closed" in res.stderr.decode() or "is not open for writing" in (
+            res.stderr.decode()
+        )
+
+
+def read_map_lines(a, b) -> np.ndarray:
+    return hope_rs.match(hope_rs.load_mesh(a), hope_rs.load_mesh(b)).map
+
+
+def test_outputs_are_not_inputs_end_in_no_slash_and_come_whole_or_not_at_all(
+    meshes, tmp_path, capsys
+):
+    a, b = meshes
+    clicks = tmp_path / "clicks.txt"
+    clicks.write_text("0 0\n5 5\n")
+    for option, target in [("-o", clicks), ("-o", a), ("--confidence-out", clicks)]:
+        before = Path(target).read_bytes()
+        status = main(["match", a, b, "-q", "--landmarks", str(clicks), option, str(target)])
+        assert status == 2 and Path(target).read_bytes() == before
+        line = one_line_error(capsys.readouterr().err)
+        assert "one of the inputs" in line or "must end in .npy" in line
+    assert main(["match", a, b, "-q", "-o", str(tmp_path / "m.txt") + "/"]) == 2
+    assert "so it names a folder" in one_line_error(capsys.readouterr().err)
+    assert not (tmp_path / "m.txt").exists()
+    with pytest.raises(NotADirectoryError, match="so it names a folder"):
+        hope_rs.write_map(str(tmp_path / "m.txt") + "/", [0, 1])
+    with pytest.raises(FileNotFoundError, match="names no file"):
+        hope_rs.write_map("", [0, 1])
+    # The map cannot be written (a full disk): the confidence file is not left alone.
+    conf = tmp_path / "conf.npy"
+    assert main(["match", a, b, "-q", "-o", "/dev/full", "--confidence-out", str(conf)]) == 1
+    assert "No space left on device" in one_line_error(capsys.readouterr().err)
+    assert not conf.exists() and not [p for p in tmp_path.iterdir() if p.suffix == ".tmp"]

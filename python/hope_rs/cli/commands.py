@@ -21,12 +21,13 @@ from ..batch.driver import one_line_warning
 from ..evaluation import bench, partial, perturbed, resolution, show
 from ..evaluation.demo import run_demo
 from ..geometry.map_io import (
-    atomic_write,
+    atomic_writes,
+    check_not_an_input,
     check_output_file,
     map_format,
+    map_writer,
     read_landmarks,
     same_file,
-    write_map,
 )
 from ..geometry.mesh import load_mesh
 from ..matching import match
@@ -77,6 +78,12 @@ def _is_standard_output(path: str) -> bool:
 
 def cmd_match(args) -> int:
     config = config_from_args(args)  # before any work, like the outputs below
+    if sys.stdout is None and (args.json or not args.output):
+        raise ValueError(
+            "standard output is closed, and the "
+            f"{'JSON summary' if args.json else 'map'} goes there; give -o FILE"
+            f"{' and leave out --json' if args.json else ''}"
+        )
     # Standard output carries the JSON, or the map when there is no -o: no file may go there too.
     for option, path, printed in [
         ("-o", args.output, args.json),
@@ -90,8 +97,10 @@ def cmd_match(args) -> int:
             )
     if args.output is not None and not args.output.strip():
         raise ValueError("-o names no file (an empty path); leave -o out to print the map")
+    inputs = [args.a, args.b, args.landmarks, args.config]
     if args.output:  # before any work: a known suffix, a folder we can write to
-        check_output_file(args.output, "output")
+        check_output_file(args.output, "-o")
+        check_not_an_input(args.output, inputs, "-o")
         map_format(args.output)
     if args.confidence_out:
         if not args.confidence_out.endswith(".npy"):
@@ -99,6 +108,7 @@ def cmd_match(args) -> int:
                 f"--confidence-out {args.confidence_out!r} must end in .npy (a NumPy float array)"
             )
         check_output_file(args.confidence_out, "--confidence-out")
+        check_not_an_input(args.confidence_out, inputs, "--confidence-out")
         if not config.confidence.enabled:
             raise ValueError(
                 "--confidence-out needs the confidence stage, which the --config file turns "
@@ -135,10 +145,6 @@ def cmd_match(args) -> int:
     coarse = next((s for s in res.stages if s.name == "coarse"), None)
     if coarse is not None and not coarse.ran and not args.quiet and not args.verbose:
         print(f"hope-rs: note: --multiscale: {coarse.reason}", file=sys.stderr)
-    if args.confidence_out:
-        conf = res.confidence
-        assert conf is not None  # checked above: the confidence stage is on
-        atomic_write(args.confidence_out, lambda fh: np.save(fh, conf, allow_pickle=False))
     if res.quality is not None and res.quality.likely_failed and not args.quiet:
         print(
             f"hope-rs: warning: this match likely failed (mean confidence "
@@ -147,9 +153,14 @@ def cmd_match(args) -> int:
             "look at it with hope-rs show --color-by confidence",
             file=sys.stderr,
         )
-    if args.output:
-        write_map(args.output, res.map)
-    elif not args.json:
+    # Both files, or neither (a full disk).
+    files = [] if not args.output else [(args.output, map_writer(args.output, res.map))]
+    if args.confidence_out:
+        conf = res.confidence
+        assert conf is not None  # checked above: the confidence stage is on
+        files.append((args.confidence_out, lambda fh: np.save(fh, conf, allow_pickle=False)))
+    atomic_writes(files)
+    if not args.output and not args.json:
         sys.stdout.write("\n".join(map(str, res.map.tolist())) + "\n")
     if args.json:
         summary = _summary(res)

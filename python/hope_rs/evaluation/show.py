@@ -25,7 +25,7 @@ import pickle
 import numpy as np
 
 from .._validate import as_index_map
-from ..geometry.map_io import atomic_write, check_output_file, read_map
+from ..geometry.map_io import atomic_write, check_not_an_input, check_output_file, read_map
 from ..geometry.mesh import Mesh, load_mesh
 from ..pipeline.config import MatchConfig
 from ..pipeline.unreferenced import body_vertices
@@ -387,15 +387,6 @@ def vertex_errors(a: Mesh, b: Mesh, mapping, a_idx, b_idx) -> np.ndarray:
     return out
 
 
-def _not_an_input(target: str, inputs: list, option: str) -> None:
-    """Refuse an output file that is one of the command's inputs (it would be overwritten)."""
-    for x in inputs:
-        if os.path.exists(target) and os.path.exists(x) and os.path.samefile(target, x):
-            raise ValueError(
-                f"{option} would write {target!r}, one of the inputs; name another file"
-            )
-
-
 def cmd_show(args) -> int:
     if not args.png and not args.ply:
         raise ValueError("give --png FILE and/or --ply FILE: there is nothing to write")
@@ -415,7 +406,7 @@ def cmd_show(args) -> int:
     inputs = [x for x in (args.a, args.b, args.map, args.confidence) if x]
     if args.png:  # before any work
         check_output_file(args.png, "--png")
-        _not_an_input(args.png, inputs, "--png")
+        check_not_an_input(args.png, inputs, "--png")
         if os.path.splitext(args.png)[1].lower() not in ("", ".png"):
             raise ValueError(f"--png {args.png!r} must end in .png (the picture is written as PNG)")
     if args.ply:
@@ -423,7 +414,7 @@ def cmd_show(args) -> int:
             raise ValueError(f"--ply {args.ply!r} is a folder; give a file name such as out.ply")
         for target in ply_pair_paths(args.ply):
             check_output_file(target, "--ply")
-            _not_an_input(target, inputs, "--ply")
+            check_not_an_input(target, inputs, "--ply")
     a, b = load_mesh(args.a), load_mesh(args.b)
     f = read_map(args.map, a.n_vertices, b.n_vertices)
     values, label, top, cmap = None, "", None, "inferno_r"

@@ -14,10 +14,12 @@ crash) sees a whole file or none; they get the usual permissions (0666 minus the
 
 from __future__ import annotations
 
+import fcntl
 import io
 import os
 import re
 import shutil
+import sys
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -29,10 +31,13 @@ from .readers import without_bom
 __all__ = [
     "MAP_SUFFIXES",
     "atomic_write",
+    "atomic_writes",
+    "check_not_an_input",
     "check_output_file",
     "check_writable_folder",
     "read_landmarks",
     "read_map",
+    "map_writer",
     "same_file",
     "write_map",
 ]
@@ -76,6 +81,45 @@ def _umask() -> int:
     return mask
 
 
+#: Names of a process's own open files, written through the open file itself.
+_FD_NAME = re.compile(r"/dev/std(out|err)|/dev/fd/([0-9]+)|/proc/self/fd/([0-9]+)")
+
+
+def _fd_named(path: str | os.PathLike) -> int | None:
+    """The file descriptor ``path`` names (``/dev/stdout`` is 1, ``/dev/fd/3`` is 3), else
+    None. Such a name is written through the descriptor: opening it again would truncate a
+    file standard output is redirected to (``>> log.txt``), and renaming over it would
+    replace that file."""
+    m = _FD_NAME.fullmatch(os.path.normpath(os.fspath(path)))
+    if m is None:
+        return None
+    std, fd, proc = m.groups()
+    return {"out": 1, "err": 2}[std] if std else int(fd or proc)
+
+
+def _write_to_fd(fd: int, write: Callable[[io.BufferedWriter], object]) -> None:
+    """Write through open file descriptor ``fd`` at its position (appending if it appends),
+    after what Python has buffered for it."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            if stream is not None and stream.fileno() == fd:
+                stream.flush()
+        except (OSError, ValueError, AttributeError):
+            pass
+    with os.fdopen(os.dup(fd), "wb") as fh:
+        write(fh)
+
+
+def _file_name_problem(shown: str) -> str | None:
+    """Why ``shown`` cannot name a file to write: empty, or ending in a separator without
+    being a folder (``m.txt/`` asks for a folder, not a plain file ``m.txt``); else None."""
+    if shown == "":
+        return "the output names no file (an empty path)"
+    if shown.endswith(("/", os.sep)) and not os.path.isdir(shown):
+        return f"{shown!r} ends in {shown[-1]!r}, so it names a folder; give a file name"
+    return None
+
+
 def _special(path: str | os.PathLike) -> bool:
     """Whether ``path`` (links followed) exists and is neither a plain file nor a folder: a
     FIFO, a socket or a device such as ``/dev/stdout``."""
@@ -88,39 +132,66 @@ def atomic_write(path: str | os.PathLike, write: Callable[[io.BufferedWriter], o
     The data go to a temporary file in the same folder, are flushed to disk, get the mode a
     plain ``open`` would give (0666 minus the umask; ``mkstemp`` makes 0600) and are renamed
     over ``path``. On any error the temporary file is removed and ``path`` is left as it was.
-    A symbolic link is followed (the file it names is replaced, the link kept); a FIFO or a
-    device (``/dev/stdout``) is written in place, since it cannot be replaced. A folder or a
-    missing folder is refused with a one-line error naming ``path``.
+    A symbolic link is followed (the file it names is replaced, the link kept); a name of one
+    of the process's open files (``/dev/stdout``, ``/dev/fd/N``) is written through that file
+    at its position, whatever it is redirected to; a FIFO or a device is written in place,
+    since it cannot be replaced. A folder, a missing folder, an empty name and one ending in
+    ``/`` are refused with a one-line error naming ``path``.
     """
-    shown = os.fspath(path)
-    if os.path.isdir(shown):
-        raise IsADirectoryError(f"{shown!r} is a folder; give a file name")
-    if _special(shown):
-        # A FIFO, a socket or a device: renaming over it would replace it with a plain file.
-        try:
-            with open(shown, "wb") as fh:
-                write(fh)
-        except OSError as err:
-            raise _naming(err, shown) from None
-        return
-    path = os.path.realpath(shown)
-    folder = os.path.dirname(path)
-    if not os.path.isdir(folder):
-        raise FileNotFoundError(f"cannot write {shown!r}: folder {folder!r} does not exist")
-    fd, tmp = tempfile.mkstemp(dir=folder, prefix=TEMP_PREFIX, suffix=".tmp")
+    atomic_writes([(path, write)])
+
+
+def atomic_writes(items) -> None:
+    """Several files as :func:`atomic_write` does one, all or none: ``items`` are
+    ``(path, write)`` pairs, and every plain file is written to its temporary file before
+    any is renamed into place, so a failure (a full disk) leaves every one as it was."""
+    staged: list[tuple[str, str, str]] = []  # (temporary file, target, name as given)
+    direct = []  # open files, FIFOs and devices: written in place, once the rest is staged
     try:
-        with os.fdopen(fd, "wb") as fh:
-            write(fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-            os.fchmod(fh.fileno(), 0o666 & ~_umask())
-        os.replace(tmp, path)
-    except BaseException as err:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        if isinstance(err, OSError):
-            raise _naming(err, shown) from None
-        raise
+        for path, write in items:
+            shown = os.fspath(path)
+            problem = _file_name_problem(shown)
+            if problem is not None:
+                raise (FileNotFoundError if shown == "" else NotADirectoryError)(problem)
+            if os.path.isdir(shown):
+                raise IsADirectoryError(f"{shown!r} is a folder; give a file name")
+            fd = _fd_named(shown)
+            if fd is not None or _special(shown):
+                # Renaming over a FIFO, a socket or a device would replace it with a file.
+                direct.append((shown, fd, write))
+                continue
+            target = os.path.realpath(shown)
+            folder = os.path.dirname(target)
+            if not os.path.isdir(folder):
+                raise FileNotFoundError(f"cannot write {shown!r}: folder {folder!r} does not exist")
+            handle, tmp = tempfile.mkstemp(dir=folder, prefix=TEMP_PREFIX, suffix=".tmp")
+            staged.append((tmp, target, shown))
+            try:
+                with os.fdopen(handle, "wb") as fh:
+                    write(fh)
+                    fh.flush()
+                    os.fsync(fh.fileno())
+                    os.fchmod(fh.fileno(), 0o666 & ~_umask())
+            except OSError as err:
+                raise _naming(err, shown) from None
+        for shown, fd, write in direct:
+            try:
+                if fd is not None:
+                    _write_to_fd(fd, write)
+                else:
+                    with open(shown, "wb") as fh:
+                        write(fh)
+            except OSError as err:
+                raise _naming(err, shown) from None
+        for tmp, target, shown in staged:
+            try:
+                os.replace(tmp, target)
+            except OSError as err:
+                raise _naming(err, shown) from None
+    finally:
+        for tmp, _, _ in staged:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
 
 
 def _naming(err: OSError, path: str) -> OSError:
@@ -187,12 +258,39 @@ def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
         return norm(os.path.realpath(a)) == norm(os.path.realpath(b))
 
 
+def check_not_an_input(target: str | os.PathLike, inputs, option: str) -> None:
+    """Refuse, in one line naming ``option``, an output file that is one of the command's
+    ``inputs`` (paths; None for one not given): writing it would overwrite that input."""
+    for x in inputs:
+        if (
+            x is not None
+            and os.path.exists(target)
+            and os.path.exists(x)
+            and os.path.samefile(target, x)
+        ):
+            raise ValueError(
+                f"{option} would write {os.fspath(target)!r}, one of the inputs; name another file"
+            )
+
+
 def check_output_file(path: str | os.PathLike, option: str) -> None:
     """Fail early, with a one-line ValueError naming the ``option``, when the file ``path``
     cannot be written: it is a folder, or its folder (a link's target's) does not take new
     files, or it is a FIFO or device that is not writable."""
+    problem = _file_name_problem(os.fspath(path))
+    if problem is not None:
+        raise ValueError(f"{option}: {problem}")
     if os.path.isdir(path):
         raise ValueError(f"{option} {os.fspath(path)!r} is a folder; give a file name")
+    fd = _fd_named(path)
+    if fd is not None:
+        try:
+            writable = (fcntl.fcntl(fd, fcntl.F_GETFL) & os.O_ACCMODE) in (os.O_WRONLY, os.O_RDWR)
+        except OSError:
+            writable = False
+        if not writable:
+            raise ValueError(f"{option} {os.fspath(path)!r} is not open for writing")
+        return
     if _special(path):
         # A FIFO or a device (/dev/stdout) is written in place (see atomic_write).
         if not os.access(path, os.W_OK):
@@ -212,6 +310,12 @@ def write_map(path: str | os.PathLike, mapping) -> None:
     mapping : (n_a,) array_like of int
         ``mapping[i]`` is the vertex of B matched to vertex i of A.
     """
+    atomic_write(path, map_writer(path, mapping))
+
+
+def map_writer(path: str | os.PathLike, mapping) -> Callable[[io.BufferedWriter], object]:
+    """What :func:`write_map` writes to ``path``, as a function of the open file (for
+    :func:`atomic_writes`); ValueError for a bad suffix or map, before anything is written."""
     fmt = map_format(path)
     arr = np.asarray(mapping)
     if arr.ndim != 1 or (arr.size and not np.issubdtype(arr.dtype, np.integer)):
@@ -222,10 +326,9 @@ def write_map(path: str | os.PathLike, mapping) -> None:
         raise ValueError(f"a map's vertex indices must fit in int64, got {arr.max()}")
     arr = arr.astype(np.int64, copy=False)
     if fmt == "npy":
-        atomic_write(path, lambda fh: np.save(fh, arr, allow_pickle=False))
-    else:
-        text = "".join(f"{x}\n" for x in arr.tolist())
-        atomic_write(path, lambda fh: fh.write(text.encode("ascii")))
+        return lambda fh: np.save(fh, arr, allow_pickle=False)
+    text = "".join(f"{x}\n" for x in arr.tolist())
+    return lambda fh: fh.write(text.encode("ascii"))
 
 
 def read_map(
