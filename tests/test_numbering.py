@@ -145,3 +145,21 @@ def test_a_shape_keeps_its_descriptors_internally_and_hands_them_out_as_numbered
     np.testing.assert_array_equal(other.internal_descriptors("shot"), want[shape.order])
     with pytest.raises(ValueError, match="descriptors must be"):
         other.set_descriptors("wks", want[:10])
+
+
+def test_a_face_listed_twice_in_either_winding_is_one_face():
+    """A double-sided export lists every face twice, once per winding: the same surface, so
+    the same Shape and map as the faces listed once (it halved the map's quality: the
+    orientation saw 2n unlinked faces and the area doubled)."""
+    from meshes import bumpy_sphere
+
+    import hope_rs
+
+    (va, fa), (vb, fb) = bumpy_sphere(300, 0), bumpy_sphere(300, 1)
+    plain = hope_rs.Shape((va, fa))
+    want = hope_rs.match(plain, (vb, fb)).map
+    for faces in (np.vstack([fa, fa[:, ::-1]]), np.vstack([fa[::-1], fa]), fa[:, [1, 2, 0]]):
+        twice = hope_rs.Shape((va, faces))
+        np.testing.assert_array_equal(twice.internal.faces, plain.internal.faces)
+        assert twice.scale == plain.scale
+        np.testing.assert_array_equal(hope_rs.match(twice, (vb, fb)).map, want)

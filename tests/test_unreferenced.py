@@ -172,3 +172,18 @@ def test_spectral_descriptors_of_a_mesh_in_two_pieces_are_finite(pair):
         for kind in ("hks", "wks"):
             d = hope_rs.Shape((v, f)).descriptors(kind)
             assert np.isfinite(d).all() and d.std(axis=0).max() > 0
+
+
+def test_a_vertex_in_no_face_beyond_1e154_takes_its_nearest_neighbours_image(pair):
+    """Squared distances overflow there, and the k-d tree finds no Euclidean neighbour (it
+    raised IndexError after the whole match)."""
+    (va, fa), (vb, fb) = pair
+    plain = hope_rs.match((va, fa), (vb, fb), spectral=False)
+    for x in (1e160, 1e300):
+        far = np.vstack([va, [[x, 0.0, 0.0]]])
+        res = hope_rs.match((far, fa), (vb, fb), spectral=False)
+        np.testing.assert_array_equal(res.map[:N], plain.map)
+        assert res.map[N] in plain.map and res.confidence[N] == 0
+        far_b = np.vstack([vb, [[x, 0.0, 0.0]]])
+        res = hope_rs.match((va, fa), (far_b, fb), init=np.full(N, N), spectral=False)
+        assert res.map.max() < N

@@ -92,9 +92,9 @@ def code_fingerprint() -> str:
     return f"{__version__}-{core}"
 
 
-#: The numbering cached arrays are in (:func:`hope_rs.geometry.numbering.canonical_order`).
-#: A new name when that order changes, so entries in an older order are computed again.
-NUMBERING = "morton"
+#: The internal mesh cached arrays are computed on (:func:`hope_rs.geometry.numbering.canonical_mesh`:
+#: its vertex order, its faces). A new name when it changes, so older entries are computed again.
+NUMBERING = "morton, faces once"
 
 
 def descriptor_params(kind: str, config: DescriptorConfig = DescriptorConfig()) -> dict:

@@ -85,6 +85,24 @@ def canonical_faces(faces: np.ndarray, rank: np.ndarray) -> np.ndarray:
     return f[np.lexsort((f[:, 2], f[:, 1], f[:, 0]))]
 
 
+def _without_repeated_faces(f: np.ndarray) -> np.ndarray:
+    """Canonical faces (:func:`canonical_faces`) with each set of three vertices once: a face
+    listed again, with either winding (a double-sided export lists every face twice), adds
+    no surface, and would double the area and cancel the normals. The first in the sorted
+    order stays, so the result depends on the set of faces only."""
+    if f.shape[0] < 2:
+        return f
+    lo, hi = np.minimum(f[:, 1], f[:, 2]), np.maximum(f[:, 1], f[:, 2])
+    n = int(f.max()) + 1
+    if n < 2**21:  # one int64 per face: ten times faster than rows
+        _, first = np.unique((f[:, 0] * n + lo) * n + hi, return_index=True)
+    else:
+        _, first = np.unique(np.column_stack([f[:, 0], lo, hi]), axis=0, return_index=True)
+    if first.size == f.shape[0]:
+        return f
+    return f[np.sort(first)]
+
+
 def canonical_mesh(mesh: Mesh, *, orient: bool = True) -> tuple[Mesh, np.ndarray, np.ndarray]:
     """``mesh`` renumbered by position: (the renumbered mesh, ``order``, ``rank``), where
     internal vertex ``i`` is ``mesh``'s vertex ``order[i]`` and ``rank`` is the inverse.
@@ -93,14 +111,15 @@ def canonical_mesh(mesh: Mesh, *, orient: bool = True) -> tuple[Mesh, np.ndarray
     for meshes of ordinary size, see :func:`hope_rs.geometry.mesh.scale_exponent`) and its faces are
     oriented consistently and outward (:func:`hope_rs.geometry.orientation.orient_faces`; ``orient=False``
     keeps them as given, for meshes derived from an oriented one), so that neither the size of
-    the coordinates nor the winding of the input's faces changes a result.
+    the coordinates nor the winding of the input's faces changes a result. A face listed
+    more than once (either winding) is kept once.
     """
     k = scale_exponent(mesh.vertices)
     v = np.ldexp(mesh.vertices, 2 * k) if k else mesh.vertices
     order = canonical_order(v)
     rank = inverse_permutation(order)
     v = v[order]
-    f = canonical_faces(mesh.faces, rank)
+    f = _without_repeated_faces(canonical_faces(mesh.faces, rank))
     flip = orient_faces(v, f) if orient else np.zeros(f.shape[0], dtype=bool)
     if flip.any():
         f = f.copy()

@@ -38,6 +38,18 @@ def _index(keep: np.ndarray | None, n: int) -> np.ndarray:
     return out
 
 
+def _nearest(points: np.ndarray, queries: np.ndarray) -> np.ndarray:
+    """Index of the point nearest each query. Where the squared distances overflow (a vertex
+    beyond 1e154), the largest coordinate difference decides instead of the Euclidean
+    distance, since the k-d tree finds no Euclidean neighbour there."""
+    tree = cKDTree(points)
+    near = tree.query(queries)[1]
+    far = near == len(points)
+    if far.any():
+        near[far] = tree.query(queries[far], p=np.inf)[1]
+    return near
+
+
 def _loose(mesh: Mesh, min_piece: float) -> np.ndarray:
     """Bool per face: in one of the smallest pieces (connected components) that together
     hold less than ``min_piece`` of the mesh's area. A piece goes with every piece of its
@@ -123,8 +135,7 @@ class Referenced:
         off = idx < 0
         if off.any():
             assert self.keep_b is not None  # only B's unused vertices have no index
-            near = cKDTree(self.points_b[self.keep_b]).query(self.points_b[f[off]])[1]
-            idx[off] = near
+            idx[off] = _nearest(self.points_b[self.keep_b], self.points_b[f[off]])
         return idx
 
     def landmarks_in(self, landmarks: np.ndarray | None) -> np.ndarray | None:
@@ -157,8 +168,7 @@ class Referenced:
         out = np.empty(self.n_a, dtype=np.int64)
         out[self.keep_a] = g
         unused = np.setdiff1d(np.arange(self.n_a), self.keep_a, assume_unique=True)
-        near = cKDTree(self.points_a[self.keep_a]).query(self.points_a[unused])[1]
-        out[unused] = g[near]
+        out[unused] = g[_nearest(self.points_a[self.keep_a], self.points_a[unused])]
         return out
 
     def expand(self, res: MatchResult) -> MatchResult:
