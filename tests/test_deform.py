@@ -92,3 +92,17 @@ def test_the_pass_lowers_the_error_of_a_gorilla_to_woman_pair():
     e_off = geodesic_errors(b, res_off.map, a_idx=ai, b_idx=bi).mean()
     # Edge-graph errors: about 0.13 without the pass, 0.09 with it.
     assert e_on < 0.9 * e_off
+
+
+def test_a_second_closed_piece_does_not_count_as_a_spectral_mismatch():
+    """Its constant is a second null eigenvalue: read as A's first frequency, it set a zero
+    against B's and made the stage re-match an isometric pair."""
+    (va, fa), (vb, fb) = bumpy_sphere(400, 0), bumpy_sphere(400, 1)
+    side = np.sqrt(0.01 * hope_rs.Mesh(va, fa).area / 2.366)  # a tetrahedron of 1% the area
+    tv = va.max(axis=0) + 1 + side * np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
+    tf = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]) + len(va)
+    with_piece = Shape((np.vstack([va, tv]), np.vstack([fa, tf])))
+    b = Shape((vb, fb))
+    alone = spectral_mismatch(Shape((va, fa)), b)
+    assert abs(spectral_mismatch(with_piece, b) - alone) < 0.01
+    assert spectral_mismatch(with_piece, b) < DeformConfig().min_mismatch

@@ -30,13 +30,22 @@ from .spectral import functional_map, nearest_rows
 from .state import QUIET, MatchState, Stage
 
 
+def _non_null(q: np.ndarray) -> np.ndarray:
+    """Eigenvalues without the null ones, one per piece of the mesh (its constants): a second
+    closed piece would otherwise set a zero against the other shape's first frequency."""
+    return q[q > NULL_SHARE * max(float(q.max(initial=0.0)), 1e-300)]
+
+
+#: Eigenvalues below this share of the largest computed are null.
+NULL_SHARE = 1e-8
+
+
 def spectral_mismatch(a: Shape, b: Shape, n: int = DeformConfig.n_eigenvalues) -> float:
     """Mean |log(λ_i(A) / λ_i(B))| over the first ``n`` non-zero Laplace–Beltrami eigenvalues
     of both shapes at unit area (Rayleigh quotients of their spectral bases): about 0 for
     isometric shapes, whatever their triangulations; a body against another body's
     proportions gives several times more."""
-    la = rayleigh_quotients(a.internal, a.spectral_basis(n + 1)[0])[1:]
-    lb = rayleigh_quotients(b.internal, b.spectral_basis(n + 1)[0])[1:]
+    la, lb = (_non_null(rayleigh_quotients(s.internal, s.spectral_basis(n + 1)[0])) for s in (a, b))
     m = min(la.size, lb.size)
     if m == 0:
         return 0.0
