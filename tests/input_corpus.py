@@ -92,6 +92,7 @@ BAD = {
     "off_trailing_garbage": ("off", TET_OFF + b"garbage here\n", "line 11: more lines"),
     "off_two_coordinates": ("off", TET_OFF.replace(b"1 0 0\n", b"1 0\n", 1), "line 4: expected 3 coordinates, got 2"),
     "off_word_for_number": ("off", TET_OFF.replace(b"1 0 0\n", b"1 zero 0\n", 1), "line 4: expected a number"),
+    "off_grouped_digits": ("off", TET_OFF.replace(b"1 0 0\n", b"1_0 0 0\n", 1), "line 4: expected a number"),
     "off_word_for_count": ("off", off("OFF\nfour 4 0"), "line 2: expected an integer"),
     "off_float_count": ("off", off("OFF\n4.0 4 0"), "expected an integer"),
     "off_negative_count": ("off", off("OFF\n-4 4 0"), "negative counts"),

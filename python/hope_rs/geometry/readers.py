@@ -67,6 +67,8 @@ def _lines(data: bytes, comment: str = "#") -> list[tuple[int, list[str]]]:
 
 def _float(s: str, line: int, what: str) -> float:
     try:
+        if "_" in s:  # float() reads "1_0" as 10: Python's digit grouping, not a file's
+            raise ValueError(s)
         x = float(s)
     except ValueError:
         raise LineError(line, f"expected a number for {what}, got {_show([s])}") from None
@@ -77,6 +79,8 @@ def _float(s: str, line: int, what: str) -> float:
 
 def _number(s: str, line: int) -> float:
     try:
+        if "_" in s:
+            raise ValueError(s)
         return float(s)
     except ValueError:
         raise LineError(line, f"expected a number, got {_show([s])}") from None
@@ -145,7 +149,7 @@ def read_off(data: bytes) -> tuple[np.ndarray, np.ndarray]:
 
 def _off_vertices(rows, allowed: list[int]) -> np.ndarray:
     n = len(rows)
-    if all(len(t) == 3 for _, t in rows):
+    if all(len(t) == 3 and "_" not in "".join(t) for _, t in rows):
         try:
             v = np.array([t for _, t in rows], dtype=np.float64).reshape(n, 3)
             if np.all(np.isfinite(v)):
