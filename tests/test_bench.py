@@ -283,3 +283,33 @@ def test_a_failing_pair_is_reported_and_the_others_still_run(
     assert "- q->p hope: RuntimeError: GC_SAFETY_ASSERT FAILURE" in md
     err = capsys.readouterr().err
     assert "3 failed" in err and "perm p->bad init" in err
+
+
+def test_an_interrupted_set_never_passes_for_a_finished_one(identity_set, vts_set, tmp_path,
+                                                            monkeypatch):  # fmt: skip
+    import hope_rs.evaluation.bench as bench
+
+    out = tmp_path / "out"
+    real, calls = bench.run_method, []
+
+    def stop_at_the_second_pair(m, ctx):
+        calls.append(m)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(m, ctx)
+
+    monkeypatch.setattr(bench, "run_method", stop_at_the_second_pair)
+    with pytest.raises(KeyboardInterrupt):
+        bench.run_bench(identity_set, out, methods=["init"], render=False, progress=False)
+    monkeypatch.undo()
+    assert not (out / "spheres.csv").exists()
+    with open(out / "spheres.csv.partial", newline="") as fh:
+        assert len(list(csv.DictReader(fh))) == 1  # the pair that ran, kept for a look
+    # Another set into the same folder: its summary holds that set only.
+    bench.run_bench(vts_set.parent, out, methods=["init"], render=False, progress=False)
+    summary = (out / "summary.md").read_text()
+    assert "perm" in summary and "spheres" not in summary
+    # The whole set run again: its table, and no partial one left.
+    bench.run_bench(identity_set, out, methods=["init"], render=False, progress=False)
+    assert (out / "spheres.csv").exists() and not (out / "spheres.csv.partial").exists()
+    assert "spheres" in (out / "summary.md").read_text()

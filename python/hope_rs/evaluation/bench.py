@@ -2,7 +2,9 @@
 
 Writes to the results folder, per data set ``SET``:
 
-* ``SET.csv`` — one row per (pair, method): accuracy, smoothness and wall time;
+* ``SET.csv`` — one row per (pair, method): accuracy, smoothness and wall time, once every
+  pair of the set has run (until then ``SET.csv.partial``, rewritten after each pair, which
+  the tables leave out: an interrupted run never passes for a finished one);
 * ``SET.md`` — the table of each method over the pairs it ran (errors pooled over pairs);
 * ``SET_curves.png`` — % correspondences within geodesic error, 0..0.25 and 0..0.10;
 * ``SET_best.png``, ``SET_worst.png`` — colour transfer of HOPE's best and worst pair;
@@ -20,14 +22,14 @@ pairs and methods still run.
 from __future__ import annotations
 
 import csv
-import os
+import io
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from ..geometry.map_io import check_writable_folder
+from ..geometry.map_io import atomic_write, check_writable_folder
 from ..geometry.mesh import load_mesh
 from .datasets import GIVE_PAIRS, Pair, datasets_in, pairs_of
 from .evaluate import confidence_auroc, error_curve, geodesic_errors, score, smoothness
@@ -104,13 +106,17 @@ def _score_row(pair: Pair, name: str, res, ctx, ai, bi, starts: dict) -> tuple[d
 
 
 def _write_csv(path: Path, rows: list[dict]) -> None:
-    tmp = path.with_suffix(".csv.tmp")
-    with open(tmp, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=FIELDS)
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
-    os.replace(tmp, path)
+    text = io.StringIO(newline="")
+    w = csv.DictWriter(text, fieldnames=FIELDS)
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
+    data = text.getvalue().encode("utf-8")
+    atomic_write(path, lambda fh: fh.write(data))
+
+
+#: Suffix of a set's table while its pairs run (not ``.csv``: the tables leave it out).
+PARTIAL = ".partial"
 
 
 #: Columns a results table has (an older table may lack later ones); a CSV file without them
@@ -249,9 +255,10 @@ def write_tables(out) -> None:
         rows = _read_csv(path)
         if rows:
             md = _set_markdown(path.stem, rows, list(dict.fromkeys(r["method"] for r in rows)))
-            path.with_suffix(".md").write_text(md)
+            atomic_write(path.with_suffix(".md"), lambda fh, md=md: fh.write(md.encode("utf-8")))
             parts.append(md)
-    (out / "summary.md").write_text("\n".join(parts))
+    summary = "\n".join(parts).encode("utf-8")
+    atomic_write(out / "summary.md", lambda fh: fh.write(summary))
 
 
 #: The render's up axes (:func:`hope_rs.evaluation.show.render_pair`).
@@ -341,6 +348,7 @@ def run_bench(
     try:
         for folder in folders:
             rows: list[dict] = []
+            partial = out / f"{folder.name}.csv{PARTIAL}"
             errors: dict[str, list[np.ndarray]] = {}
             shown: list[tuple[float, Pair, np.ndarray]] = []
             show_method = "hope" if "hope" in methods else methods[-1]
@@ -353,7 +361,7 @@ def run_bench(
                     for m in ms:
                         rows.append(_failure(pair, m, err, a, b))
                         bar.step(f"{folder.name} {pair.name} {m} FAILED {rows[-1]['failed']}")
-                    _write_csv(out / f"{folder.name}.csv", rows)
+                    _write_csv(partial, rows)
                     continue
                 ctx = PairContext(a, b)
                 starts: dict = {}
@@ -370,9 +378,11 @@ def run_bench(
                     if m == show_method:
                         shown.append((row["mean"], pair, res.map))
                     bar.step(f"{folder.name} {pair.name} {m} x100 {row['mean_x100']:.2f}")
-                _write_csv(out / f"{folder.name}.csv", rows)
+                _write_csv(partial, rows)
             if not rows:
                 continue
+            _write_csv(out / f"{folder.name}.csv", rows)  # the set is whole
+            partial.unlink(missing_ok=True)
             all_rows += rows
             n_pairs = {m: len(es) for m, es in errors.items()}
             if errors:
