@@ -495,3 +495,12 @@ def test_7_the_manifest_journal_survives_a_cut_last_line_and_keeps_the_last_word
         warnings.simplefilter("error")
         with pytest.raises(ValueError, match=r"the batch manifest .* is a folder; move it away"):
             Manifest(tmp_path)
+
+
+def test_8b_a_folder_where_a_map_goes_fails_its_pair_before_matching_it(files, tmp_path, configs):
+    out = tmp_path / "out"
+    (out / "s0__s1.txt").mkdir(parents=True)
+    res = hope_rs.match_many([files / "s0.off", files / "s1.off", files / "s2.off"],
+                             [(0, 1), (1, 2)], out_dir=out, jobs=1, cache=False, **FAST)  # fmt: skip
+    assert not res[0].ok and "a folder is there" in res[0].error and res[1].ok
+    assert len(configs) == 1  # the other pair only

@@ -226,6 +226,13 @@ def run(plan: Plan, ex: Backend, report: Callable) -> Iterator[PairResult]:
                             continue
                         path = plan.paths[n]
                         assert path is not None  # a pair to check has a map file
+                        if os.path.isdir(path):  # no map can be written there: fail now
+                            yield result(
+                                n,
+                                error=f"cannot write the map {str(path)!r}: a folder is there; "
+                                "move it away",
+                            )
+                            continue
                         m, why = existing_map(path, sizes[i], sizes[j])
                         if why is None and manifest is not None:
                             why = manifest.why_redo(
