@@ -132,6 +132,8 @@ def test_partial_sets_bad_input(tmp_path, sphere):
         write_partial_sets(tmp_path, tmp_path / "out")
     with pytest.raises(ValueError, match="unknown condition"):
         write_partial_sets(tmp_path, tmp_path / "out", conditions=["cut99"])
+    with pytest.raises(ValueError, match="condition cut30 is given twice"):
+        write_partial_sets(tmp_path, tmp_path / "out", conditions=["cut30", "cut50", "cut30"])
 
 
 def test_derived_set_commands_refuse_sources_that_give_nothing_or_clash(tmp_path, sphere, capsys):

@@ -51,6 +51,9 @@ def set_jobs(
     bad = [c for c in conditions if c not in known]
     if bad:
         raise ValueError(f"unknown {what} {', '.join(bad)}; the {what}s are {', '.join(known)}")
+    twice = sorted({c for c in conditions if list(conditions).count(c) > 1})
+    if twice:
+        raise ValueError(f"{what} {', '.join(twice)} is given twice; list each once")
     jobs: list[tuple[Path, list[Pair]]] = []
     for src in sources:
         same = [s for s, _ in jobs if s.name == Path(src).name]
