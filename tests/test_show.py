@@ -59,6 +59,8 @@ def test_png_has_the_requested_size(pair):
         (["--png", "x.png", "--color-by", "confidence"], "needs --confidence FILE.npy"),
         (["--png", "x.png", "--truth", "a.vts"], "'identity' or two .vts files"),
         (["--png", "x.jpg"], "must end in .png"),
+        (["--ply", "x.ply", "--truth", "a", "b", "c"], "--truth colour the --png picture only"),
+        (["--ply", "x.ply", "--confidence", "c.npy"], "--confidence colour the --png picture"),
     ],
 )
 def test_bad_options_fail_in_one_line(pair, capsys, extra, message):

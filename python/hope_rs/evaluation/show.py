@@ -390,6 +390,13 @@ def vertex_errors(a: Mesh, b: Mesh, mapping, a_idx, b_idx) -> np.ndarray:
 def cmd_show(args) -> int:
     if not args.png and not args.ply:
         raise ValueError("give --png FILE and/or --ply FILE: there is nothing to write")
+    given = [o for o, x in [("--truth", args.truth), ("--confidence", args.confidence),
+                            ("--color-by", args.color_by)] if x]  # fmt: skip
+    if given and not args.png:
+        raise ValueError(
+            f"{', '.join(given)} colour the --png picture only (the PLY pair carries the "
+            "position colours through the map): add --png FILE, or leave them out"
+        )
     size = _parse_size(args.size)
     color_by = args.color_by or (
         "error" if args.truth else "confidence" if args.confidence else "position"
@@ -418,9 +425,7 @@ def cmd_show(args) -> int:
     a, b = load_mesh(args.a), load_mesh(args.b)
     f = read_map(args.map, a.n_vertices, b.n_vertices)
     values, label, top, cmap = None, "", None, "inferno_r"
-    if not args.png:  # the PLY pair carries the colour transfer only
-        pass
-    elif color_by == "error":
+    if color_by == "error":
         ai, bi = _truth(args.truth, a.n_vertices, b.n_vertices)
         values = vertex_errors(a, b, f, ai, bi)
         label = "geodesic error / sqrt(area of B)"
