@@ -224,6 +224,14 @@ def test_settings_files_a_folder_binary_or_with_a_byte_order_mark(meshes, tmp_pa
     binary.write_bytes(b"\x82\xff\x00\x93")
     assert main(["match", a, b, "-q", "-o", str(out), "--config", str(binary)]) == 2
     assert "s.toml' is not UTF-8 text" in one_line_error(capsys.readouterr().err)
+    for text, says in [
+        ("[refine]\nmax_passes = -1\n", "refine.max_passes must be an integer >= 1, got -1"),
+        ('[multiscale]\nenabled = "yes"\n', "leaves [multiscale] enabled out"),
+    ]:
+        (tmp_path / "v.toml").write_text(text)
+        assert main(["match", a, b, "-q", "--config", str(tmp_path / "v.toml")]) == 2
+        line = one_line_error(capsys.readouterr().err)
+        assert f"settings file '{tmp_path / 'v.toml'}'" in line and says in line
     bom = tmp_path / "bom.toml"
     bom.write_bytes(b"\xef\xbb\xbf[refine]\nmax_passes = 1\n")
     assert main(["match", a, b, "-q", "-o", str(out), "--config", str(bom)]) == 0

@@ -93,6 +93,11 @@ def config_from_args(args) -> MatchConfig:
     shortcuts set through the same :meth:`~hope_rs.MatchConfig.with_options` as
     :func:`hope_rs.match`'s keyword options, checked before any work."""
     config = read_config(args.config) if args.config else MatchConfig()
+    if args.config:  # its values checked here, so that the message names the file
+        try:
+            check_match_options(config=config)
+        except (TypeError, ValueError) as e:
+            raise type(e)(f"settings file {str(args.config)!r}: {e}") from None
     options = {}
     if args.k_max is not None:
         options["k_max"] = args.k_max

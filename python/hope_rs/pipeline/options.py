@@ -64,7 +64,8 @@ def check_options(
         _integer("polish_k", polish_k, p_lo, p_hi, f"None or an integer in [{p_lo}, {p_hi}]")
     if not (multiscale is None or isinstance(multiscale, (bool, np.bool_))):
         raise TypeError(
-            f"multiscale must be None (chosen by size), True or False, got {multiscale!r}"
+            "multiscale must be None (chosen by size; a settings file leaves [multiscale] "
+            f"enabled out for it), True or False, got {multiscale!r}"
         )
     for name, value in [
         ("global_step", global_step),
