@@ -78,7 +78,11 @@ BAD = [
     ({"callback": 3}, TypeError, r"callback must be None or callable .*got int"),
     ({"callback": "print"}, TypeError, r"callback must be None or callable .*got str"),
     ({"spectral": "no"}, TypeError, r"spectral must be True or False, got 'no'"),
-    ({"multiscale": 1}, TypeError, r"multiscale must be None \(chosen by size\), True or False"),
+    (
+        {"multiscale": 1},
+        TypeError,
+        r"multiscale must be None \(chosen by size; .*\), True or False",
+    ),
     ({"global_step": None}, TypeError, r"global_step must be True or False"),
     ({"shared_faces": [True]}, TypeError, r"shared_faces must be True or False"),
     ({"progress": "yes"}, TypeError, r"progress must be None, True, False or callable.*got str"),
