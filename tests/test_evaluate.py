@@ -1,5 +1,7 @@
 """The scorer on cases with known answers."""
 
+import warnings
+
 import numpy as np
 import pytest
 from conftest import data_path
@@ -110,6 +112,9 @@ def test_vts_files_are_one_based(tmp_path):
     (tmp_path / "c.vts").write_text("1\nx\n")
     with pytest.raises(ValueError, match="cannot read"):
         load_vts(tmp_path / "c.vts")
+    (tmp_path / "d.vts").write_text("1 5\n2 6\n")  # a landmark file, not a .vts
+    with pytest.raises(ValueError, match="has 2 numbers a line"):
+        load_vts(tmp_path / "d.vts")
 
 
 def test_vts_files_of_the_shared_data_index_vertices():
@@ -131,6 +136,15 @@ def test_curve_and_areas_of_known_errors():
     assert s.exact == 0.25 and s.mean == pytest.approx(1.25 / 4)
     assert s.mean_x100 == pytest.approx(125 / 4) and "x100 31.25" in str(s)
     assert score([np.inf, 0.0]).mean == 0.5  # unreachable counts as error 1
+    with pytest.raises(ValueError, match="errors are distances, >= 0"):
+        score([-1.0, 0.0])
+    with pytest.raises(ValueError, match="must be a 1-D array"):
+        score([[0.0, 0.1]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert np.isnan(score([]).mean) and np.isnan(score([]).exact)
+    with pytest.raises(ValueError, match=r"map must be a 1-D array .* got shape \(9, 1\)"):
+        geodesic_errors(grid(3), np.arange(9)[:, None])
 
 
 def test_smoothness_of_identity_and_of_a_scrambled_map():

@@ -17,6 +17,7 @@ Either way an exact match scores exactly 0.
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 
@@ -43,6 +44,11 @@ def load_vts(path: str | os.PathLike) -> np.ndarray:
         rows = np.loadtxt(path, dtype=np.int64, ndmin=2, encoding="utf-8-sig")
     except (OSError, ValueError) as e:
         raise ValueError(f"cannot read {os.fspath(path)!r} as a .vts file: {e}") from None
+    if rows.size and rows.shape[1] != 1:
+        raise ValueError(
+            f"{os.fspath(path)!r} has {rows.shape[1]} numbers a line; a .vts file has one "
+            "1-based vertex index a line"
+        )
     idx = rows[:, 0] - 1
     if idx.size and idx.min() < 0:
         raise ValueError(f"{os.fspath(path)!r} holds an index below 1; .vts files are 1-based")
@@ -117,7 +123,11 @@ def geodesic_errors(b, mapping, *, a_idx=None, b_idx=None, method: str = "graph"
         raise ValueError(f"method must be one of {GEODESIC_METHODS}, got {method!r}")
     mesh_b, shape_b = _mesh_and_shape(b)
     mapping = np.asarray(mapping)
-    n_a = mapping.shape[0] if mapping.ndim == 1 else -1
+    if mapping.ndim != 1:
+        raise ValueError(
+            f"map must be a 1-D array (one vertex of B per vertex of A), got shape {mapping.shape}"
+        )
+    n_a = mapping.shape[0]
     mapping = as_index_map(mapping, n_a, mesh_b.n_vertices, name="map")
     if a_idx is None:
         a_idx = np.arange(min(n_a, mesh_b.n_vertices))
@@ -185,8 +195,14 @@ class Score:
 
 def score(errors: np.ndarray, *, max_error: float = MAX_ERROR) -> Score:
     """Fraction exactly right, mean error and curve AUCs (0..max_error and 0..0.10) of an array
-    of geodesic errors."""
+    of geodesic errors (NaN for none)."""
     e = np.asarray(errors, dtype=np.float64)
+    if e.ndim != 1:
+        raise ValueError(f"errors must be a 1-D array, got shape {e.shape}")
+    if e.size == 0:  # nothing scored
+        return Score(math.nan, math.nan, math.nan, math.nan)
+    if (e < 0).any():
+        raise ValueError(f"errors are distances, >= 0; got {e.min()}")
     finite = np.where(np.isfinite(e), e, 1.0)
     return Score(
         float(np.mean(e == 0)),
