@@ -190,6 +190,8 @@ def test_pairs_files_take_quoted_and_tab_separated_paths_with_spaces(tmp_path):
         "'my meshes/x.off' \"my meshes/a b\"\n"
         "my meshes/a b\tc d.off\t# tab-separated, comment\n"
         "\tc\t my meshes/x \n"
+        "\"my meshes/a b\"\t'c d.ply'\n"  # quoted and tab-separated
+        "scan.v2 b.PLY\n"  # a bare name with a dot, a mesh suffix in capitals
     )
     d = tmp_path / "my meshes"
     assert read_pairs(f, ext=".off") == [
@@ -197,6 +199,8 @@ def test_pairs_files_take_quoted_and_tab_separated_paths_with_spaces(tmp_path):
         (d / "x.off", d / "a b.off"),
         (d / "a b.off", tmp_path / "c d.off"),
         (tmp_path / "c.off", d / "x.off"),
+        (d / "a b.off", tmp_path / "c d.ply"),
+        (tmp_path / "scan.v2.off", tmp_path / "b.PLY"),
     ]
 
 

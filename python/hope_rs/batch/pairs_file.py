@@ -10,6 +10,7 @@ from typing import Literal, overload
 import numpy as np
 
 from ..geometry.map_io import read_landmarks
+from ..geometry.readers import READERS
 from ..pipeline.landmarks import check_landmarks
 
 __all__ = ["all_pairs", "read_pairs", "strip_comment"]
@@ -42,14 +43,38 @@ def _pair_fields(line: str) -> list[str]:
         cut = (i for i, c in enumerate(line) if c == "#" and (i == 0 or line[i - 1].isspace()))
         body = line[: next(cut, len(line))]
         if "\t" in body.strip():
-            return [f.strip() for f in body.split("\t") if f.strip()]
+            return [_unquoted(f.strip()) for f in body.split("\t") if f.strip()]
     return shlex.split(strip_comment(line), comments=False)
+
+
+def _unquoted(field: str) -> str:
+    """A tab-separated field without the quotes around it, when it is one quoted word."""
+    if len(field) >= 2 and field[0] == field[-1] and field[0] in "'\"":
+        try:
+            words = shlex.split(field)
+        except ValueError:
+            return field
+        if len(words) == 1:
+            return words[0]
+    return field
 
 
 @overload
 def read_pairs(
     path: str | os.PathLike, *, ext: str = "", with_landmarks: Literal[False] = False
 ) -> list[tuple[Path, Path]]: ...
+def _unquoted(field: str) -> str:
+    """A tab-separated field without the quotes around it, when it is one quoted word."""
+    if len(field) >= 2 and field[0] == field[-1] and field[0] in "'\"":
+        try:
+            words = shlex.split(field)
+        except ValueError:
+            return field
+        if len(words) == 1:
+            return words[0]
+    return field
+
+
 @overload
 def read_pairs(
     path: str | os.PathLike, *, ext: str = "", with_landmarks: Literal[True]
@@ -59,9 +84,10 @@ def read_pairs(path: str | os.PathLike, *, ext: str = "", with_landmarks: bool =
 
     The two paths are separated by white space (quote a path holding spaces, as in a shell:
     ``"my meshes/a.off" b.off``) or by a tab (then each field is taken as it is, spaces
-    included). Relative paths are resolved against the file's folder; ``ext`` (e.g. ``".off"``)
-    is appended to names that do not already end with it, so the ``pairs.txt`` of the shared
-    benchmark sets (``tr_reg_002 tr_reg_007``) work as they are. Blank lines are ignored, and
+    included, without quotes around it). Relative paths are resolved against the file's
+    folder; ``ext`` (e.g. ``".off"``) is appended to bare names, those without a mesh suffix
+    (``.off``, ``.obj``, ``.ply``, ``.stl``), so the ``pairs.txt`` of the shared benchmark sets
+    (``tr_reg_002 tr_reg_007``) work as they are, beside ``scan.ply``. Blank lines are ignored, and
     so is a comment: a ``#`` at the start of a line or after white space (outside quotes) and
     the rest of the line; a ``#`` inside a name (``scan#2``) is part of the path. A malformed
     line raises ValueError naming the file and line.
@@ -122,7 +148,7 @@ def read_pairs(path: str | os.PathLike, *, ext: str = "", with_landmarks: bool =
             marks.append(None)
         pair = []
         for t in tokens[:2]:
-            if ext and not t.endswith(ext):
+            if ext and Path(t).suffix.lower() not in READERS:  # a bare name
                 t += ext
             p = Path(t)
             pair.append(p if p.is_absolute() else folder / p)

@@ -141,7 +141,9 @@ def add_batch_parser(sub) -> None:
         "--format", default="txt", choices=["txt", "npy"],
         help="map files: txt (one B index per line, default) or npy (NumPy int64)",
     )  # fmt: skip
-    p.add_argument("--ext", default="", help="suffix appended to names without it, e.g. .off")
+    p.add_argument(
+        "--ext", default="", help="suffix appended to names without a mesh suffix, e.g. .off"
+    )
     p.add_argument(
         "-j", "--jobs", type=int, help="local worker processes (default: one per two cores)"
     )
