@@ -70,7 +70,9 @@ def test_files_that_load_but_cannot_be_matched(tmp_path, name):
     m = hope_rs.load_mesh(write(tmp_path, name, ext, data))
     with pytest.raises(ValueError, match=fragment) as e:
         hope_rs.match(m, TET_MESH)
-    assert "\n" not in str(e.value)
+    assert "\n" not in str(e.value) and str(e.value).startswith("a: ")
+    with pytest.raises(ValueError, match=f"^b: .*{fragment}"):
+        hope_rs.match(TET_MESH, m)
 
 
 @pytest.mark.parametrize("name", sorted(ODD))
@@ -131,6 +133,7 @@ def test_the_cli_in_process_exits_2_with_one_line(tmp_path, good_off, capsys, na
     assert main(["match", str(bad), str(good_off), "-o", str(out), "-q"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("hope-rs: error:") and fragment in err
+    assert str(bad) in err  # which file
     assert not out.exists()
 
 

@@ -31,7 +31,12 @@ def _as_mesh(x, k_max: int, name: str) -> Shape | Mesh:
         if x.k_max < k_max:
             raise ValueError(f"{name} was built with k_max={x.k_max} < requested k_max={k_max}")
         return x
-    return as_mesh(x, name)
+    mesh = as_mesh(x, name)
+    try:
+        mesh.scale  # noqa: B018 (a mesh without area is refused here, named)
+    except ValueError as e:
+        raise ValueError(f"{name}: {e}") from None
+    return mesh
 
 
 def _mesh_of(x: Shape | Mesh) -> Mesh:

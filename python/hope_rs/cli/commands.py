@@ -121,6 +121,11 @@ def cmd_match(args) -> int:
             )
     landmarks = None if args.landmarks is None else read_landmarks(args.landmarks)
     a, b = load_mesh(args.a), load_mesh(args.b)
+    for path, mesh in ((args.a, a), (args.b, b)):
+        try:
+            mesh.scale  # noqa: B018 (a mesh without area is refused here, named by its file)
+        except ValueError as e:
+            raise ValueError(f"cannot match {path!r}: {e}") from None
     if (
         not config.multiscale.enabled
         and (

@@ -328,7 +328,7 @@ def parse_mesh(
                 f"{path!r}: {seams} boundary edges lie exactly on other edges (seams split "
                 "for texture coordinates or normals?); the vertices there stay separate to "
                 "keep the file's numbering, so the surface is cut along them. If the numbering "
-                "does not matter, pass merge_duplicates=True",
+                "does not matter, merge them (load_mesh(..., merge_duplicates=True) in Python)",
                 stacklevel=stacklevel,
             )
     return mesh
