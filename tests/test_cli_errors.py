@@ -344,3 +344,18 @@ def test_outputs_are_not_inputs_end_in_no_slash_and_come_whole_or_not_at_all(
     assert main(["match", a, b, "-q", "-o", "/dev/full", "--confidence-out", str(conf)]) == 1
     assert "No space left on device" in one_line_error(capsys.readouterr().err)
     assert not conf.exists() and not [p for p in tmp_path.iterdir() if p.suffix == ".tmp"]
+
+
+def test_a_landmark_out_of_range_is_named_by_its_file_and_line(meshes, tmp_path, capsys):
+    a, b = meshes
+    clicks = tmp_path / "clicks.txt"
+    clicks.write_text("# my clicks\n\n0 0\n99999 3\n")
+    assert main(["match", a, b, "-q", "--landmarks", str(clicks)]) == 2
+    assert f"{clicks}:4: vertex 99999 is not a vertex of A, which has {N}" in one_line_error(
+        capsys.readouterr().err
+    )
+    clicks.write_text("0 0\n0 5\n")
+    assert main(["match", a, b, "-q", "--landmarks", str(clicks)]) == 2
+    assert f"{clicks}: landmarks contradict each other" in one_line_error(capsys.readouterr().err)
+    with pytest.raises(ValueError, match=r"clicks.txt:2: vertex 5 is not a vertex of B"):
+        hope_rs.read_landmarks(clicks, n_a=10, n_b=5)

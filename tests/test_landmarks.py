@@ -111,6 +111,7 @@ BAD = [
 @pytest.mark.parametrize("landmarks, exc, message", BAD)
 def test_bad_landmarks_fail_in_one_line_before_any_work(no_shapes, landmarks, exc, message):
     v = np.zeros((N, 3))
+    v[1:3] = np.eye(3)[:2]  # one face with area
     f = np.array([[0, 1, 2]])
     with pytest.raises(exc, match=message) as info:
         hope_rs.match((v, f), (v, f), landmarks=landmarks)

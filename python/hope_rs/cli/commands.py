@@ -31,6 +31,7 @@ from ..geometry.map_io import (
 )
 from ..geometry.mesh import load_mesh
 from ..matching import match
+from ..pipeline.landmarks import check_landmarks
 from ..pipeline.progress import ProgressBar
 from .batch_cli import add_batch_parser, add_setting_arguments, config_from_args, environment_help
 
@@ -126,6 +127,12 @@ def cmd_match(args) -> int:
             mesh.scale  # noqa: B018 (a mesh without area is refused here, named by its file)
         except ValueError as e:
             raise ValueError(f"cannot match {path!r}: {e}") from None
+    if landmarks is not None:  # again, with the meshes' sizes: a bad index named by its line
+        landmarks = read_landmarks(args.landmarks, n_a=a.n_vertices, n_b=b.n_vertices)
+        try:
+            check_landmarks(landmarks, a.n_vertices, b.n_vertices)
+        except (TypeError, ValueError) as e:
+            raise type(e)(f"{args.landmarks}: {e}") from None
     if (
         not config.multiscale.enabled
         and (

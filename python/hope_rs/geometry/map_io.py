@@ -401,14 +401,22 @@ def read_map(
     return arr
 
 
-def read_landmarks(path: str | os.PathLike) -> np.ndarray:
+def read_landmarks(
+    path: str | os.PathLike, *, n_a: int | None = None, n_b: int | None = None
+) -> np.ndarray:
     """Read a landmark file: one ``A_VERTEX B_VERTEX`` pair per line (0-based, separated by
     spaces, tabs or a comma; ``#`` starts a comment; blank lines are skipped).
+
+    Parameters
+    ----------
+    n_a, n_b : int, keyword-only, optional
+        Vertex counts of A and B: an index out of range is then refused naming its line.
 
     Returns
     -------
     (m, 2) int64 ndarray
-        Checked for form only; :func:`hope_rs.match` checks the indices against the meshes.
+        Checked for form (and range, given the counts); :func:`hope_rs.match` checks the
+        indices against the meshes.
 
     Raises
     ------
@@ -443,7 +451,14 @@ def read_landmarks(path: str | os.PathLike) -> np.ndarray:
         # Past 19 digits no index fits int64 (and int() refuses past 4,300 digits).
         if any(len(w.lstrip("+-")) > 19 or int(w) not in _INT64 for w in words):
             raise ValueError(f"{name}:{n}: vertex index too large, got {line.strip()[:80]!r}")
-        rows.append((int(words[0]), int(words[1])))
+        row = (int(words[0]), int(words[1]))
+        for v, count, mesh in ((row[0], n_a, "A"), (row[1], n_b, "B")):
+            if count is not None and not 0 <= v < count:
+                raise ValueError(
+                    f"{name}:{n}: vertex {v} is not a vertex of {mesh}, which has {count} "
+                    f"(0-based indices 0..{count - 1})"
+                )
+        rows.append(row)
     return np.array(rows, dtype=np.int64).reshape(-1, 2)
 
 
