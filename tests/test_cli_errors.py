@@ -359,3 +359,13 @@ def test_a_landmark_out_of_range_is_named_by_its_file_and_line(meshes, tmp_path,
     assert f"{clicks}: landmarks contradict each other" in one_line_error(capsys.readouterr().err)
     with pytest.raises(ValueError, match=r"clicks.txt:2: vertex 5 is not a vertex of B"):
         hope_rs.read_landmarks(clicks, n_a=10, n_b=5)
+
+
+def test_verbosity_adds_up_before_and_after_the_subcommand(meshes, tmp_path, capsys):
+    a, b = meshes
+    out = str(tmp_path / "m.txt")
+    lines = {}
+    for v in (["-v", "match"], ["match", "-v"], ["-v", "match", "-v"], ["match", "-vv"]):
+        assert main([*v, a, b, "-o", out]) == 0
+        lines[" ".join(v)] = len(capsys.readouterr().err.splitlines())
+    assert lines["-v match"] == lines["match -v"] < lines["-v match -v"] == lines["match -vv"]

@@ -244,8 +244,9 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     m.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     m.add_argument(
-        "-v", "--verbose", action="count", default=argparse.SUPPRESS,
-        help="as hope-rs -v: log each stage (-vv: every step) instead of the bar",
+        "-v", "--verbose", action="count", default=0, dest="match_verbose",
+        help="as hope-rs -v, adding up with it: log each stage (-vv: every step) instead of "
+        "the bar",
     )  # fmt: skip
     m.set_defaults(func=cmd_match)
     d = sub.add_parser(
@@ -273,6 +274,7 @@ USAGE_ERRORS = (
 def main(argv=None) -> int:
     """Run the command line; returns the exit status (see ``hope-rs --help``)."""
     args = build_parser().parse_args(argv)
+    args.verbose += getattr(args, "match_verbose", 0)  # `hope-rs -v match -v` is -vv
     debug = os.environ.get("HOPE_RS_DEBUG", "") not in ("", "0")
     formatwarning, warnings.formatwarning = warnings.formatwarning, one_line_warning
     handler = _log_to_stderr(args.verbose)
