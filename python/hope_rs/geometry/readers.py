@@ -56,7 +56,10 @@ def _text(data: bytes) -> str:
 def _lines(data: bytes, comment: str = "#") -> list[tuple[int, list[str]]]:
     """The non-empty lines as (1-based line number, tokens), comments removed."""
     out = []
-    for no, ln in enumerate(_text(data).split("\n"), 1):
+    text = _text(data)
+    if "\r" in text:  # Windows (CR LF) and classic Mac (CR alone) line ends
+        text = text.replace("\r\n", "\n").replace("\r", "\n")
+    for no, ln in enumerate(text.split("\n"), 1):
         if comment in ln:
             ln = ln.split(comment, 1)[0]
         tok = ln.split()
@@ -318,7 +321,11 @@ def read_ply(data: bytes) -> tuple[np.ndarray, np.ndarray]:
             count = _int(t[2], no, "the element count")
             if count < 0:
                 raise LineError(no, f"negative element count {count}")
+            if any(e[0] == t[1] for e in elements):
+                raise LineError(no, f"a second element {_show([t[1]])}; each is declared once")
             elements.append([t[1], count, []])
+        elif t[0] == "property" and elements and any(p[0] == t[-1] for p in elements[-1][2]):
+            raise LineError(no, f"a second property {_show([t[-1]])} of {_show([elements[-1][0]])}")
         elif t[0] == "property" and elements and len(t) == 3 and t[1] in _PLY_TYPES:
             elements[-1][2].append((t[2], _PLY_TYPES[t[1]]))
         elif (
@@ -340,10 +347,12 @@ def read_ply(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     vert = values.get("vertex")
     if vert is None or not all(k in vert for k in "xyz"):
         raise ValueError("the PLY file has no 'vertex' element with x, y and z")
+    if any(np.ndim(vert[k]) != 1 for k in "xyz"):
+        raise ValueError("the PLY vertex coordinates x, y and z must be numbers, not lists")
     v = np.stack([np.asarray(vert[k], dtype=np.float64) for k in "xyz"], axis=1)
     faces = values.get("face", {})
     lists = faces.get("vertex_indices", faces.get("vertex_index"))
-    if lists is None:
+    if lists is None or (len(lists) and np.ndim(lists[0]) == 0):  # absent, or not a list
         raise ValueError("the PLY file has no 'face' element with a vertex_indices list")
     return v, _fan(lists)
 
