@@ -31,12 +31,7 @@ def _as_mesh(x, k_max: int, name: str) -> Shape | Mesh:
         if x.k_max < k_max:
             raise ValueError(f"{name} was built with k_max={x.k_max} < requested k_max={k_max}")
         return x
-    mesh = as_mesh(x, name)
-    try:
-        mesh.scale  # noqa: B018 (a mesh without area is refused here, named)
-    except ValueError as e:
-        raise ValueError(f"{name}: {e}") from None
-    return mesh
+    return as_mesh(x, name)
 
 
 def _mesh_of(x: Shape | Mesh) -> Mesh:
@@ -50,8 +45,14 @@ def _like(x: Shape | Mesh, mesh: Mesh, min_piece: float) -> Shape | Mesh:
     return x.without(mesh, min_piece) if isinstance(x, Shape) else mesh
 
 
-def _as_shape(x: Shape | Mesh, config: MatchConfig) -> Shape:
-    return x if isinstance(x, Shape) else Shape(x, k_max=config.k_max, config=config.shape)
+def _as_shape(x: Shape | Mesh, config: MatchConfig, name: str) -> Shape:
+    """``x`` as a Shape; a mesh that cannot be one (no surface area) is named (``name: ...``)."""
+    if isinstance(x, Shape):
+        return x
+    try:
+        return Shape(x, k_max=config.k_max, config=config.shape)
+    except ValueError as e:
+        raise ValueError(f"{name}: {e}") from None
 
 
 def match(
@@ -167,7 +168,7 @@ def match(
         if not isinstance(init, str):
             init = ref.init_in(init)
         landmarks = ref.landmarks_in(landmarks)
-    sa, sb = _as_shape(ma, config), _as_shape(mb, config)
+    sa, sb = _as_shape(ma, config, "a"), _as_shape(mb, config, "b")
     timings = {"shapes": time.perf_counter() - t0}
     if isinstance(progress, (bool, np.bool_)):  # True: the bar; False: nothing
         bar, progress = (ProgressBar() if progress else None), None

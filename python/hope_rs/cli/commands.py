@@ -122,11 +122,6 @@ def cmd_match(args) -> int:
             )
     landmarks = None if args.landmarks is None else read_landmarks(args.landmarks)
     a, b = load_mesh(args.a), load_mesh(args.b)
-    for path, mesh in ((args.a, a), (args.b, b)):
-        try:
-            mesh.scale  # noqa: B018 (a mesh without area is refused here, named by its file)
-        except ValueError as e:
-            raise ValueError(f"cannot match {path!r}: {e}") from None
     if landmarks is not None:  # again, with the meshes' sizes: a bad index named by its line
         landmarks = read_landmarks(args.landmarks, n_a=a.n_vertices, n_b=b.n_vertices)
         try:
@@ -152,6 +147,12 @@ def cmd_match(args) -> int:
     show_bar = bar.live and not args.quiet and not args.verbose
     try:
         res = match(a, b, landmarks=landmarks, progress=bar if show_bar else None, config=config)
+    except ValueError as e:
+        # A mesh that cannot be matched, named "a: ..." or "b: ...": named by its file here.
+        which = {"a: ": args.a, "b: ": args.b}.get(str(e)[:3])
+        if which is None:
+            raise
+        raise ValueError(f"cannot match {which!r}: {str(e)[3:]}") from None
     finally:
         bar.close()
     coarse = next((s for s in res.stages if s.name == "coarse"), None)
