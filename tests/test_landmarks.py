@@ -444,3 +444,25 @@ def test_many_landmarks_are_all_pinned_and_a_spread_few_give_coordinates(spheres
     np.testing.assert_array_equal(res.map[lm[:, 0]], lm[:, 1])
     assert seen and set(seen) == {16}
     assert "250 landmarks (16 of them as coordinates)" in res.stage("landmarks").reason
+
+
+def test_a_multiscale_match_with_landmarks_does_not_depend_on_descriptors_left_before():
+    """The landmarks re-place the start by descriptors only where the start was made from them:
+    on the multiscale path, SHOT an earlier match left on the fine Shapes changed the map."""
+    from hope_rs.geometry.coarsen import CoarsenConfig
+    from hope_rs.shape import ShapeConfig
+
+    sc = ShapeConfig(coarsen=CoarsenConfig(spacing=0.06))  # 1500 vertices coarsen
+    cfg = hope_rs.MatchConfig(shape=sc)
+    meshes = bumpy_sphere(1500, 0), bumpy_sphere(1500, 1)
+    lm = np.array([[10, 10], [500, 500], [900, 900]])
+    maps = []
+    for warm in (False, True):
+        a, b = (hope_rs.Shape(m, config=sc) for m in meshes)
+        if warm:
+            hope_rs.match(a, b, config=cfg)  # computes the fine SHOT descriptors
+        res = hope_rs.match(a, b, config=cfg, landmarks=lm, multiscale=True)
+        assert res.coarse is not None
+        maps.append((res.init_map, res.map))
+    for fresh, warm in zip(*maps):
+        np.testing.assert_array_equal(warm, fresh)

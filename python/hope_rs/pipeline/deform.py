@@ -98,9 +98,10 @@ class DeformStage(Stage):
             return QUIET  # the landmarks' and the partial stage's maps are not re-matched here
         a, b = state.a, state.b
         k = max(cfg.k_spectral, cfg.k_displacement, cfg.n_eigenvalues + 1)
-        if not (a.has_spectral_basis(k) and b.has_spectral_basis(k)):
-            # The spectral pass did not run (disabled, too large, too small): no basis to read,
-            # and solving one here would cost more than the pass.
+        if state.zoomout is None or not (a.has_spectral_basis(k) and b.has_spectral_basis(k)):
+            # The spectral pass did not run in this match (disabled, too large, too small): no
+            # basis to read, and solving one here would cost more than the pass. A basis an
+            # earlier match left on the shapes does not count: the map would depend on it.
             return QUIET
         if any(boundary_edges(s.internal.faces).size for s in (a, b)):
             return QUIET  # an open surface's spectrum differs from a closed one's for that alone

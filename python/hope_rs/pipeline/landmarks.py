@@ -310,7 +310,10 @@ class LandmarkStage(Stage):
         t = state.log.start("landmarks", detail=detail)
         kind = state.init if isinstance(state.init, str) else None
         desc = None
-        if kind is not None and a.has_descriptors(kind) and b.has_descriptors(kind):
+        if kind is not None and state.coarse is None:
+            # The descriptors the initial map was made from; not on the multiscale path, whose
+            # start is the lifted coarse map (descriptors an earlier match left on the shapes
+            # do not count there: the map would depend on them).
             desc = a.internal_descriptors(kind), b.internal_descriptors(kind)
         f0 = pin(state.f0, lm)
         if cfg.landmarks.init:
