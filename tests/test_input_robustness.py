@@ -1,7 +1,9 @@
 """Bad input fails early in one line; odd but valid input loads; extreme scales, array
 ownership, face dtypes and other mesh types are handled (corpus in input_corpus.py)."""
 
+import copy
 import os
+import pickle
 import subprocess
 import sys
 import warnings
@@ -243,6 +245,16 @@ def test_a_mesh_copies_the_callers_arrays():
     np.testing.assert_array_equal(m.vertices, TET_V)
     np.testing.assert_array_equal(m.faces, TET_F)
     assert not m.vertices.flags.writeable and not m.faces.flags.writeable
+    # So does an unpickled mesh, and a Shape's.
+    for back in (pickle.loads(pickle.dumps(m)), pickle.loads(pickle.dumps(hope_rs.Shape(m))).mesh):
+        np.testing.assert_array_equal(back.vertices, TET_V)
+        assert not back.vertices.flags.writeable and not back.faces.flags.writeable
+
+
+def test_match_results_compare_by_identity():
+    res = hope_rs.match(TET_MESH, TET_MESH)
+    other = copy.copy(res)
+    assert res == res and res != other and res in [res] and other not in [res]
 
 
 @pytest.mark.parametrize(

@@ -80,6 +80,10 @@ class Mesh:
         self.vertices = v
         self.faces = f
 
+    def __reduce__(self):
+        # Built again by the constructor: an unpickled mesh holds read-only copies too.
+        return (Mesh, (self.vertices, self.faces))
+
     def __repr__(self) -> str:
         return f"Mesh(n_vertices={self.n_vertices}, n_faces={self.n_faces})"
 

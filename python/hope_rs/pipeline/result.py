@@ -42,7 +42,7 @@ class MatchQuality:
     flipped_share: float = 0.0
 
 
-@dataclass
+@dataclass(eq=False)  # == is identity: comparing its arrays element-wise has no one answer
 class MatchResult:
     """The outcome of :func:`match`.
 
