@@ -467,7 +467,7 @@ def test_rayon_threads_above_the_cores_are_capped_with_a_warning():
 
 def test_7_the_manifest_journal_survives_a_cut_last_line_and_keeps_the_last_word(tmp_path):
     entry = {"a": "x", "b": "y", "a_digest": "1", "b_digest": "2", "landmarks": None,
-             "settings": "s", "code": "c"}  # fmt: skip
+             "settings": "s", "code": "c", "map_digest": "m"}  # fmt: skip
     m = Manifest(tmp_path)
     m.record("x__y.txt", entry)
     m.record("x__z.txt", entry)
@@ -481,6 +481,9 @@ def test_7_the_manifest_journal_survives_a_cut_last_line_and_keeps_the_last_word
     assert again.why_redo("x__z.txt", entry) == "the manifest has no entry for it"
     again.record("x__v.txt", entry)  # starts on a line of its own
     assert set(Manifest(tmp_path).entries) == {"x__y.txt", "x__v.txt"}
+    # An entry from before map digests: redone, saying why.
+    again.record("x__u.txt", {k: v for k, v in entry.items() if k != "map_digest"})
+    assert "written by an older hope_rs" in again.why_redo("x__u.txt", entry)
     (tmp_path / MANIFEST).write_text("not a manifest\n")
     with pytest.warns(RuntimeWarning, match="unreadable"):
         assert Manifest(tmp_path).entries == {}

@@ -55,6 +55,13 @@ def test_configs_are_printable_comparable_and_hashable():
     assert other != cfg and other.refine.top_k == 32 and cfg.refine.top_k == 48
     assert len({MatchConfig(), MatchConfig(), other}) == 2
     assert MatchConfig().key() == cfg.key() != other.key()
+    # Equal configs, equal keys: a whole number given as an int or a float.
+    for a, b in [
+        (MatchConfig(min_piece=0), MatchConfig(min_piece=0.0)),
+        (cfg.with_options(min_consistent=1), cfg.with_options(min_consistent=1.0)),
+    ]:
+        assert a == b and a.key() == b.key()
+    assert MatchConfig(min_piece=0.01).key() != MatchConfig().key()
     listed = MatchConfig(refine=RefineConfig(schedule=[3, 2, 1]))
     assert listed.refine.schedule == (3, 2, 1) and hash(listed) == hash(listed.with_options())
     with pytest.raises(dataclasses.FrozenInstanceError):

@@ -27,7 +27,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import hashlib
-import json
 import os
 import warnings
 from functools import lru_cache
@@ -47,6 +46,7 @@ from ..features.descriptors import (
 from ..geometry.map_io import atomic_write
 from ..geometry.mesh import Mesh, load_mesh, parse_mesh, read_mesh_file
 from ..geometry.numbering import canonical_mesh
+from ..pipeline.config import settings_json
 from ..shape import Shape, ShapeConfig
 
 #: Bump when the layout or the meaning of an entry changes (2: entries carry key and checksum).
@@ -165,8 +165,8 @@ class ShapeCache:
     def _key(self, digest: str, what: str, params: dict) -> tuple[Path, str]:
         """The entry's file and the key stored inside it."""
         common = {"what": what, "params": params, "code": code_fingerprint(), "format": FORMAT}
-        tag = hashlib.sha256(json.dumps(common, sort_keys=True).encode()).hexdigest()[:16]
-        key = json.dumps({"digest": digest, **common}, sort_keys=True)
+        tag = hashlib.sha256(settings_json(common).encode()).hexdigest()[:16]
+        key = settings_json({"digest": digest, **common})
         return self.root / f"v{FORMAT}" / digest[:2] / digest / f"{what}-{tag}.npz", key
 
     def get(self, digest: str, what: str, params: dict) -> dict[str, np.ndarray] | None:

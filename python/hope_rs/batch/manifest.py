@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ..geometry.map_io import atomic_write
-from ..pipeline.config import json_default
+from ..pipeline.config import settings_json
 
 __all__ = ["MANIFEST", "Manifest", "landmarks_digest", "map_digest", "settings_key"]
 
@@ -49,10 +49,7 @@ FIELDS = {
 
 def settings_key(match_key: str, config_a, config_b) -> str:
     """The settings of one pair: the MatchConfig key and the ShapeConfig of each shape."""
-    parts = [match_key] + [
-        json.dumps(dataclasses.asdict(c), sort_keys=True, default=json_default)
-        for c in (config_a, config_b)
-    ]
+    parts = [match_key] + [settings_json(dataclasses.asdict(c)) for c in (config_a, config_b)]
     return hashlib.sha256("\n".join(parts).encode("utf-8")).hexdigest()
 
 
@@ -157,6 +154,8 @@ class Manifest:
         old = self.entries.get(name)
         if old is None:
             return "the manifest has no entry for it"
+        if "map_digest" not in old:
+            return "its manifest entry was written by an older hope_rs (no map digest)"
         for key, why in FIELDS.items():
             if old.get(key) != entry.get(key):
                 return why.format(a=entry.get("a"), b=entry.get("b"))

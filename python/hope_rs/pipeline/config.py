@@ -680,6 +680,25 @@ def read_config(path) -> MatchConfig:
         raise type(e)(f"settings file {str(path)!r}: {e}") from None
 
 
+def settings_json(obj) -> str:
+    """``obj`` (settings: dicts, lists, numbers, strings) as JSON text that equal settings
+    share: keys sorted, NumPy scalars as numbers, and a whole float written as the int it
+    equals (``0.0`` as ``0``), since ``MatchConfig(min_piece=0) == MatchConfig(min_piece=0.0)``."""
+    return json.dumps(_whole_floats_as_ints(obj), sort_keys=True, default=json_default)
+
+
+def _whole_floats_as_ints(x):
+    if isinstance(x, np.generic):
+        x = x.item()
+    if isinstance(x, float) and math.isfinite(x) and x.is_integer():
+        return int(x)
+    if isinstance(x, dict):
+        return {k: _whole_floats_as_ints(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_whole_floats_as_ints(v) for v in x]
+    return x
+
+
 def json_default(x):
     """What ``json`` writes for a value it cannot (``json.dumps(..., default=json_default)``):
     a NumPy scalar as its Python number (``np.int64(32)`` like ``32``), another sequence as a
@@ -1184,5 +1203,4 @@ class MatchConfig:
 
     def key(self) -> str:
         """A SHA-256 (hex) of every setting: equal configs, equal keys."""
-        text = json.dumps(self.to_dict(), sort_keys=True, default=json_default)
-        return hashlib.sha256(text.encode()).hexdigest()
+        return hashlib.sha256(settings_json(self.to_dict()).encode()).hexdigest()
