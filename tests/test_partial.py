@@ -548,3 +548,22 @@ def test_the_part_s_scale_trials_are_recorded_with_the_kept_one(sphere):
     wide = max(trials[-3:], key=lambda t: t.score)
     assert kept is (wide if wide.score >= best.score else best)
     assert str(res.stage("partial")).startswith("partial: ")
+
+
+def test_the_callback_and_progress_see_the_steps_of_a_partial_match(sphere):
+    """Both ways: the nested matches' steps reach the caller's callback (so raising there
+    stops a partial match too) and progress; whole -> part reports the reversed match's steps
+    as its history. (Neither saw a step: the nested matches ran without them.)"""
+    part = cut_by_plane(sphere, plane_normal(4), 0.3).mesh
+    for a, b in ((part, sphere), (sphere, part)):
+        calls, events = [], []
+        res = hope_rs.match(a, b, callback=calls.append, progress=events.append)
+        assert res.stage("partial").ran
+        assert len(res.history) > 0 and len(calls) >= len(res.history)
+        assert any(e.iteration is not None for e in events)
+
+        def stop(it):
+            raise KeyboardInterrupt
+
+        with pytest.raises(KeyboardInterrupt):
+            hope_rs.match(a, b, callback=stop)

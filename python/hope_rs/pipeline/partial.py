@@ -190,6 +190,8 @@ class PartialStage(Stage):
                 state.a,
                 state.init,
                 state.config,
+                callback=state.callback,  # its steps are this match's
+                progress=state.log.relay("partial"),
                 landmarks=input_landmarks(state, swap=True),
                 on_stage=lambda st, name: nested.update(partial=st.partial),
             )
@@ -200,6 +202,7 @@ class PartialStage(Stage):
             scale = part.scale if part is not None and part.part == "a" else info.scale
             info = dataclasses.replace(info, counterpart=has, scale=scale)
             state.f0 = state.f = state.hope_map = f
+            state.history = back.history
             # The stages after this one (the confidence) measure the part at that scale too.
             if scale != state.b.scale:
                 state.b = state.b.at_scale(scale)
@@ -246,7 +249,10 @@ class PartialStage(Stage):
         def times(t: float) -> str:
             return f"x{t:.3g}"
 
-        first = run_trial(state, "partial", at(guess, times(1.0)))
+        # The kept trial's steps become the match's history: the caller's callback sees the
+        # steps of every trial, and progress every trial's events.
+        seen = {"progress": state.log.relay("partial"), "callback": state.callback}
+        first = run_trial(state, "partial", at(guess, times(1.0)), **seen)
         share = covered_share(b, guess.map_in(b, first.result.map), covering_rings(guess, b))
         scale = a.internal.scale / np.sqrt(max(share, cfg.partial.min_covered))
         kept = first
@@ -255,9 +261,11 @@ class PartialStage(Stage):
             near = [at(a.at_scale(info.scale * t), times(t)) for t in trials]
             if rescale:
                 near.append(at(a.at_scale(scale), f"covered {times(scale / info.scale)}"))
-            nearby = run_trials(state, "partial", near, mean_confidence, against=first)
+            nearby = run_trials(state, "partial", near, mean_confidence, against=first, **seen)
             merge = _merge_candidate(state, [first, *nearby.tried], nearby.kept, cfg.partial)
-            kept = run_trials(state, "partial", [merge], mean_confidence, against=nearby.kept).kept
+            kept = run_trials(
+                state, "partial", [merge], mean_confidence, against=nearby.kept, **seen
+            ).kept
             top, margin = kept.score, cfg.partial.wide_margin
             assert top is not None  # run_trials scores the trial it keeps
             # A confidence is at most 1: beyond that no wider map could win.
@@ -267,7 +275,7 @@ class PartialStage(Stage):
                 # clearly more confident: they lie farther from the guessed scale.
                 wide = [at(a.at_scale(info.scale * t), times(t)) for t in cfg.partial.wide_trials]
                 kept = run_trials(
-                    state, "partial", wide, mean_confidence, against=kept, margin=margin
+                    state, "partial", wide, mean_confidence, against=kept, margin=margin, **seen
                 ).kept
             info = dataclasses.replace(info, scale=float(kept.candidate.a.scale))
         elif rescale:
@@ -282,7 +290,9 @@ class PartialStage(Stage):
                 return -float(np.linalg.norm(da - db[g], axis=1).mean())
 
             second = at(again, f"covered {times(scale / info.scale)}")
-            kept = run_trials(state, "partial", [second], nearer, against=first, margin=0.0).kept
+            kept = run_trials(
+                state, "partial", [second], nearer, against=first, margin=0.0, **seen
+            ).kept
             if kept is not first:
                 info = dataclasses.replace(info, scale=float(scale))
         # The stages of the kept nested match count as seconds within "partial".

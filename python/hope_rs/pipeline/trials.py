@@ -108,11 +108,18 @@ class Trials:
 
 
 def run_trial(
-    state: MatchState, stage: str, candidate: Candidate, progress: Callable | None = None
+    state: MatchState,
+    stage: str,
+    candidate: Candidate,
+    progress: Callable | None = None,
+    *,
+    callback: Callable | None = None,
 ) -> Trial:
     """The match of ``candidate`` (the runner's stages, fresh), recorded under ``stage``
     unscored; the trial is kept until a later round keeps another. ``progress`` receives
-    the nested match's events (``state.log.relay(stage)`` logs them under the stage)."""
+    the nested match's events (``state.log.relay(stage)`` logs them under the stage), and
+    ``callback`` each of its steps (a stage whose kept trial's steps become the match's
+    history passes the caller's)."""
     c = candidate
     assert state.run is not None  # the runner sets it
     last: dict = {}
@@ -121,7 +128,14 @@ def run_trial(
         last["zoomout"] = s.zoomout
 
     result = state.run(
-        c.a, c.b, c.init, c.config, landmarks=c.landmarks, progress=progress, on_stage=grab
+        c.a,
+        c.b,
+        c.init,
+        c.config,
+        callback=callback,
+        progress=progress,
+        landmarks=c.landmarks,
+        on_stage=grab,
     )
     trial = Trial(c, result, None, Tried(c.label), last.get("zoomout"))
     state.log.tried(stage, trial.record)
@@ -158,6 +172,7 @@ def run_trials(
     against: Trial | None = None,
     margin: float | None = None,
     progress: Callable | None = None,
+    callback: Callable | None = None,
 ) -> Trials:
     """Matches every candidate in order, scores each with ``score`` (higher is better) and
     keeps the first of the highest score. With ``against`` (a trial kept before, scored
@@ -167,7 +182,7 @@ def run_trials(
         raise ValueError("run_trials needs at least one candidate")
     tried = []
     for c in candidates:
-        t = run_trial(state, stage, c, progress)
+        t = run_trial(state, stage, c, progress, callback=callback)
         t.score = t.record.score = float(score(t))
         tried.append(t)
     if against is not None:
