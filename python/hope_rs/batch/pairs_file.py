@@ -63,18 +63,6 @@ def _unquoted(field: str) -> str:
 def read_pairs(
     path: str | os.PathLike, *, ext: str = "", with_landmarks: Literal[False] = False
 ) -> list[tuple[Path, Path]]: ...
-def _unquoted(field: str) -> str:
-    """A tab-separated field without the quotes around it, when it is one quoted word."""
-    if len(field) >= 2 and field[0] == field[-1] and field[0] in "'\"":
-        try:
-            words = shlex.split(field)
-        except ValueError:
-            return field
-        if len(words) == 1:
-            return words[0]
-    return field
-
-
 @overload
 def read_pairs(
     path: str | os.PathLike, *, ext: str = "", with_landmarks: Literal[True]

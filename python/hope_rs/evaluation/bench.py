@@ -111,8 +111,7 @@ def _write_csv(path: Path, rows: list[dict]) -> None:
     w.writeheader()
     for r in rows:
         w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
-    data = text.getvalue().encode("utf-8")
-    atomic_write(path, lambda fh: fh.write(data))
+    atomic_write(path, _writer(text.getvalue()))
 
 
 #: Suffix of a set's table while its pairs run (not ``.csv``: the tables leave it out).
@@ -247,6 +246,12 @@ def _plot_curves(name: str, errors: dict[str, list[np.ndarray]], n_pairs: dict, 
     plt.close(fig)
 
 
+def _writer(text: str):
+    """What :func:`~hope_rs.geometry.map_io.atomic_write` writes for ``text`` (UTF-8)."""
+    data = text.encode("utf-8")
+    return lambda fh: fh.write(data)
+
+
 def write_tables(out) -> None:
     """(Re)write ``SET.md`` and ``summary.md`` from the ``SET.csv`` files in ``out``."""
     out = Path(out)
@@ -255,10 +260,9 @@ def write_tables(out) -> None:
         rows = _read_csv(path)
         if rows:
             md = _set_markdown(path.stem, rows, list(dict.fromkeys(r["method"] for r in rows)))
-            atomic_write(path.with_suffix(".md"), lambda fh, md=md: fh.write(md.encode("utf-8")))
+            atomic_write(path.with_suffix(".md"), _writer(md))
             parts.append(md)
-    summary = "\n".join(parts).encode("utf-8")
-    atomic_write(out / "summary.md", lambda fh: fh.write(summary))
+    atomic_write(out / "summary.md", _writer("\n".join(parts)))
 
 
 #: The render's up axes (:func:`hope_rs.evaluation.show.render_pair`).

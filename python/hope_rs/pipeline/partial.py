@@ -251,8 +251,8 @@ class PartialStage(Stage):
 
         # The kept trial's steps become the match's history: the caller's callback sees the
         # steps of every trial, and progress every trial's events.
-        seen = {"progress": state.log.relay("partial"), "callback": state.callback}
-        first = run_trial(state, "partial", at(guess, times(1.0)), **seen)
+        relay, callback = state.log.relay("partial"), state.callback
+        first = run_trial(state, "partial", at(guess, times(1.0)), relay, callback=callback)
         share = covered_share(b, guess.map_in(b, first.result.map), covering_rings(guess, b))
         scale = a.internal.scale / np.sqrt(max(share, cfg.partial.min_covered))
         kept = first
@@ -261,10 +261,24 @@ class PartialStage(Stage):
             near = [at(a.at_scale(info.scale * t), times(t)) for t in trials]
             if rescale:
                 near.append(at(a.at_scale(scale), f"covered {times(scale / info.scale)}"))
-            nearby = run_trials(state, "partial", near, mean_confidence, against=first, **seen)
+            nearby = run_trials(
+                state,
+                "partial",
+                near,
+                mean_confidence,
+                against=first,
+                progress=relay,
+                callback=callback,
+            )
             merge = _merge_candidate(state, [first, *nearby.tried], nearby.kept, cfg.partial)
             kept = run_trials(
-                state, "partial", [merge], mean_confidence, against=nearby.kept, **seen
+                state,
+                "partial",
+                [merge],
+                mean_confidence,
+                against=nearby.kept,
+                progress=relay,
+                callback=callback,
             ).kept
             top, margin = kept.score, cfg.partial.wide_margin
             assert top is not None  # run_trials scores the trial it keeps
@@ -275,7 +289,14 @@ class PartialStage(Stage):
                 # clearly more confident: they lie farther from the guessed scale.
                 wide = [at(a.at_scale(info.scale * t), times(t)) for t in cfg.partial.wide_trials]
                 kept = run_trials(
-                    state, "partial", wide, mean_confidence, against=kept, margin=margin, **seen
+                    state,
+                    "partial",
+                    wide,
+                    mean_confidence,
+                    against=kept,
+                    margin=margin,
+                    progress=relay,
+                    callback=callback,
                 ).kept
             info = dataclasses.replace(info, scale=float(kept.candidate.a.scale))
         elif rescale:
@@ -291,7 +312,14 @@ class PartialStage(Stage):
 
             second = at(again, f"covered {times(scale / info.scale)}")
             kept = run_trials(
-                state, "partial", [second], nearer, against=first, margin=0.0, **seen
+                state,
+                "partial",
+                [second],
+                nearer,
+                against=first,
+                margin=0.0,
+                progress=relay,
+                callback=callback,
             ).kept
             if kept is not first:
                 info = dataclasses.replace(info, scale=float(scale))
