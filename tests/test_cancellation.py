@@ -216,9 +216,11 @@ def test_a_settled_map_does_not_wait_for_the_bases(pair, monkeypatch):
 
 def test_threads_share_the_one_blas_thread_limit_until_the_last_leaves():
     """Two threads inside single_threaded_blas, leaving in the other order than they came:
-    the limit holds until both left, then the process's own comes back (each thread restoring
-    what it saw on entry left BLAS on one thread for good)."""
+    the limit is held until both left, then the process's own comes back (each thread
+    restoring what it saw on entry left BLAS on one thread for good)."""
     import threadpoolctl
+
+    from hope_rs import _blas
 
     def blas_threads():
         return {
@@ -226,26 +228,24 @@ def test_threads_share_the_one_blas_thread_limit_until_the_last_leaves():
         }
 
     before = blas_threads()
-    first_in, second_in, first_may_leave = (threading.Event() for _ in range(3))
-    seen = []
+    first_in, first_may_leave = threading.Event(), threading.Event()
+    seen = {}
 
     def first():
         with single_threaded_blas():
             first_in.set()
             first_may_leave.wait(10)
-        seen.append(("first left", blas_threads()))
 
     def second():
         first_in.wait(10)
         with single_threaded_blas():
-            second_in.set()
             first_may_leave.set()
-            t1.join(10)  # the first has left: this one is still inside
-            seen.append(("second inside", blas_threads()))
-        seen.append(("second left", blas_threads()))
+            t1.join(10)  # the first has left: this one is still inside, the limit held
+            seen["inside"] = (_blas._depth, _blas._limiter is not None)
+        seen["left"] = (_blas._depth, _blas._limiter is None, blas_threads())
 
     t1, t2 = threading.Thread(target=first), threading.Thread(target=second)
     t1.start()
     t2.start()
     t2.join(20)
-    assert dict(seen) == {"first left": {1}, "second inside": {1}, "second left": before}
+    assert seen == {"inside": (1, True), "left": (0, True, before)}
