@@ -40,8 +40,11 @@ def single_threaded_blas():
     thread inside it has left."""
     global _depth, _limiter
     with _lock:
+        # Set from every thread that enters (as BLAS may read it per thread); the first
+        # entry's limiter holds the limits to restore.
+        limiter = _blas_controller().limit(limits=1, user_api="blas")
         if _depth == 0:
-            _limiter = _blas_controller().limit(limits=1, user_api="blas")
+            _limiter = limiter
         _depth += 1
     try:
         yield
