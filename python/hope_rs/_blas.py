@@ -7,19 +7,11 @@ Large products keep all threads.
 
 from __future__ import annotations
 
-import contextlib
 import functools
-import threading
 
 from threadpoolctl import ThreadpoolController
 
 _controller: ThreadpoolController | None = None
-# The limit is process-wide: threads share one, set by the first to enter and restored by the
-# last to leave (each restoring what it saw on entry left one thread for good, and lifted the
-# limit under a solve still running).
-_lock = threading.Lock()
-_depth = 0
-_limiter = None
 
 
 def _blas_controller() -> ThreadpoolController:
@@ -34,26 +26,9 @@ def _blas_controller() -> ThreadpoolController:
     return _controller
 
 
-@contextlib.contextmanager
 def single_threaded_blas():
-    """Context manager limiting BLAS (and the LAPACK on top of it) to one thread, until every
-    thread inside it has left."""
-    global _depth, _limiter
-    with _lock:
-        # Set from every thread that enters (as BLAS may read it per thread); the first
-        # entry's limiter holds the limits to restore.
-        limiter = _blas_controller().limit(limits=1, user_api="blas")
-        if _depth == 0:
-            _limiter = limiter
-        _depth += 1
-    try:
-        yield
-    finally:
-        with _lock:
-            _depth -= 1
-            if _depth == 0 and _limiter is not None:
-                _limiter.restore_original_limits()
-                _limiter = None
+    """Context manager limiting BLAS (and the LAPACK on top of it) to one thread."""
+    return _blas_controller().limit(limits=1, user_api="blas")
 
 
 def with_single_threaded_blas(fn):
