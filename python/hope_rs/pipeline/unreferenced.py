@@ -71,8 +71,13 @@ def _loose(mesh: Mesh, min_piece: float) -> np.ndarray:
 def body_vertices(mesh: Mesh, min_piece: float) -> np.ndarray:
     """Bool per vertex: used by a face outside the small loose pieces (:func:`_loose`), the
     vertices a match keeps."""
-    used = np.zeros(mesh.n_vertices, dtype=bool)
-    used[mesh.faces[~_loose(mesh, min_piece)].ravel()] = True
+    return _used(mesh.n_vertices, mesh.faces[~_loose(mesh, min_piece)])
+
+
+def _used(n: int, faces: np.ndarray) -> np.ndarray:
+    """Bool per vertex of ``n``: used by one of ``faces``."""
+    used = np.zeros(n, dtype=bool)
+    used[faces.ravel()] = True
     return used
 
 
@@ -82,11 +87,10 @@ def _compact(mesh: Mesh, min_piece: float) -> tuple[Mesh, np.ndarray, int] | Non
     ``None`` when it keeps every vertex."""
     loose = _loose(mesh, min_piece)
     faces = mesh.faces[~loose]
-    used = body_vertices(mesh, min_piece)
+    used = _used(mesh.n_vertices, faces)  # the pieces found once, not again by body_vertices
     if used.all():
         return None
-    in_loose = np.zeros(mesh.n_vertices, dtype=bool)
-    in_loose[mesh.faces[loose].ravel()] = True
+    in_loose = _used(mesh.n_vertices, mesh.faces[loose])
     keep = np.flatnonzero(used)
     return (
         Mesh(mesh.vertices[keep], _index(keep, mesh.n_vertices)[faces]),
