@@ -7,15 +7,15 @@ problem is reported in one line naming the file and, where there is one, the lin
 STL stores a soup of separate triangles, with no shared vertices and no vertex order, so its
 exactly coincident corners are merged (first appearance first): vertex indices of an STL mesh
 refer to that merged mesh. OFF, OBJ and PLY keep the file's vertex order, which ground-truth
-correspondences index into; vertices they duplicate at one position are kept apart, and when
-that splits the surface along a seam (texture coordinates or normals) :func:`load_mesh` warns,
-because merging them would renumber the file (``merge_duplicates=True`` merges them anyway).
+correspondences index into; vertices they duplicate at one position are kept apart (where
+that splits the surface along a seam, for texture coordinates or normals, :func:`~hope_rs.match`
+welds the copies for the match and answers in the file's numbering; ``merge_duplicates=True``
+merges them in the mesh, renumbering it).
 """
 
 from __future__ import annotations
 
 import os
-import warnings
 from functools import cached_property
 
 import numpy as np
@@ -37,6 +37,7 @@ __all__ = [
     "read_mesh_file",
     "scale_exponent",
     "seam_edges",
+    "seam_welds",
     "unique_edges",
     "vertex_components",
 ]
@@ -226,21 +227,46 @@ def _coincident_ids(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return new_id[inverse.reshape(-1)], first[by_first]
 
 
-def seam_edges(mesh: Mesh) -> int:
-    """How many boundary edges of ``mesh`` lie exactly on another edge: the surface is split
-    there (typically along texture or normal seams) although merging the coincident vertices
-    would close it."""
+def _seams(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """The unique edges of ``mesh`` that are seams (boundary edges lying exactly on another
+    edge) as a bool per edge, the unique edges, and per vertex its position's id and per id
+    the first vertex there (:func:`_coincident_ids`); ``None`` when no two vertices
+    coincide."""
     new_id, keep = _coincident_ids(mesh.vertices + 0.0)
     if keep.size == mesh.n_vertices:
-        return 0
+        return None
     f = mesh.faces
     e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
     e = e[e[:, 0] != e[:, 1]]
     edges, count = np.unique(e, axis=0, return_counts=True)
     merged = np.sort(new_id[edges], axis=1)
     _, where, merged_count = np.unique(merged, axis=0, return_inverse=True, return_counts=True)
-    boundary = count == 1
-    return int(np.sum(boundary & (merged_count[where.reshape(-1)] > 1)))
+    seam = (count == 1) & (merged_count[where.reshape(-1)] > 1)
+    return seam, edges, new_id, keep
+
+
+def seam_edges(mesh: Mesh) -> int:
+    """How many boundary edges of ``mesh`` lie exactly on another edge: the surface is split
+    there (typically along texture or normal seams, or every edge of a triangle soup)
+    although merging the coincident vertices would close it."""
+    seams = _seams(mesh)
+    return 0 if seams is None else int(seams[0].sum())
+
+
+def seam_welds(mesh: Mesh) -> np.ndarray:
+    """Per vertex of ``mesh``, the vertex it is welded to (itself when none): the vertices at
+    one position where a seam edge (:func:`seam_edges`) ends are welded to the first of them
+    in the numbering, which closes the seams; coincident vertices elsewhere stay apart."""
+    out = np.arange(mesh.n_vertices)
+    seams = _seams(mesh)
+    if seams is None or not seams[0].any():
+        return out
+    seam, edges, new_id, keep = seams
+    welded = np.zeros(keep.size, dtype=bool)
+    welded[new_id[edges[seam].ravel()]] = True
+    at = welded[new_id]
+    out[at] = keep[new_id[at]]
+    return out
 
 
 def load_mesh(path: str | os.PathLike, *, merge_duplicates: bool | None = None) -> Mesh:
@@ -257,8 +283,9 @@ def load_mesh(path: str | os.PathLike, *, merge_duplicates: bool | None = None) 
         Merge vertices at exactly the same position (first appearance first, see
         :func:`merge_coincident_vertices`). ``None`` (default): for STL only, which stores
         every triangle separately and has no vertex order; OFF, OBJ and PLY keep their
-        numbering and warn when coincident vertices split the surface along a seam (as
-        texture coordinates or normals do; see :func:`seam_edges`). ``True`` merges for every
+        numbering, also where coincident vertices split the surface along a seam (as texture
+        coordinates or normals do; :func:`~hope_rs.match` welds those copies itself, see
+        :func:`seam_welds`). ``True`` merges for every
         format (indices then refer to the merged mesh), ``False`` never (an STL file stays a
         soup of triangles).
 
@@ -270,7 +297,7 @@ def load_mesh(path: str | os.PathLike, *, merge_duplicates: bool | None = None) 
         If the file cannot be read as a triangle mesh (one line, naming the file and, where
         it helps, the line).
     """
-    return parse_mesh(path, read_mesh_file(path), merge_duplicates=merge_duplicates, stacklevel=3)
+    return parse_mesh(path, read_mesh_file(path), merge_duplicates=merge_duplicates)
 
 
 def read_mesh_file(path: str | os.PathLike) -> bytes:
@@ -307,7 +334,6 @@ def parse_mesh(
     data: bytes,
     *,
     merge_duplicates: bool | None = None,
-    stacklevel: int = 2,
 ) -> Mesh:
     """The mesh in ``data``, the bytes of the file ``path`` (its suffix picks the reader;
     see :func:`load_mesh` for ``merge_duplicates`` and the errors)."""
@@ -325,14 +351,4 @@ def parse_mesh(
         raise ValueError(f"cannot read {path!r}: line {e.line}: {e.message}") from None
     except (ValueError, TypeError, OverflowError) as e:
         raise ValueError(f"cannot read {path!r} as a triangle mesh: {one_line(e)}") from None
-    if not merge and merge_duplicates is None:
-        seams = seam_edges(mesh)
-        if seams:
-            warnings.warn(
-                f"{path!r}: {seams} boundary edges lie exactly on other edges (seams split "
-                "for texture coordinates or normals?); the vertices there stay separate to "
-                "keep the file's numbering, so the surface is cut along them. If the numbering "
-                "does not matter, merge them (load_mesh(..., merge_duplicates=True) in Python)",
-                stacklevel=stacklevel,
-            )
     return mesh

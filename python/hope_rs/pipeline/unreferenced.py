@@ -11,9 +11,14 @@ of the pieces that matter (:func:`referenced`): the smallest pieces (connected c
 that together hold less than ``MatchConfig.min_piece`` of a mesh's area are left out (never
 its largest piece, and only when that holds at least half the area: a mesh of many pieces,
 such as a triangle soup, is not debris around a body), and so are the vertices in no face.
+Before that, a surface split along seams (texture or normal seams, every edge of a triangle
+soup: boundary edges lying exactly on other edges) is closed: the copies of a vertex there
+are welded to its first copy (:func:`~hope_rs.geometry.mesh.seam_welds`), so the other copies
+are left out as vertices in no face.
 The result is expanded to the meshes' own numbering (:meth:`Referenced.expand`): a left-out
-vertex of B is never a target, and a left-out vertex of A takes the image of the nearest (in
-space) kept vertex of A, with confidence 0.
+vertex of B is never a target, a welded copy on A takes its first copy's image and
+confidence, and another left-out vertex of A takes the image of the nearest (in space) kept
+vertex of A, with confidence 0.
 """
 
 from __future__ import annotations
@@ -23,7 +28,7 @@ import dataclasses
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..geometry.mesh import Mesh, unique_edges, vertex_components
+from ..geometry.mesh import Mesh, seam_welds, unique_edges, vertex_components
 from .result import MatchResult
 
 __all__ = ["Referenced", "body_vertices", "referenced"]
@@ -81,10 +86,24 @@ def _used(n: int, faces: np.ndarray) -> np.ndarray:
     return used
 
 
-def _compact(mesh: Mesh, min_piece: float) -> tuple[Mesh, np.ndarray, int] | None:
-    """``mesh`` without its small loose pieces (:func:`_loose`) and the vertices no face
-    uses, the indices of the vertices it keeps and how many vertices of loose pieces went;
-    ``None`` when it keeps every vertex."""
+@dataclasses.dataclass(frozen=True)
+class _Compact:
+    """A mesh without the vertices a match leaves out (:func:`_compact`)."""
+
+    mesh: Mesh
+    keep: np.ndarray  # the vertices kept, in the input numbering
+    weld: np.ndarray | None  # per vertex, the copy it is welded to (``None``: none welded)
+    loose: int  # how many vertices of small loose pieces went
+
+
+def _compact(mesh: Mesh, min_piece: float) -> _Compact | None:
+    """``mesh`` with its seams welded (:func:`~hope_rs.geometry.mesh.seam_welds`), without
+    its small loose pieces (:func:`_loose`) and the vertices no face uses; ``None`` when it
+    keeps every vertex."""
+    weld = seam_welds(mesh)
+    welded = bool((weld != np.arange(mesh.n_vertices)).any())
+    if welded:
+        mesh = Mesh(mesh.vertices, weld[mesh.faces])
     loose = _loose(mesh, min_piece)
     faces = mesh.faces[~loose]
     used = _used(mesh.n_vertices, faces)  # the pieces found once, not again by body_vertices
@@ -92,9 +111,10 @@ def _compact(mesh: Mesh, min_piece: float) -> tuple[Mesh, np.ndarray, int] | Non
         return None
     in_loose = _used(mesh.n_vertices, mesh.faces[loose])
     keep = np.flatnonzero(used)
-    return (
+    return _Compact(
         Mesh(mesh.vertices[keep], _index(keep, mesh.n_vertices)[faces]),
         keep,
+        weld if welded else None,
         int(in_loose.sum()),
     )
 
@@ -115,26 +135,36 @@ class Referenced:
     mesh_b: Mesh | None = None
     #: How many vertices of A and of B were in small loose pieces.
     loose: tuple[int, int] = (0, 0)
+    #: Per vertex of A and of B, the copy it is welded to along a seam (``None``: none).
+    weld_a: np.ndarray | None = None
+    weld_b: np.ndarray | None = None
 
     def note(self) -> str:
         """What was left out, for the shapes' log line ("" when nothing)."""
         parts = []
-        for name, keep, n, loose in (
-            ("A", self.keep_a, self.n_a, self.loose[0]),
-            ("B", self.keep_b, self.n_b, self.loose[1]),
+        for name, keep, n, loose, weld in (
+            ("A", self.keep_a, self.n_a, self.loose[0], self.weld_a),
+            ("B", self.keep_b, self.n_b, self.loose[1], self.weld_b),
         ):
             if keep is None:
                 continue
+            welded = 0 if weld is None else int(np.sum(weld != np.arange(n)))
+            if welded:
+                parts.append(f"{welded} of {name}'s vertices welded to their copies along seams")
             if loose:
                 parts.append(f"{loose} of {name}'s vertices in small loose pieces left out")
-            if n - keep.size > loose:
-                parts.append(f"{n - keep.size - loose} of {name}'s vertices in no face left out")
+            if n - keep.size > loose + welded:
+                parts.append(
+                    f"{n - keep.size - loose - welded} of {name}'s vertices in no face left out"
+                )
         return "; ".join(parts)
 
     def init_in(self, init: np.ndarray) -> np.ndarray:
         """A given initial map in the compact numbering: a vertex of A in no face is dropped,
         an image in no face moves to the nearest vertex of B that faces use."""
         f = init if self.keep_a is None else init[self.keep_a]
+        if self.weld_b is not None:
+            f = self.weld_b[f]
         idx = _index(self.keep_b, self.n_b)[f]
         off = idx < 0
         if off.any():
@@ -147,13 +177,14 @@ class Referenced:
         if landmarks is None:
             return None
         out = landmarks.copy()
-        for col, keep, n, name in (
-            (0, self.keep_a, self.n_a, "A"),
-            (1, self.keep_b, self.n_b, "B"),
+        for col, keep, n, name, weld in (
+            (0, self.keep_a, self.n_a, "A", self.weld_a),
+            (1, self.keep_b, self.n_b, "B", self.weld_b),
         ):
             if keep is None:
                 continue
-            mapped = _index(keep, n)[landmarks[:, col]]
+            given = landmarks[:, col] if weld is None else weld[landmarks[:, col]]
+            mapped = _index(keep, n)[given]
             if (mapped < 0).any():
                 v = int(landmarks[np.argmax(mapped < 0), col])
                 raise ValueError(
@@ -173,6 +204,8 @@ class Referenced:
         out[self.keep_a] = g
         unused = np.setdiff1d(np.arange(self.n_a), self.keep_a, assume_unique=True)
         out[unused] = g[_nearest(self.points_a[self.keep_a], self.points_a[unused])]
+        if self.weld_a is not None:
+            out = out[self.weld_a]  # a welded copy: its first copy's image
         return out
 
     def expand(self, res: MatchResult) -> MatchResult:
@@ -181,7 +214,7 @@ class Referenced:
         if conf is not None and self.keep_a is not None:
             full = np.zeros(self.n_a)
             full[self.keep_a] = conf
-            conf = full
+            conf = full if self.weld_a is None else full[self.weld_a]
         return dataclasses.replace(
             res,
             map=self._map_out(res.map),
@@ -202,11 +235,13 @@ def referenced(ma: Mesh, mb: Mesh, min_piece: float = 0.0) -> Referenced | None:
     return Referenced(
         ma.n_vertices,
         mb.n_vertices,
-        None if ca is None else ca[1],
-        None if cb is None else cb[1],
+        None if ca is None else ca.keep,
+        None if cb is None else cb.keep,
         ma.vertices,
         mb.vertices,
-        None if ca is None else ca[0],
-        None if cb is None else cb[0],
-        (0 if ca is None else ca[2], 0 if cb is None else cb[2]),
+        None if ca is None else ca.mesh,
+        None if cb is None else cb.mesh,
+        (0 if ca is None else ca.loose, 0 if cb is None else cb.loose),
+        None if ca is None else ca.weld,
+        None if cb is None else cb.weld,
     )

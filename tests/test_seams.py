@@ -1,0 +1,110 @@
+"""A surface split along seams (vertices duplicated for texture coordinates or normals, or a
+triangle soup with every corner separate) is matched closed: the copies are welded for the
+match, each copy of A takes its first copy's image and confidence, and a copy of B is never
+a target; the map is the one of the mesh without the split."""
+
+import numpy as np
+import pytest
+from conftest import data_path
+from meshes import bumpy_sphere
+
+import hope_rs
+from hope_rs.geometry.mesh import seam_edges, seam_welds
+
+
+def split_along_equator(v, f):
+    """(v, f) with the faces above the equator given their own copies of the vertices they
+    share with the faces below (a closed seam), and per new vertex the old vertex it copies."""
+    up = v[f].mean(axis=1)[:, 2] > 0
+    shared = np.intersect1d(f[up].ravel(), f[~up].ravel())
+    copy = np.full(len(v), -1)
+    copy[shared] = len(v) + np.arange(shared.size)
+    g = f.copy()
+    g[up] = np.where(copy[f[up]] >= 0, copy[f[up]], f[up])
+    return np.vstack([v, v[shared]]), g, np.concatenate([np.arange(len(v)), shared])
+
+
+def soup(v, f):
+    """Every face with its own three corners, and per corner the vertex it copies."""
+    of = f.ravel()
+    return v[of], np.arange(of.size).reshape(-1, 3), of
+
+
+@pytest.fixture(scope="module")
+def pair():
+    return bumpy_sphere(400, 0), bumpy_sphere(400, 1)
+
+
+@pytest.fixture(scope="module")
+def plain(pair):
+    (va, fa), (vb, fb) = pair
+    return hope_rs.match((va, fa), (vb, fb))
+
+
+def test_a_seam_is_found_and_welded_to_the_first_copy(pair):
+    (v, f), _ = pair
+    w, g, of = split_along_equator(v, f)
+    mesh = hope_rs.Mesh(w, g)
+    copies = np.arange(len(v), len(w))
+    assert copies.size > 10
+    assert seam_edges(mesh) == 2 * copies.size  # the loop's edges, once on each side
+    weld = seam_welds(mesh)
+    np.testing.assert_array_equal(weld, of)
+    # Coincident vertices that close no seam stay apart: an unused copy, and two spheres
+    # touching at one vertex (a pinch, not a seam).
+    assert (seam_welds(hope_rs.Mesh(np.vstack([v, v[:1]]), f)) == np.arange(len(v) + 1)).all()
+    touching = hope_rs.Mesh(np.vstack([v, 2 * v[0] - v]), np.vstack([f, f + len(v)]))
+    assert seam_edges(touching) == 0
+    np.testing.assert_array_equal(seam_welds(touching), np.arange(2 * len(v)))
+    m003 = hope_rs.load_mesh(data_path("faust_r", "tr_reg_003.off"))
+    assert len(np.unique(m003.vertices, axis=0)) < m003.n_vertices  # it has coincident pairs
+    np.testing.assert_array_equal(seam_welds(m003), np.arange(m003.n_vertices))
+
+
+def test_a_seam_on_a_is_matched_closed(pair, plain):
+    (va, fa), (vb, fb) = pair
+    w, g, of = split_along_equator(va, fa)
+    res = hope_rs.match((w, g), (vb, fb))
+    np.testing.assert_array_equal(res.map, plain.map[of])
+    np.testing.assert_array_equal(res.confidence, plain.confidence[of])
+    assert res.quality == plain.quality
+    n = len(w) - len(va)
+    assert f"{n} of A's vertices welded to their copies along seams" in res.stage("shapes").reason
+
+
+def test_a_seam_on_b_is_matched_closed_and_its_copies_are_never_targets(pair, plain):
+    (va, fa), (vb, fb) = pair
+    w, g, _ = split_along_equator(vb, fb)
+    res = hope_rs.match((va, fa), (w, g))
+    np.testing.assert_array_equal(res.map, plain.map)
+    assert res.map.max() < len(vb)
+
+
+def test_landmarks_and_a_given_map_on_copies_are_read_as_the_first_copy(pair):
+    (va, fa), (vb, fb) = pair
+    wa, ga, of_a = split_along_equator(va, fa)
+    wb, gb, of_b = split_along_equator(vb, fb)
+    ca, cb = len(va), len(vb)  # the first copies made: vertex ca copies of_a[ca]
+    marks = np.array([[ca, cb], [5, 7]])
+    got = hope_rs.match((wa, ga), (wb, gb), landmarks=marks, spectral=False)
+    want = hope_rs.match(
+        (va, fa), (vb, fb), landmarks=[[of_a[ca], of_b[cb]], [5, 7]], spectral=False
+    )
+    np.testing.assert_array_equal(got.map, want.map[of_a])
+    init = np.arange(len(wa)) % len(wb)  # images on copies of B too
+    got = hope_rs.match((wa, ga), (wb, gb), init=init, spectral=False)
+    want = hope_rs.match((va, fa), (vb, fb), init=of_b[init[: len(va)]], spectral=False)
+    np.testing.assert_array_equal(got.map, want.map[of_a])
+
+
+def test_a_triangle_soup_is_matched_as_the_mesh_it_comes_from():
+    # A real pair given as soups (trimesh.load(stl, process=False) gives one): the same map,
+    # each corner answering for the vertex it copies.
+    a = hope_rs.load_mesh(data_path("faust_r", "tr_reg_000.off"))
+    b = hope_rs.load_mesh(data_path("faust_r", "tr_reg_001.off"))
+    plain = hope_rs.match(a, b)
+    sa, sb = soup(a.vertices, a.faces), soup(b.vertices, b.faces)
+    res = hope_rs.match(sa[:2], sb[:2])
+    np.testing.assert_array_equal(sb[2][res.map], plain.map[sa[2]])
+    np.testing.assert_array_equal(res.confidence, plain.confidence[sa[2]])
+    assert not res.quality.likely_failed
