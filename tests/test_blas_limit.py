@@ -1,0 +1,84 @@
+"""The one-BLAS-thread limit (hope_rs._blas) is shared by the threads inside it: set by every
+thread that enters, restored by the last to leave to what the process had before."""
+
+import threading
+
+import threadpoolctl
+
+from hope_rs._blas import single_threaded_blas
+
+
+def blas_threads() -> set[int]:
+    return {i["num_threads"] for i in threadpoolctl.threadpool_info() if i["user_api"] == "blas"}
+
+
+def test_threads_share_the_limit_until_the_last_leaves():
+    # Two threads inside, leaving in the other order than they came (as a match's background
+    # eigenbasis thread and its caller, or two matches in threads, do). Each thread restoring
+    # what it saw on entry left the process's BLAS on one thread for good.
+    with threadpoolctl.threadpool_limits(limits=2, user_api="blas"):
+        before = blas_threads()
+        assert before == {2}
+        first_in, first_may_leave = threading.Event(), threading.Event()
+        seen = {}
+
+        def first():
+            with single_threaded_blas():
+                first_in.set()
+                first_may_leave.wait(10)
+
+        def second():
+            first_in.wait(10)
+            with single_threaded_blas():
+                first_may_leave.set()
+                t1.join(10)
+                seen["inside, the first gone"] = blas_threads()
+            seen["both gone"] = blas_threads()
+
+        t1, t2 = threading.Thread(target=first), threading.Thread(target=second)
+        t1.start()
+        t2.start()
+        t2.join(20)
+        assert seen == {"inside, the first gone": {1}, "both gone": before}
+
+
+def test_nested_entries_and_many_threads_restore_the_process_limit():
+    with threadpoolctl.threadpool_limits(limits=2, user_api="blas"):
+        start = threading.Barrier(8)
+
+        def work():
+            start.wait(10)
+            for _ in range(50):
+                with single_threaded_blas(), single_threaded_blas():
+                    assert blas_threads() == {1}
+
+        threads = [threading.Thread(target=work) for _ in range(8)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(60)
+        assert blas_threads() == {2}
+
+
+def test_a_worker_thread_sets_the_limit_after_the_main_thread_did():
+    # threadpoolctl lets only the first thread that changed OpenBLAS's limit change it
+    # again: a match in a worker thread after one in the main thread ran on every core
+    # (a 5k pair 3x slower).
+    with threadpoolctl.threadpool_limits(limits=2, user_api="blas"):
+        with single_threaded_blas():
+            assert blas_threads() == {1}
+        assert blas_threads() == {2}
+        seen = []
+
+        def work():
+            with single_threaded_blas():
+                seen.append(blas_threads())
+            seen.append(blas_threads())
+
+        t = threading.Thread(target=work)
+        t.start()
+        t.join(10)
+        assert seen == [{1}, {2}]
+        with single_threaded_blas():  # and the main thread again after it
+            assert blas_threads() == {1}
+        assert blas_threads() == {2}
