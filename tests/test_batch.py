@@ -41,6 +41,10 @@ def test_read_pairs_resolves_relative_paths_against_the_file_and_appends_ext(fol
     f.write_text("# nothing\n")
     with pytest.raises(ValueError, match="lists no pairs"):
         read_pairs(f)
+    # A pair listed twice (spelled two ways) would write one map file twice: named by line.
+    f.write_text("a.off b.off\nb.off a.off\n\nsub/../a.off b\n")
+    with pytest.raises(ValueError, match=r"p.txt:4: the pair sub/../a.off -> b .* line 1 already"):
+        read_pairs(f, ext=".off")
 
 
 def test_maps_are_written_atomically_and_a_rerun_skips_them(folder, tmp_path):

@@ -78,7 +78,8 @@ def read_pairs(path: str | os.PathLike, *, ext: str = "", with_landmarks: bool =
     (``tr_reg_002 tr_reg_007``) work as they are, beside ``scan.ply``. Blank lines are ignored, and
     so is a comment: a ``#`` at the start of a line or after white space (outside quotes) and
     the rest of the line; a ``#`` inside a name (``scan#2``) is part of the path. A malformed
-    line raises ValueError naming the file and line.
+    line, or a pair listed twice (its map would go to one file twice), raises ValueError
+    naming the file and line.
 
     With ``with_landmarks``, a line may name a third file: the pair's landmarks (read with
     :func:`hope_rs.read_landmarks`, relative paths against the pairs file's folder, no ``ext``
@@ -107,6 +108,7 @@ def read_pairs(path: str | os.PathLike, *, ext: str = "", with_landmarks: bool =
     except UnicodeDecodeError:
         raise ValueError(f"{path} is not a text file of mesh paths") from None
     out, marks = [], []
+    listed: dict[tuple[str, str], int] = {}  # each pair's first line, by its files
     for no, line in enumerate(text.splitlines(), 1):
         try:
             tokens = _pair_fields(line)
@@ -140,6 +142,12 @@ def read_pairs(path: str | os.PathLike, *, ext: str = "", with_landmarks: bool =
                 t += ext
             p = Path(t)
             pair.append(p if p.is_absolute() else folder / p)
+        first = listed.setdefault((os.path.realpath(pair[0]), os.path.realpath(pair[1])), no)
+        if first != no:  # its map would be written twice, to one file
+            raise ValueError(
+                f"{path}:{no}: the pair {tokens[0]} -> {tokens[1]} is listed on line {first} "
+                "already; list each pair once"
+            )
         out.append((pair[0], pair[1]))
     if not out:
         raise ValueError(f"{path} lists no pairs (expected lines of two mesh paths)")
