@@ -228,35 +228,45 @@ def _coincident_ids(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _seams(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
-    """The unique edges of ``mesh`` that are seams (boundary edges lying exactly on another
-    edge) as a bool per edge, the unique edges, and per vertex its position's id and per id
-    the first vertex there (:func:`_coincident_ids`); ``None`` when no two vertices
-    coincide."""
+    """The unique edges of ``mesh`` that lie exactly on another edge (their two ends at the
+    other's two positions) where that splits or doubles the surface: a boundary edge (a
+    seam), or an edge of another connected piece (a second copy of the surface); as a bool
+    per edge, with the unique edges, and per vertex its position's id and per id the first
+    vertex there (:func:`_coincident_ids`). ``None`` when no two vertices coincide."""
     new_id, keep = _coincident_ids(mesh.vertices + 0.0)
     if keep.size == mesh.n_vertices:
         return None
-    f = mesh.faces
-    e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
-    e = e[e[:, 0] != e[:, 1]]
-    edges, count = np.unique(e, axis=0, return_counts=True)
+    edges, count = _edge_counts(mesh.faces)
+    proper = edges[:, 0] != edges[:, 1]
+    edges, count = edges[proper], count[proper]
     merged = np.sort(new_id[edges], axis=1)
     _, where, merged_count = np.unique(merged, axis=0, return_inverse=True, return_counts=True)
-    seam = (count == 1) & (merged_count[where.reshape(-1)] > 1)
-    return seam, edges, new_id, keep
+    where = where.reshape(-1)
+    piece = vertex_components(mesh.n_vertices, edges)[edges[:, 0]]
+    low = np.full(merged_count.size, piece.max() + 1)
+    high = np.full(merged_count.size, -1)
+    np.minimum.at(low, where, piece)
+    np.maximum.at(high, where, piece)
+    shared = merged_count[where] > 1
+    return shared & ((count == 1) | (low[where] != high[where])), edges, new_id, keep
 
 
 def seam_edges(mesh: Mesh) -> int:
-    """How many boundary edges of ``mesh`` lie exactly on another edge: the surface is split
-    there (typically along texture or normal seams, or every edge of a triangle soup)
-    although merging the coincident vertices would close it."""
+    """How many edges of ``mesh`` lie exactly on another edge where that splits the surface
+    (a boundary edge: texture or normal seams, every edge of a triangle soup) or stores it
+    twice (an edge of another piece: a double-sided export with each face reversed on its
+    own copies of the vertices), although merging the coincident vertices would make it one
+    surface."""
     seams = _seams(mesh)
     return 0 if seams is None else int(seams[0].sum())
 
 
 def seam_welds(mesh: Mesh) -> np.ndarray:
     """Per vertex of ``mesh``, the vertex it is welded to (itself when none): the vertices at
-    one position where a seam edge (:func:`seam_edges`) ends are welded to the first of them
-    in the numbering, which closes the seams; coincident vertices elsewhere stay apart."""
+    one position where an edge of :func:`seam_edges` ends are welded to the first of them in
+    the numbering, which closes seams and makes a surface stored twice one; coincident
+    vertices elsewhere (a surface touching itself at a point, or folded onto itself within
+    one piece) stay apart."""
     out = np.arange(mesh.n_vertices)
     seams = _seams(mesh)
     if seams is None or not seams[0].any():

@@ -12,9 +12,10 @@ that together hold less than ``MatchConfig.min_piece`` of a mesh's area are left
 its largest piece, and only when that holds at least half the area: a mesh of many pieces,
 such as a triangle soup, is not debris around a body), and so are the vertices in no face.
 Before that, a surface split along seams (texture or normal seams, every edge of a triangle
-soup: boundary edges lying exactly on other edges) is closed: the copies of a vertex there
-are welded to its first copy (:func:`~hope_rs.geometry.mesh.seam_welds`), so the other copies
-are left out as vertices in no face.
+soup: boundary edges lying exactly on other edges) is closed, and one stored twice (a
+double-sided export) made one: the copies of a vertex there are welded to its first copy
+(:func:`~hope_rs.geometry.mesh.seam_welds`), so the other copies are left out as vertices in
+no face.
 The result is expanded to the meshes' own numbering (:meth:`Referenced.expand`): a left-out
 vertex of B is never a target, a welded copy on A takes its first copy's image and
 confidence, and another left-out vertex of A takes the image of the nearest (in space) kept
