@@ -1123,10 +1123,10 @@ class MatchConfig:
     k_max : int
         Largest hop radius, in [2, 64].
     min_piece : float
-        A mesh's smallest pieces (connected components) that together hold less than this
-        share of its area are left out of the match, never its largest, and only when its
-        largest holds at least half the area (scan debris around a body, not a mesh of many
-        pieces; :mod:`hope_rs.pipeline.unreferenced`); 0 keeps every piece.
+        A mesh's pieces (connected components) that each hold less than this share of its
+        area are left out of the match, never its largest, and only when its largest holds
+        at least half the area (scan debris around a body, not a mesh of many pieces;
+        :mod:`hope_rs.pipeline.unreferenced`); 0 keeps every piece.
     shape : ShapeConfig
         Per-shape precomputation (descriptors, eigenbases, coarse copies) of shapes built
         from meshes; a :class:`~hope_rs.Shape` passed in keeps its own.

@@ -7,10 +7,10 @@ triangles (debris). Neither has a surface to match by: a piece of debris has lon
 edges for its size, no place in the body's spectrum and nothing to correspond to, and a few
 of them would make a closed body count as a part, fill the spectral basis with their own
 constant functions and send body vertices onto them. So the pair is matched on the vertices
-of the pieces that matter (:func:`referenced`): the smallest pieces (connected components)
-that together hold less than ``MatchConfig.min_piece`` of a mesh's area are left out (never
-its largest piece, and only when that holds at least half the area: a mesh of many pieces,
-such as a triangle soup, is not debris around a body), and so are the vertices in no face.
+of the pieces that matter (:func:`referenced`): each piece (connected component) holding
+less than ``MatchConfig.min_piece`` of a mesh's area is left out, however many there are
+(never its largest piece, and only when that holds at least half the area: a mesh of many
+pieces is not debris around a body), and so are the vertices in no face.
 Before that, a surface split along seams (texture or normal seams, every edge of a triangle
 soup: boundary edges lying exactly on other edges) is closed, and one stored twice (a
 double-sided export) made one: the copies of a vertex there are welded to its first copy
@@ -57,10 +57,9 @@ def _nearest(points: np.ndarray, queries: np.ndarray) -> np.ndarray:
 
 
 def _loose(mesh: Mesh, min_piece: float) -> np.ndarray:
-    """Bool per face: in one of the smallest pieces (connected components) that together
-    hold less than ``min_piece`` of the mesh's area. A piece goes with every piece of its
-    area or less, so that which pieces go does not depend on the numbering; the largest
-    piece always stays, and nothing goes when it holds less than half the area."""
+    """Bool per face: in a piece (connected component) holding less than ``min_piece`` of
+    the mesh's area. The largest piece always stays, and nothing goes when it holds less
+    than half the area."""
     faces = mesh.faces
     piece = vertex_components(mesh.n_vertices, unique_edges(faces))[faces[:, 0]]
     if min_piece <= 0.0 or piece.min() == piece.max():
@@ -68,9 +67,7 @@ def _loose(mesh: Mesh, min_piece: float) -> np.ndarray:
     area = np.bincount(piece, mesh.face_areas)
     if area.max() < 0.5 * area.sum():  # no body for the pieces to be debris around
         return np.zeros(len(faces), dtype=bool)
-    ranked = np.sort(area)
-    upto = np.cumsum(ranked)[np.searchsorted(ranked, area, side="right") - 1]
-    small = (upto < min_piece * area.sum()) & (area < area.max())
+    small = (area < min_piece * area.sum()) & (area < area.max())
     return small[piece]
 
 
