@@ -303,8 +303,9 @@ def test_trimesh_and_duck_typed_meshes_are_accepted_everywhere():
     assert _spec(tm, hope_rs.shape.ShapeConfig())["kind"] == "mesh"
 
 
-@pytest.mark.parametrize("x", [42, "not a mesh", (TET_V,), object()])
+@pytest.mark.parametrize("x", [42, b"not a mesh", (TET_V,), object()])
 def test_other_objects_get_a_one_line_type_error(x):
+    # (A str is a mesh file's path: tests/test_input_forms.py.)
     with pytest.raises(TypeError, match="must be a hope_rs.Mesh") as e:
         as_mesh(x, "a")
     assert "\n" not in str(e.value)

@@ -70,8 +70,11 @@ def match(
 
     Parameters
     ----------
-    a, b : Shape, Mesh or (vertices, faces)
-        The shapes. Pass :class:`Shape` objects to reuse their precomputation across pairs;
+    a, b : Shape, Mesh, (vertices, faces), a mesh file's path or a mesh object
+        The shapes (anything :func:`~hope_rs.geometry.mesh.as_mesh` reads: a
+        ``trimesh.Trimesh``, an open3d ``TriangleMesh``, a one-mesh ``trimesh.Scene``;
+        polygons are fan-triangulated). Pass :class:`Shape` objects to reuse their
+        precomputation across pairs;
         a Shape keeps the :class:`~hope_rs.ShapeConfig` it was built with, over
         ``config.shape`` (``res.config.shape`` is the one used, and a mesh given beside it is
         described with it too).

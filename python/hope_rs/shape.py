@@ -69,7 +69,8 @@ class Shape:
 
     Parameters
     ----------
-    mesh : Mesh, (vertices, faces), or an object with ``vertices`` and ``faces`` (trimesh)
+    mesh : Mesh, (vertices, faces), a mesh file's path or a mesh object
+        Anything :func:`~hope_rs.geometry.mesh.as_mesh` reads (trimesh, open3d).
     k_max : int, keyword-only
         Largest hop radius the refinement may use.
     orient : bool, keyword-only

@@ -128,27 +128,67 @@ class Mesh:
 
 
 def as_mesh(x, name: str = "mesh") -> Mesh:
-    """``x`` as a :class:`Mesh`: a Mesh itself, a ``(vertices, faces)`` pair, or any object with
-    ``vertices`` and ``faces`` attributes (such as ``trimesh.Trimesh``, used as stored: trimesh's
-    processing is not applied again).
+    """``x`` as a :class:`Mesh`: a Mesh itself, a ``(vertices, faces)`` pair, a mesh file's
+    path (read by :func:`load_mesh`), or any object with ``vertices`` and ``faces`` (such as
+    ``trimesh.Trimesh``, used as stored: trimesh's processing is not applied again) or
+    ``vertices`` and ``triangles`` (such as ``open3d.geometry.TriangleMesh``). A
+    ``trimesh.Scene`` of one mesh (as a ``.glb`` file loads) is that mesh, placed as the scene
+    places it. Polygons of more than three corners (an (M, k) array, or a list of index lists
+    of mixed lengths) are fan-triangulated, as the file readers do; the vertices keep their
+    numbering.
 
     Raises
     ------
     TypeError
-        If ``x`` is none of these.
+        If ``x`` is none of these (the message says what to pass instead).
     ValueError
         If the arrays do not make a valid mesh.
     """
     if isinstance(x, Mesh):
         return x
+    if isinstance(x, (str, os.PathLike)):
+        return load_mesh(x)
     if isinstance(x, (tuple, list)) and len(x) == 2:
-        return Mesh(*x)
-    if hasattr(x, "vertices") and hasattr(x, "faces"):
-        return Mesh(np.asarray(x.vertices), np.asarray(x.faces))
+        return Mesh(x[0], _triangles(x[1], name))
+    geometry = getattr(x, "geometry", None)
+    if isinstance(geometry, dict) and hasattr(x, "dump"):  # a trimesh.Scene
+        if len(geometry) != 1:
+            raise TypeError(
+                f"{name} is a scene of {len(geometry)} meshes (as a .glb or multi-object file "
+                "loads in trimesh); pass one of them (scene.geometry[key], placed as stored) or "
+                "all as one mesh (scene.to_mesh(), or trimesh.load(path, force='mesh'))"
+            )
+        return as_mesh(x.dump(concatenate=True), name)
+    for faces in ("faces", "triangles"):
+        if hasattr(x, "vertices") and hasattr(x, faces):
+            return Mesh(np.asarray(x.vertices), _triangles(np.asarray(getattr(x, faces)), name))
     raise TypeError(
-        f"{name} must be a hope_rs.Mesh, a (vertices, faces) pair or an object with .vertices "
-        f"and .faces (such as trimesh.Trimesh), got {type(x).__name__}"
+        f"{name} must be a hope_rs.Mesh, a (vertices, faces) pair, a mesh file's path or an "
+        f"object with .vertices and .faces (such as trimesh.Trimesh), got {type(x).__name__}"
     )
+
+
+def _triangles(faces, name: str):
+    """``faces`` with polygons of more than three corners fan-triangulated (corner 0 with each
+    pair of consecutive others), each face's triangles in its place; anything else as given,
+    for :class:`Mesh` to check."""
+    if isinstance(faces, (list, tuple)) and faces:
+        sizes = {len(f) if hasattr(f, "__len__") else -1 for f in faces}
+        if -1 not in sizes and len(sizes) > 1:  # polygons of mixed sizes
+            if min(sizes) < 3:
+                raise ValueError(f"{name}: a face has {min(sizes)} corners; faces need 3 or more")
+            return np.concatenate([_triangles(np.asarray([f]), name) for f in faces])
+    arr = faces if isinstance(faces, np.ndarray) else None
+    if arr is None:
+        try:
+            arr = np.asarray(faces)
+        except (ValueError, TypeError):
+            return faces
+    if arr.ndim != 2 or arr.shape[1] <= 3:
+        return faces
+    k = arr.shape[1]
+    fan = np.stack([np.stack([arr[:, 0], arr[:, i], arr[:, i + 1]], 1) for i in range(1, k - 1)], 1)
+    return fan.reshape(-1, 3)
 
 
 def _face_edges(faces: np.ndarray) -> np.ndarray:
