@@ -31,6 +31,7 @@ __all__ = [
     "Mesh",
     "as_mesh",
     "boundary_edges",
+    "face_pieces",
     "load_mesh",
     "merge_coincident_vertices",
     "parse_mesh",
@@ -222,6 +223,33 @@ def vertex_components(n: int, edges: np.ndarray) -> np.ndarray:
     ((m, 2) vertex pairs); a vertex in no edge is a component of its own."""
     graph = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
     return connected_components(graph, directed=False)[1].astype(np.int64)
+
+
+def face_pieces(faces: np.ndarray) -> np.ndarray:
+    """Piece label (int64) per face: faces are joined across an edge that exactly two distinct
+    faces share, so a flap or fin hanging off a surface by an edge of three or more faces (or
+    by a vertex) is a piece of its own; a face listed again on the same vertices is in its
+    first listing's piece."""
+    f = np.sort(np.asarray(faces, dtype=np.int64), axis=1)
+    if len(f) == 0:
+        return np.zeros(0, dtype=np.int64)
+    distinct, which = np.unique(f, axis=0, return_inverse=True)
+    m = len(distinct)
+    edges = np.concatenate([distinct[:, [0, 1]], distinct[:, [1, 2]], distinct[:, [0, 2]]])
+    face = np.tile(np.arange(m), 3)
+    proper = edges[:, 0] != edges[:, 1]
+    edges, face = edges[proper], face[proper]
+    n = int(f.max()) + 1
+    key = edges[:, 0] * n + edges[:, 1]
+    order = np.argsort(key, kind="stable")
+    key, face = key[order], face[order]
+    first = np.r_[True, key[1:] != key[:-1]]
+    group = np.cumsum(first) - 1
+    two = np.bincount(group)[group] == 2
+    second = two & ~first  # the second face of an edge two faces share
+    other = face[np.flatnonzero(first)[group[second]]]
+    graph = sp.coo_matrix((np.ones(other.size), (other, face[second])), shape=(m, m))
+    return connected_components(graph, directed=False)[1].astype(np.int64)[which.reshape(-1)]
 
 
 def boundary_edges(faces: np.ndarray) -> np.ndarray:

@@ -29,7 +29,7 @@ import dataclasses
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..geometry.mesh import Mesh, seam_welds, unique_edges, vertex_components
+from ..geometry.mesh import Mesh, face_pieces, seam_welds
 from .result import MatchResult
 
 __all__ = ["Referenced", "body_vertices", "referenced"]
@@ -57,11 +57,13 @@ def _nearest(points: np.ndarray, queries: np.ndarray) -> np.ndarray:
 
 
 def _loose(mesh: Mesh, min_piece: float) -> np.ndarray:
-    """Bool per face: in a piece (connected component) holding less than ``min_piece`` of
-    the mesh's area. The largest piece always stays, and nothing goes when it holds less
-    than half the area."""
+    """Bool per face: in a piece (faces joined across edges two faces share,
+    :func:`~hope_rs.geometry.mesh.face_pieces`: a loose piece, or a fin or flap hanging off
+    the surface by an edge of three faces) holding less than ``min_piece`` of the mesh's
+    area. The largest piece always stays, and nothing goes when it holds less than half the
+    area."""
     faces = mesh.faces
-    piece = vertex_components(mesh.n_vertices, unique_edges(faces))[faces[:, 0]]
+    piece = face_pieces(faces)
     if min_piece <= 0.0 or piece.min() == piece.max():
         return np.zeros(len(faces), dtype=bool)
     area = np.bincount(piece, mesh.face_areas)
@@ -113,7 +115,7 @@ def _compact(mesh: Mesh, min_piece: float) -> _Compact | None:
         Mesh(mesh.vertices[keep], _index(keep, mesh.n_vertices)[faces]),
         keep,
         weld if welded else None,
-        int(in_loose.sum()),
+        int((in_loose & ~used).sum()),
     )
 
 
