@@ -64,3 +64,29 @@ def test_match_takes_paths():
     res = hope_rs.match(str(a), b, spectral=False)
     np.testing.assert_array_equal(res.map, hope_rs.match(ma, mb, spectral=False).map)
     assert res.map.shape == (ma.n_vertices,)
+
+
+def test_a_glb_file_is_read_through_trimesh(tmp_path):
+    a = hope_rs.load_mesh(data_path("faust_r", "tr_reg_000.off"))
+    tm = trimesh.Trimesh(a.vertices, a.faces, process=False)
+    tm.export(tmp_path / "a.glb")
+    g = hope_rs.load_mesh(tmp_path / "a.glb")
+    np.testing.assert_array_equal(g.faces, a.faces)
+    np.testing.assert_allclose(g.vertices, a.vertices, atol=1e-6)  # glTF stores float32
+    # Two meshes in the scene: one after the other, each placed as the scene places it.
+    box = trimesh.creation.box()
+    scene = trimesh.Scene()
+    scene.add_geometry(tm, node_name="body")
+    scene.add_geometry(
+        box, node_name="box", transform=trimesh.transformations.translation_matrix([5, 0, 0])
+    )
+    scene.export(tmp_path / "two.glb")
+    two = hope_rs.load_mesh(tmp_path / "two.glb")
+    assert (two.n_vertices, two.n_faces) == (a.n_vertices + 8, a.n_faces + 12)
+    assert two.vertices[:, 0].max() == pytest.approx(5.5)
+    (tmp_path / "bad.glb").write_bytes(b"glTF" + bytes(40))
+    with pytest.raises(ValueError, match=r"cannot read .*bad\.glb.*trimesh cannot read it"):
+        hope_rs.load_mesh(tmp_path / "bad.glb")
+    (tmp_path / "text.glb").write_text("OFF\n")
+    with pytest.raises(ValueError, match="not a binary glTF file"):
+        hope_rs.load_mesh(tmp_path / "text.glb")

@@ -126,3 +126,13 @@ def test_a_double_sided_mesh_is_matched_as_one_surface(pair, plain):
     m = len(vb)
     res = hope_rs.match((va, fa), (np.vstack([vb, vb]), np.vstack([fb, fb[:, ::-1] + m])))
     np.testing.assert_array_equal(res.map, plain.map)
+
+
+def test_faces_collapsed_to_a_point_weld_nothing():
+    # Every corner at one position: its edges have length 0 and lie on nothing (the mesh
+    # stays as given, and match names its zero area).
+    point = hope_rs.Mesh(np.zeros((3, 3)), [[0, 1, 2]])
+    assert seam_edges(point) == 0
+    np.testing.assert_array_equal(seam_welds(point), [0, 1, 2])
+    with pytest.raises(ValueError, match="zero surface area"):
+        hope_rs.match(point, point)

@@ -211,7 +211,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=environment_help(),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    m.add_argument("a", help="source mesh (OFF, OBJ, PLY, STL)")
+    m.add_argument("a", help="source mesh (OFF, OBJ, PLY, STL, GLB)")
     m.add_argument("b", help="target mesh")
     m.add_argument(
         "-o", "--output",

@@ -243,6 +243,8 @@ def face_pieces(faces: np.ndarray) -> np.ndarray:
     key = edges[:, 0] * n + edges[:, 1]
     order = np.argsort(key, kind="stable")
     key, face = key[order], face[order]
+    if key.size == 0:  # no face has two distinct corners: each is a piece
+        return np.arange(m, dtype=np.int64)[which.reshape(-1)]
     first = np.r_[True, key[1:] != key[:-1]]
     group = np.cumsum(first) - 1
     two = np.bincount(group)[group] == 2
@@ -315,7 +317,8 @@ def _seams(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] 
     high = np.full(merged_count.size, -1)
     np.minimum.at(low, where, piece)
     np.maximum.at(high, where, piece)
-    shared = merged_count[where] > 1
+    # An edge of length 0 lies on nothing: its ends are one position.
+    shared = (merged_count[where] > 1) & (merged[:, 0] != merged[:, 1])
     return shared & ((count == 1) | (low[where] != high[where])), edges, new_id, keep
 
 
@@ -348,11 +351,12 @@ def seam_welds(mesh: Mesh) -> np.ndarray:
 
 
 def load_mesh(path: str | os.PathLike, *, merge_duplicates: bool | None = None) -> Mesh:
-    """Load a triangle mesh from OFF, OBJ, PLY or STL, keeping the file's vertex order.
+    """Load a triangle mesh from OFF, OBJ, PLY, STL or GLB, keeping the file's vertex order.
 
     Polygons with more than three corners are fan-triangulated. OFF may be any of its ASCII
     variants (``OFF``, ``COFF``, ``NOFF``, ``STOFF``...: colours, normals and texture
-    coordinates are skipped), PLY ASCII or binary, STL ASCII or binary.
+    coordinates are skipped), PLY ASCII or binary, STL ASCII or binary; a binary glTF
+    (``.glb``) is read by trimesh, every mesh of its scene placed as the scene places it.
 
     Parameters
     ----------

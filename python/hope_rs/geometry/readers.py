@@ -1,4 +1,5 @@
-"""Strict parsers of OFF, OBJ, PLY and STL: bytes in, (vertices, faces) arrays out.
+"""Strict parsers of OFF, OBJ, PLY and STL, and binary glTF through trimesh: bytes in,
+(vertices, faces) arrays out.
 
 A file is read whole and its counts must agree with its body; a problem at one line raises
 :class:`LineError` (the caller names the file). Polygons are fan-triangulated.
@@ -11,7 +12,16 @@ import struct
 
 import numpy as np
 
-__all__ = ["READERS", "LineError", "one_line", "read_obj", "read_off", "read_ply", "read_stl"]
+__all__ = [
+    "READERS",
+    "LineError",
+    "one_line",
+    "read_glb",
+    "read_obj",
+    "read_off",
+    "read_ply",
+    "read_stl",
+]
 
 
 class LineError(ValueError):
@@ -526,5 +536,36 @@ def read_stl(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     return v, np.arange(v.shape[0], dtype=np.int64).reshape(-1, 3)
 
 
+def read_glb(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+    """Binary glTF (``.glb``, as scanning apps and asset stores export) read by trimesh: the
+    triangles of every mesh in the scene, placed as the scene places them, one mesh after
+    another in trimesh's order, each mesh's vertices as stored (glTF splits them along
+    texture seams; :func:`~hope_rs.match` welds those)."""
+    import io
+
+    import trimesh
+
+    if not data.startswith(b"glTF"):
+        raise ValueError("not a binary glTF file (it does not start with 'glTF')")
+    try:
+        scene = trimesh.load(io.BytesIO(data), file_type="glb", force="scene", process=False)
+        assert isinstance(scene, trimesh.Scene)  # force="scene"
+    except Exception as e:  # trimesh raises many kinds on a damaged file
+        raise ValueError(f"trimesh cannot read it: {one_line(e)}") from None
+    meshes = [g for g in scene.dump() if isinstance(g, trimesh.Trimesh) and len(g.faces)]
+    if not meshes:
+        raise ValueError("the scene holds no triangle mesh")
+    counts = np.cumsum([0] + [len(m.vertices) for m in meshes])
+    v = np.concatenate([np.asarray(m.vertices, dtype=np.float64) for m in meshes])
+    f = np.concatenate([np.asarray(m.faces, dtype=np.int64) + c for m, c in zip(meshes, counts)])
+    return v, f
+
+
 #: The parser of each file extension :func:`hope_rs.load_mesh` reads.
-READERS = {".off": read_off, ".obj": read_obj, ".ply": read_ply, ".stl": read_stl}
+READERS = {
+    ".off": read_off,
+    ".obj": read_obj,
+    ".ply": read_ply,
+    ".stl": read_stl,
+    ".glb": read_glb,
+}
