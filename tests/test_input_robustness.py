@@ -264,6 +264,12 @@ def test_match_results_compare_by_identity():
         (np.array([[0, 1, np.nan]]), TypeError, "got nan"),
         (np.array([[True, False, True]]), TypeError, "dtype bool"),
         (np.array([[0, 1, -2.0]]), ValueError, r"negative vertex index \(-2\)"),
+        # Indices cast to int8 wrapped past 127: the cause is named.
+        (
+            np.array([[0, 1, 200]]).astype(np.int8),
+            ValueError,
+            "int8, which wraps indices above 127",
+        ),
         ([[0, 1, 2], [0, 1]], ValueError, "different lengths"),
     ],
 )

@@ -37,10 +37,17 @@ def as_faces(
         lo = int(lo) if np.issubdtype(arr.dtype, np.integer) else float(lo)
         hi = int(hi) if np.issubdtype(arr.dtype, np.integer) else float(hi)
         if lo < 0:
+            small = np.issubdtype(arr.dtype, np.signedinteger) and arr.dtype.itemsize < 4
             raise ValueError(
                 f"{name} hold a negative vertex index ({lo:.0f}); indices are 0-based"
                 if isinstance(lo, float)
                 else f"{name} hold a negative vertex index ({lo}); indices are 0-based"
+                + (
+                    f" (they are {arr.dtype}, which wraps indices above "
+                    f"{np.iinfo(arr.dtype).max}: give int32 or int64)"
+                    if small
+                    else ""
+                )
             )
         limit = n_vertices if n_vertices is not None else 2**63 - 1
         if hi >= limit:
