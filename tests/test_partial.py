@@ -258,6 +258,9 @@ def test_whole_to_part_inverts_the_part_match_and_says_which_vertices_have_a_par
     # map is trusted there, and the pair is not reported as failed for the rest.
     assert (res.confidence[has & counterpart] >= 0.5).mean() > 0.9
     assert not res.quality.likely_failed
+    # The initial map is the reversed match's, inverted too (it was the final map).
+    assert (res.init_map != res.map).any()
+    assert (part.origin[res.init_map] == np.arange(sphere.n_vertices))[has].mean() < 0.9
     # The part matched the other way: every vertex has its partner.
     res_a = run_match(sb, sa, "shot", MatchConfig(), on_stage=lambda st, name: seen.update(st=st))
     assert seen["st"].partial.counterpart.all()

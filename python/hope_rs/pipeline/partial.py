@@ -195,13 +195,15 @@ class PartialStage(Stage):
                 landmarks=input_landmarks(state, swap=True),
                 on_stage=lambda st, name: nested.update(partial=st.partial),
             )
-            g = state.b.map_in(state.a, back.map)
-            f, has = invert_part_map(state.a, g, cfg.counterpart_edges * mean_edge(state.a))
+            radius = cfg.counterpart_edges * mean_edge(state.a)
+            f, has = invert_part_map(state.a, state.b.map_in(state.a, back.map), radius)
+            # The initial map is the nested match's, inverted alike.
+            f0, _ = invert_part_map(state.a, state.b.map_in(state.a, back.init_map), radius)
             # The scale the nested match measured the part at (it may have rescaled it).
             part = nested.get("partial")
             scale = part.scale if part is not None and part.part == "a" else info.scale
             info = dataclasses.replace(info, counterpart=has, scale=scale)
-            state.f0 = state.f = state.hope_map = f
+            state.f0, state.f, state.hope_map = f0, f, f
             state.history = back.history
             # The stages after this one (the confidence) measure the part at that scale too.
             if scale != state.b.scale:
