@@ -797,6 +797,14 @@ class PartialConfig:
         keeping its distances; ``None``: the refinement's own setting. A whole matched
         directly to its part (``whole_to_part="direct"``, or a given initial map) keeps the
         refinement's own setting too.
+    rough_smoothing : int
+        The part's sqrt(area) for the guessed scale is measured on its copy smoothed this many
+        times (each vertex halfway to its 1-ring's centroid) when that shrinks it by more
+        than ``inflated``: vertex noise of about a dense scan's edge length inflates its area
+        by a third or more, while smoothing a clean mesh shrinks it by a few percent. 0: the
+        part as given.
+    inflated : float
+        See ``rough_smoothing`` (a share of sqrt(area)).
     """
 
     enabled: bool = True
@@ -812,6 +820,8 @@ class PartialConfig:
     wide_below: float = 0.85
     wide_margin: float = 0.15
     max_turned: float | None = 0.5
+    rough_smoothing: int = field(default=5, metadata={"range": (0, 100)})
+    inflated: float = field(default=0.15, metadata={"range": (0.0, 1.0)})
 
     def __post_init__(self):
         _check_share("PartialConfig.max_turned", self.max_turned)

@@ -40,6 +40,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..geometry.mesh import boundary_edges
+from ..geometry.roughness import umbrella_smoothed
 from ..shape import Shape
 from .config import MatchConfig, PartialConfig
 from .landmarks import input_landmarks
@@ -66,6 +67,7 @@ __all__ = [
     "invert_part_map",
     "mean_edge",
     "part_match_config",
+    "part_scale",
 ]
 
 
@@ -115,6 +117,17 @@ def covering_rings(a: Shape, b: Shape) -> int:
     return max(1, int(np.ceil(np.sqrt(density(b) / density(a)) / 2)))
 
 
+def part_scale(part: Shape, config: PartialConfig) -> float:
+    """The part's sqrt(area) for the guessed scale, in its units: its own, or, when its copy
+    smoothed ``config.rough_smoothing`` times has a sqrt(area) smaller by more than
+    ``config.inflated`` (vertex noise of about its edge length inflates a dense scan's
+    area), the smoothed copy's."""
+    if config.rough_smoothing == 0:
+        return part.scale
+    shrink = umbrella_smoothed(part.internal, config.rough_smoothing).scale / part.internal.scale
+    return part.scale * shrink if shrink < 1.0 - config.inflated else part.scale
+
+
 def detect_part(a: Shape, b: Shape, config: PartialConfig | None = None) -> PartialInfo | None:
     """:class:`PartialInfo` when A or B is a part of the other (see the module notes), else
     ``None``; ``config`` defaults to ``PartialConfig()``."""
@@ -124,9 +137,9 @@ def detect_part(a: Shape, b: Shape, config: PartialConfig | None = None) -> Part
     # (a smaller body), its own sqrt(area) is the better guess and it keeps it.
     # Two parts of one shape (both cut) are not a part and its whole: the whole-shape path.
     if la - lb >= config.min_boundary_excess and lb <= config.max_whole_boundary:
-        return PartialInfo("a", (la, lb), max(a.scale, b.scale))
+        return PartialInfo("a", (la, lb), max(part_scale(a, config), b.scale))
     if lb - la >= config.min_boundary_excess and la <= config.max_whole_boundary:
-        return PartialInfo("b", (la, lb), max(a.scale, b.scale))
+        return PartialInfo("b", (la, lb), max(a.scale, part_scale(b, config)))
     return None
 
 
