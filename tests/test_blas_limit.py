@@ -82,3 +82,26 @@ def test_a_worker_thread_sets_the_limit_after_the_main_thread_did():
         with single_threaded_blas():  # and the main thread again after it
             assert blas_threads() == {1}
         assert blas_threads() == {2}
+
+
+def test_other_threads_can_still_set_their_limits_afterwards():
+    # The limit gives threadpoolctl's control back after each change: a user's
+    # threadpool_limits in another thread, after a match in a worker, still takes effect.
+    from concurrent.futures import ThreadPoolExecutor
+
+    def enter_and_leave():
+        with single_threaded_blas():
+            pass
+
+    with ThreadPoolExecutor(1) as pool:
+        pool.submit(enter_and_leave).result()
+        with threadpoolctl.threadpool_limits(limits=1, user_api="blas"):
+            assert blas_threads() == {1}
+        with single_threaded_blas():
+            pass
+
+        def user_limit():
+            with threadpoolctl.threadpool_limits(limits=1, user_api="blas"):
+                return blas_threads()
+
+        assert pool.submit(user_limit).result() == {1}

@@ -588,14 +588,19 @@ def test_a_noisy_dense_part_is_measured_on_its_smoothed_copy(sphere):
     )
     shapes = {name: Shape(m) for name, m in (("clean", dense), ("noisy", noisy))}
     assert shapes["noisy"].scale > 1.15 * shapes["clean"].scale
-    cfg = PartialConfig()
-    assert part_scale(shapes["clean"], cfg) == shapes["clean"].scale
-    assert part_scale(shapes["noisy"], cfg) == pytest.approx(shapes["clean"].scale, rel=0.05)
-    assert part_scale(shapes["noisy"], PartialConfig(rough_smoothing=0)) == shapes["noisy"].scale
     # Against a whole smaller than the noisy part's raw area: the whole's scale is the guess.
     whole = Shape(
         hope_rs.Mesh(sphere.vertices * 1.1 * shapes["clean"].scale / part.scale, sphere.faces)
     )
     assert shapes["clean"].scale < whole.scale < shapes["noisy"].scale
+    cfg = PartialConfig()
+    assert part_scale(shapes["clean"], whole, cfg) == shapes["clean"].scale
+    guess = part_scale(shapes["noisy"], whole, cfg)
+    assert guess == pytest.approx(shapes["clean"].scale, rel=0.05)
+    off = PartialConfig(rough_smoothing=0)
+    assert part_scale(shapes["noisy"], whole, off) == shapes["noisy"].scale
+    # A coarse clean part against its coarse whole: both shrink alike under the smoothing.
+    coarse = Shape(part)
+    assert part_scale(coarse, Shape(sphere), cfg) == coarse.scale
     info = detect_part(shapes["noisy"], whole)
     assert info is not None and info.part == "a" and info.scale == whole.scale

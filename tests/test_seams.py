@@ -13,10 +13,11 @@ import hope_rs
 from hope_rs.geometry.mesh import seam_edges, seam_welds
 
 
-def split_along_equator(v, f):
-    """(v, f) with the faces above the equator given their own copies of the vertices they
-    share with the faces below (a closed seam), and per new vertex the old vertex it copies."""
-    up = v[f].mean(axis=1)[:, 2] > 0
+def split_along_equator(v, f, above: float = 0.0):
+    """(v, f) with the faces above the equator (or the height ``above``) given their own
+    copies of the vertices they share with the faces below (a closed seam), and per new
+    vertex the old vertex it copies."""
+    up = v[f].mean(axis=1)[:, 2] > above
     shared = np.intersect1d(f[up].ravel(), f[~up].ravel())
     copy = np.full(len(v), -1)
     copy[shared] = len(v) + np.arange(shared.size)
@@ -136,3 +137,47 @@ def test_faces_collapsed_to_a_point_weld_nothing():
     np.testing.assert_array_equal(seam_welds(point), [0, 1, 2])
     with pytest.raises(ValueError, match="zero surface area"):
         hope_rs.match(point, point)
+
+
+def test_welds_and_pieces_on_awkward_meshes(pair):
+    from hope_rs.geometry.mesh import face_pieces
+    from hope_rs.pipeline.unreferenced import _loose, body_vertices
+
+    # A face with a repeated corner lies on an edge without making it an edge of three
+    # faces: the two real faces there stay one piece.
+    assert face_pieces(np.array([[0, 1, 2], [1, 3, 2], [1, 1, 2]]))[:2].tolist() == [0, 0]
+    # Every corner repeated: nothing to weld, and match names the zero area.
+    with pytest.raises(ValueError, match="zero surface area"):
+        hope_rs.match((np.zeros((2, 3)), [[0, 0, 0]]), (np.zeros((2, 3)), [[0, 0, 0]]))
+    # A vertex in no face at a seam's position is not the copy the others weld to.
+    (v, f), _ = pair
+    w, g, of = split_along_equator(v, f)
+    at = len(v)  # the first copy; an unused vertex placed first at its position
+    w2 = np.vstack([w[at], w])
+    g2 = g + 1
+    weld = seam_welds(hope_rs.Mesh(w2, g2))
+    assert weld[0] == 0 and weld[at + 1] == of[at] + 1
+    # A double-sided card on the same vertices counts its area once.
+    card = np.array([[3.0, 0, 0], [3.05, 0, 0], [3.0, 0.05, 0]])
+    vv = np.vstack([v, card])
+    m = len(v)
+    once = hope_rs.Mesh(vv, np.vstack([f, [[m, m + 1, m + 2]]]))
+    twice = hope_rs.Mesh(vv, np.vstack([f, [[m, m + 1, m + 2], [m + 2, m + 1, m]]]))
+    share = 0.5 * 0.05**2 / once.area
+    limit = 1.5 * share
+    assert _loose(once, limit)[-1] and _loose(twice, limit)[-2:].all()
+    # body_vertices (what show colours) welds as the match does: a small island cut off by
+    # a seam (its faces under 0.5% of the area) is kept, not taken for debris.
+    top = np.sort(v[f].mean(axis=1)[:, 2])[-4]
+    wi, gi, _ = split_along_equator(v, f, above=top - 1e-9)
+    island = hope_rs.Mesh(wi, gi)
+    assert _loose(island, 0.005).any()  # unwelded, the island is a small piece
+    assert body_vertices(island, 0.005).all()
+
+
+def test_landmarks_on_copies_with_different_partners_are_refused(pair):
+    (va, fa), (vb, fb) = pair
+    w, g, of = split_along_equator(va, fa)
+    copy = len(va)
+    with pytest.raises(ValueError, match=r"copies of one vertex of A \(welded along a seam\)"):
+        hope_rs.match((w, g), (vb, fb), landmarks=[[of[copy], 5], [copy, 9]])

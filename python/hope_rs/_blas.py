@@ -9,31 +9,27 @@ process-wide limit, while a match's background thread enters it beside the calle
 concurrent matches in threads do too: the threads inside share the limit, set by every thread
 that enters and restored by the last to leave to what it was before the first entered (each
 thread restoring what it saw on entry left BLAS on one thread for good). threadpoolctl lets
-only the first thread that set such a limit change it again, which left a match run in a
-worker thread after one in the main thread on every core; the shared holder takes control
-for each change under its own lock. OpenBLAS built on OpenMP keeps a limit per thread, so
-each thread sets and restores its own.
+only one thread at a time change such a limit (the first to change it, until it gives
+control back), which left a match run in a worker thread after one in the main thread on
+every core; each change here takes control and gives it back, under this module's lock.
+OpenBLAS built on OpenMP keeps a limit per thread, so each thread sets and restores its own.
 """
 
 from __future__ import annotations
 
 import contextlib
 import functools
-import signal
 import threading
 from collections.abc import Iterator
+from typing import Any
 
 from threadpoolctl import ThreadpoolController
 
 _controller: ThreadpoolController | None = None
 _lock = threading.Lock()
 _depth = 0  # entries inside the process-wide limit, over all threads
-_limiter = None  # the first entry's limiter: it holds the process-wide limits to restore
+_limiter: Any = None  # the first entry's limiter: it holds the process-wide limits to restore
 _local = threading.local()  # per thread: depth and limiter of the per-thread (OpenMP) limits
-
-#: Signals deferred while the main thread holds the lock: a handler raising there (Ctrl-C,
-#: SIGTERM as hope_rs._terminate sets it) could leave the lock held and hang the next entry.
-_DEFERRED = {signal.SIGINT, signal.SIGTERM} if hasattr(signal, "pthread_sigmask") else set()
 
 
 def _blas_controller() -> ThreadpoolController:
@@ -61,55 +57,55 @@ def _blas_libraries(per_thread: bool) -> ThreadpoolController:
     return ThreadpoolController._from_controllers(libs)
 
 
-def _take_control() -> None:
-    """Let this thread change OpenBLAS's process-wide limit (threadpoolctl ≥ 3.6 ignores
-    changes from any thread but the first that made one)."""
+def _free_control() -> None:
+    """Let any thread change OpenBLAS's process-wide limit next (threadpoolctl ≥ 3.6 ignores
+    changes from any thread but the one that last took control)."""
     for lib in _blas_controller().lib_controllers:
         clear = getattr(type(lib), "clear_controlling_thread", None)
         if clear is not None:
             clear(force=True)
 
 
-@contextlib.contextmanager
-def _held() -> Iterator[None]:
-    """The module's lock, with SIGINT and SIGTERM deferred until it is released when the
-    calling thread is the main one (only it runs Python's signal handlers)."""
-    masked = bool(_DEFERRED) and threading.current_thread() is threading.main_thread()
-    if masked:
-        before = signal.pthread_sigmask(signal.SIG_BLOCK, _DEFERRED)
+def _set_shared(change):
+    """``change()`` made by this thread, control given back after it (or after a failure)."""
+    _free_control()
     try:
-        with _lock:
-            yield
+        return change()
     finally:
-        if masked:
-            signal.pthread_sigmask(signal.SIG_SETMASK, before)
+        _free_control()
 
 
 def _enter() -> None:
+    """Count this entry in, under the limit; on any failure, as if it never happened."""
     global _depth, _limiter
-    with _held():
-        _take_control()
-        limiter = _blas_libraries(per_thread=False).limit(limits=1)
+    with _lock:
+        limiter = _set_shared(lambda: _blas_libraries(per_thread=False).limit(limits=1))
+        own = None
+        if getattr(_local, "depth", 0) == 0:
+            try:
+                own = _blas_libraries(per_thread=True).limit(limits=1)
+            except BaseException:
+                if _depth == 0:
+                    _set_shared(limiter.restore_original_limits)
+                raise
+            _local.limiter = own
         if _depth == 0:
             _limiter = limiter
         _depth += 1
-        if getattr(_local, "depth", 0) == 0:
-            _local.limiter = _blas_libraries(per_thread=True).limit(limits=1)
         _local.depth = getattr(_local, "depth", 0) + 1
 
 
 def _leave() -> None:
     global _depth, _limiter
-    with _held():
+    with _lock:
         _local.depth -= 1
-        if _local.depth == 0:
-            _local.limiter.restore_original_limits()
-            _local.limiter = None
         _depth -= 1
+        if _local.depth == 0:
+            own, _local.limiter = _local.limiter, None
+            own.restore_original_limits()
         if _depth == 0 and _limiter is not None:
-            _take_control()
-            _limiter.restore_original_limits()
-            _limiter = None
+            shared, _limiter = _limiter, None
+            _set_shared(shared.restore_original_limits)
 
 
 @contextlib.contextmanager

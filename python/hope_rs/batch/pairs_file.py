@@ -142,7 +142,7 @@ def read_pairs(path: str | os.PathLike, *, ext: str = "", with_landmarks: bool =
                 t += ext
             p = Path(t)
             pair.append(p if p.is_absolute() else folder / p)
-        first = listed.setdefault((os.path.realpath(pair[0]), os.path.realpath(pair[1])), no)
+        first = listed.setdefault((os.path.abspath(pair[0]), os.path.abspath(pair[1])), no)
         if first != no:  # its map would be written twice, to one file
             raise ValueError(
                 f"{path}:{no}: the pair {tokens[0]} -> {tokens[1]} is listed on line {first} "

@@ -157,9 +157,10 @@ def as_mesh(x, name: str = "mesh") -> Mesh:
             raise TypeError(
                 f"{name} is a scene of {len(geometry)} meshes (as a .glb or multi-object file "
                 "loads in trimesh); pass one of them (scene.geometry[key], placed as stored) or "
-                "all as one mesh (scene.to_mesh(), or trimesh.load(path, force='mesh'))"
+                "all as one mesh (trimesh.load(path, force='mesh'))"
             )
-        return as_mesh(x.dump(concatenate=True), name)
+        whole = x.to_geometry() if hasattr(x, "to_geometry") else x.dump(concatenate=True)
+        return as_mesh(whole, name)
     for faces in ("faces", "triangles"):
         if hasattr(x, "vertices") and hasattr(x, faces):
             return Mesh(np.asarray(x.vertices), _triangles(np.asarray(getattr(x, faces)), name))
@@ -235,15 +236,17 @@ def face_pieces(faces: np.ndarray) -> np.ndarray:
         return np.zeros(0, dtype=np.int64)
     distinct, which = np.unique(f, axis=0, return_inverse=True)
     m = len(distinct)
-    edges = np.concatenate([distinct[:, [0, 1]], distinct[:, [1, 2]], distinct[:, [0, 2]]])
-    face = np.tile(np.arange(m), 3)
-    proper = edges[:, 0] != edges[:, 1]
-    edges, face = edges[proper], face[proper]
+    # A face with a repeated corner has no surface and shares nothing: it is a piece alone
+    # (its edge would count as a third face on the edge it lies on).
+    proper_face = (distinct[:, 0] != distinct[:, 1]) & (distinct[:, 1] != distinct[:, 2])
+    on = distinct[proper_face]
+    edges = np.concatenate([on[:, [0, 1]], on[:, [1, 2]], on[:, [0, 2]]])
+    face = np.tile(np.flatnonzero(proper_face), 3)
     n = int(f.max()) + 1
     key = edges[:, 0] * n + edges[:, 1]
     order = np.argsort(key, kind="stable")
     key, face = key[order], face[order]
-    if key.size == 0:  # no face has two distinct corners: each is a piece
+    if key.size == 0:  # no face has three distinct corners: each is a piece
         return np.arange(m, dtype=np.int64)[which.reshape(-1)]
     first = np.r_[True, key[1:] != key[:-1]]
     group = np.cumsum(first) - 1
@@ -309,6 +312,8 @@ def _seams(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] 
     edges, count = _edge_counts(mesh.faces)
     proper = edges[:, 0] != edges[:, 1]
     edges, count = edges[proper], count[proper]
+    if edges.size == 0:
+        return None
     merged = np.sort(new_id[edges], axis=1)
     _, where, merged_count = np.unique(merged, axis=0, return_inverse=True, return_counts=True)
     where = where.reshape(-1)
@@ -333,20 +338,21 @@ def seam_edges(mesh: Mesh) -> int:
 
 
 def seam_welds(mesh: Mesh) -> np.ndarray:
-    """Per vertex of ``mesh``, the vertex it is welded to (itself when none): the vertices at
-    one position where an edge of :func:`seam_edges` ends are welded to the first of them in
-    the numbering, which closes seams and makes a surface stored twice one; coincident
-    vertices elsewhere (a surface touching itself at a point, or folded onto itself within
-    one piece) stay apart."""
+    """Per vertex of ``mesh``, the vertex it is welded to (itself when none): the ends of the
+    edges of :func:`seam_edges` at one position are welded to the first of them in the
+    numbering, which closes seams and makes a surface stored twice one; other vertices at
+    that position (in no face, or of a piece touching there) and coincident vertices
+    elsewhere (a surface touching itself at a point, or folded onto itself within one
+    piece) stay apart."""
     out = np.arange(mesh.n_vertices)
     seams = _seams(mesh)
     if seams is None or not seams[0].any():
         return out
     seam, edges, new_id, keep = seams
-    welded = np.zeros(keep.size, dtype=bool)
-    welded[new_id[edges[seam].ravel()]] = True
-    at = welded[new_id]
-    out[at] = keep[new_id[at]]
+    ends = np.unique(edges[seam].ravel())
+    first = np.full(keep.size, mesh.n_vertices)
+    np.minimum.at(first, new_id[ends], ends)
+    out[ends] = first[new_id[ends]]
     return out
 
 

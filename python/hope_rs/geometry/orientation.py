@@ -116,7 +116,7 @@ def _manifold_pairs(f: np.ndarray, usable: np.ndarray):
     keep = lo != hi
     lo, hi, forward, face = lo[keep], hi[keep], forward[keep], face[keep]
     # One int64 key per undirected edge; the stable sort keeps faces ascending within an edge.
-    order = np.argsort(lo * (int(hi.max()) + 1) + hi, kind="stable")
+    order = np.argsort(lo * (int(hi.max(initial=0)) + 1) + hi, kind="stable")
     lo, hi, forward, face = lo[order], hi[order], forward[order], face[order]
     new = np.ones(lo.size, dtype=bool)
     new[1:] = (lo[1:] != lo[:-1]) | (hi[1:] != hi[:-1])

@@ -30,6 +30,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..geometry.mesh import Mesh, face_pieces, seam_welds
+from .landmarks import check_landmarks
 from .result import MatchResult
 
 __all__ = ["Referenced", "body_vertices", "referenced"]
@@ -66,7 +67,9 @@ def _loose(mesh: Mesh, min_piece: float) -> np.ndarray:
     piece = face_pieces(faces)
     if min_piece <= 0.0 or piece.min() == piece.max():
         return np.zeros(len(faces), dtype=bool)
-    area = np.bincount(piece, mesh.face_areas)
+    # A face listed twice (double-sided on the same vertices) counts once.
+    _, once = np.unique(np.sort(faces, axis=1), axis=0, return_index=True)
+    area = np.bincount(piece[once], mesh.face_areas[once], minlength=piece.max() + 1)
     if area.max() < 0.5 * area.sum():  # no body for the pieces to be debris around
         return np.zeros(len(faces), dtype=bool)
     small = (area < min_piece * area.sum()) & (area < area.max())
@@ -74,9 +77,11 @@ def _loose(mesh: Mesh, min_piece: float) -> np.ndarray:
 
 
 def body_vertices(mesh: Mesh, min_piece: float) -> np.ndarray:
-    """Bool per vertex: used by a face outside the small loose pieces (:func:`_loose`), the
-    vertices a match keeps."""
-    return _used(mesh.n_vertices, mesh.faces[~_loose(mesh, min_piece)])
+    """Bool per vertex: used by a face outside the small loose pieces (:func:`_loose`), its
+    seams welded first, or welded to such a vertex: the vertices a match gives a map."""
+    weld = seam_welds(mesh)
+    welded = Mesh(mesh.vertices, weld[mesh.faces])
+    return _used(mesh.n_vertices, welded.faces[~_loose(welded, min_piece)])[weld]
 
 
 def _used(n: int, faces: np.ndarray) -> np.ndarray:
@@ -193,6 +198,22 @@ class Referenced:
                     "with MatchConfig(min_piece=0))"
                 )
             out[:, col] = mapped
+        if self.weld_a is not None or self.weld_b is not None:
+            # Copies of one vertex (welded along a seam) given different partners contradict.
+            for col, name in ((0, "A"), (1, "B")):
+                order = np.lexsort((out[:, 1 - col], out[:, col]))
+                key, other = out[order, col], out[order, 1 - col]
+                clash = np.flatnonzero((key[1:] == key[:-1]) & (other[1:] != other[:-1]))
+                if clash.size:
+                    i, j = order[clash[0]], order[clash[0] + 1]
+                    raise ValueError(
+                        f"landmarks {landmarks[i].tolist()} and {landmarks[j].tolist()} pair "
+                        f"copies of one vertex of {name} (welded along a seam) with different "
+                        "vertices; give one of them"
+                    )
+            checked = check_landmarks(out, None, None)  # rows now given twice count once
+            assert checked is not None
+            out = checked
         return out
 
     def _map_out(self, f: np.ndarray) -> np.ndarray:
