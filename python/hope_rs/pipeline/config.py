@@ -800,10 +800,9 @@ class PartialConfig:
     rough_smoothing : int
         The part's sqrt(area) for the guessed scale is measured on its copy smoothed this many
         times (each vertex halfway to its 1-ring's centroid) when that shrinks it by more
-        than ``inflated`` beyond the same smoothing's shrink of the whole (corrected by it):
-        vertex noise of about a dense scan's edge length inflates its area by a third or
-        more, while smoothing shrinks a clean mesh by a few percent (a coarse one more, the
-        whole alike). 0: the part as given.
+        than ``inflated``: vertex noise of about a dense scan's edge length inflates its area
+        by a third or more, while smoothing shrinks a clean mesh of a few thousand vertices
+        or more by a few percent. 0: the part as given.
     inflated : float
         See ``rough_smoothing`` (a share of sqrt(area)).
     """

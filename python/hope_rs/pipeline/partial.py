@@ -117,21 +117,16 @@ def covering_rings(a: Shape, b: Shape) -> int:
     return max(1, int(np.ceil(np.sqrt(density(b) / density(a)) / 2)))
 
 
-def part_scale(part: Shape, whole: Shape, config: PartialConfig) -> float:
+def part_scale(part: Shape, config: PartialConfig) -> float:
     """The part's sqrt(area) for the guessed scale, in its units: its own, or, when its copy
-    smoothed ``config.rough_smoothing`` times shrinks by a share more than
-    ``config.inflated`` beyond what the same smoothing takes off the whole (vertex noise of
-    about its edge length inflates a dense scan's area; smoothing a clean mesh, the coarser
-    the more, shrinks it too), its smoothed sqrt(area) corrected by the whole's shrink."""
+    smoothed ``config.rough_smoothing`` times has a sqrt(area) smaller by a share more than
+    ``config.inflated`` (vertex noise of about its edge length inflates a dense scan's
+    area), the smoothed copy's."""
     if config.rough_smoothing == 0:
         return part.scale
-
-    def shrink(shape: Shape) -> float:
-        smoothed = umbrella_smoothed(shape.internal, config.rough_smoothing)
-        return smoothed.scale / shape.internal.scale
-
-    excess = shrink(part) / shrink(whole)
-    return part.scale * excess if excess < 1.0 - config.inflated else part.scale
+    smoothed = umbrella_smoothed(part.internal, config.rough_smoothing)
+    shrink = smoothed.scale / part.internal.scale
+    return part.scale * shrink if shrink < 1.0 - config.inflated else part.scale
 
 
 def detect_part(a: Shape, b: Shape, config: PartialConfig | None = None) -> PartialInfo | None:
@@ -143,9 +138,9 @@ def detect_part(a: Shape, b: Shape, config: PartialConfig | None = None) -> Part
     # (a smaller body), its own sqrt(area) is the better guess and it keeps it.
     # Two parts of one shape (both cut) are not a part and its whole: the whole-shape path.
     if la - lb >= config.min_boundary_excess and lb <= config.max_whole_boundary:
-        return PartialInfo("a", (la, lb), max(part_scale(a, b, config), b.scale))
+        return PartialInfo("a", (la, lb), max(part_scale(a, config), b.scale))
     if lb - la >= config.min_boundary_excess and la <= config.max_whole_boundary:
-        return PartialInfo("b", (la, lb), max(a.scale, part_scale(b, a, config)))
+        return PartialInfo("b", (la, lb), max(a.scale, part_scale(b, config)))
     return None
 
 
