@@ -23,7 +23,8 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from .._validate import as_faces, as_vertices
-from .readers import READERS, LineError, one_line
+from .orientation import manifold_pairs
+from .readers import READERS, LineError, fan, one_line
 
 __all__ = [
     "SAFE_COORDINATES",
@@ -188,9 +189,7 @@ def _triangles(faces, name: str):
             return faces
     if arr.ndim != 2 or arr.shape[1] <= 3:
         return faces
-    k = arr.shape[1]
-    fan = np.stack([np.stack([arr[:, 0], arr[:, i], arr[:, i + 1]], 1) for i in range(1, k - 1)], 1)
-    return fan.reshape(-1, 3)
+    return fan(arr)
 
 
 def _face_edges(faces: np.ndarray) -> np.ndarray:
@@ -238,22 +237,9 @@ def face_pieces(faces: np.ndarray) -> np.ndarray:
     m = len(distinct)
     # A face with a repeated corner has no surface and shares nothing: it is a piece alone
     # (its edge would count as a third face on the edge it lies on).
-    proper_face = (distinct[:, 0] != distinct[:, 1]) & (distinct[:, 1] != distinct[:, 2])
-    on = distinct[proper_face]
-    edges = np.concatenate([on[:, [0, 1]], on[:, [1, 2]], on[:, [0, 2]]])
-    face = np.tile(np.flatnonzero(proper_face), 3)
-    n = int(f.max()) + 1
-    key = edges[:, 0] * n + edges[:, 1]
-    order = np.argsort(key, kind="stable")
-    key, face = key[order], face[order]
-    if key.size == 0:  # no face has three distinct corners: each is a piece
-        return np.arange(m, dtype=np.int64)[which.reshape(-1)]
-    first = np.r_[True, key[1:] != key[:-1]]
-    group = np.cumsum(first) - 1
-    two = np.bincount(group)[group] == 2
-    second = two & ~first  # the second face of an edge two faces share
-    other = face[np.flatnonzero(first)[group[second]]]
-    graph = sp.coo_matrix((np.ones(other.size), (other, face[second])), shape=(m, m))
+    on = np.flatnonzero((distinct[:, 0] != distinct[:, 1]) & (distinct[:, 1] != distinct[:, 2]))
+    a, b, _ = manifold_pairs(distinct[on], np.ones(on.size, dtype=bool))
+    graph = sp.coo_matrix((np.ones(a.size), (on[a], on[b])), shape=(m, m))
     return connected_components(graph, directed=False)[1].astype(np.int64)[which.reshape(-1)]
 
 

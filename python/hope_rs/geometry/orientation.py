@@ -35,7 +35,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
-__all__ = ["face_keys", "orient_faces"]
+__all__ = ["face_keys", "manifold_pairs", "orient_faces"]
 
 #: A component whose centroid volume is below this times ``area ** 1.5`` counts as flat.
 FLAT_VOLUME = 1e-12
@@ -72,7 +72,7 @@ def orient_faces(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     dup[1:] |= same
     dup[:-1] |= same
     usable &= ~dup
-    rows, cols, parity = _manifold_pairs(f, usable)
+    rows, cols, parity = manifold_pairs(f, usable)
     comp, relative = _relative_orientation(m, rows, cols, parity)
     orient = sign * np.where(relative, -1.0, 1.0)  # the sign each face would end with
     outward = _outward_sign(p, srt, orient, comp)
@@ -104,7 +104,7 @@ def _is_ascending_cycle(f: np.ndarray) -> np.ndarray:
     return ((a < b) & (b < c)) | ((b < c) & (c < a)) | ((c < a) & (a < b))
 
 
-def _manifold_pairs(f: np.ndarray, usable: np.ndarray):
+def manifold_pairs(f: np.ndarray, usable: np.ndarray):
     """Pairs of usable faces sharing an edge that exactly two faces (all faces counted) use,
     with ``parity`` True when both run it the same way (one of them must flip)."""
     m = f.shape[0]

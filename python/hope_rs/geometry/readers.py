@@ -15,6 +15,7 @@ import numpy as np
 __all__ = [
     "READERS",
     "LineError",
+    "fan",
     "one_line",
     "read_glb",
     "read_obj",
@@ -367,10 +368,20 @@ def read_ply(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     return v, _fan(lists)
 
 
+def fan(polygons: np.ndarray) -> np.ndarray:
+    """An (M, k) array of polygons fan-triangulated (corner 0 with each pair of consecutive
+    others), each polygon's triangles in its place, in the array's dtype."""
+    k = polygons.shape[1]
+    tris = [
+        np.stack([polygons[:, 0], polygons[:, i], polygons[:, i + 1]], 1) for i in range(1, k - 1)
+    ]
+    return np.stack(tris, 1).reshape(-1, 3)
+
+
 def _fan(lists) -> np.ndarray:
     """Fan-triangulate a list of polygons (an (M, k) array or a list of index lists)."""
-    if isinstance(lists, np.ndarray) and lists.ndim == 2 and lists.shape[1] == 3:
-        return lists.astype(np.int64)
+    if isinstance(lists, np.ndarray) and lists.ndim == 2 and lists.shape[1] >= 3:
+        return fan(lists).astype(np.int64)
     tris: list[list[int]] = []
     for poly in lists:
         poly = [int(i) for i in poly]
