@@ -123,6 +123,7 @@ BAD = {
     "obj_no_faces": ("obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\n", "no faces"),
     "obj_relative_before_first": ("obj", b"v 0 0 0\nf -1 -2 -3\n", "before the first vertex"),
     "obj_word_index": ("obj", obj_text(TET_V, TET_F) + b"f a b c\n", "expected an integer"),
+    "obj_continued_index_out_of_range": ("obj", obj_text(TET_V, TET_F) + b"f 1 \\\n2 \\\n9\n", "line 9: vertex index 9 is out of range"),
     "obj_huge_index": ("obj", obj_text(TET_V, TET_F) + b"f 1 2 99999999999999999999999\n", "out of range"),
     # PLY
     "ply_empty": ("ply", b"", "empty"),
@@ -198,6 +199,12 @@ ODD = {
     ),
     "obj_relative_indices": ("obj", obj_text(TET_V, []) + b"f -4 -2 -3\nf -4 -3 -1\nf -4 -1 -2\nf -3 -2 -1\n", 4, 4),
     "obj_quads_crlf": ("obj", obj_text(CUBE_V, CUBE_QUADS).replace(b"\n", b"\r\n"), 8, 12),
+    # A backslash at a line's end continues the statement (a comment after it does not).
+    "obj_line_continuation": (
+        "obj",
+        b"v 0 0 \\\n0\nv 1 0 0 # x \\\nv 0 1 0\nv 0 0 1\nf 1 3 \\\r\n 2\nf 1 \\\n2 \\\n 4\nf 1 4 3\nf 2 3 4 \\",
+        4, 4,
+    ),
     "ply_ascii": ("ply", ply_ascii(TET_V, TET_F), 4, 4),
     "ply_binary_little": ("ply", ply_binary(TET_V, TET_F), 4, 4),
     "ply_binary_big": ("ply", ply_binary(TET_V, TET_F, endian=">"), 4, 4),

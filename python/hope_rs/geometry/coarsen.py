@@ -15,7 +15,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 
-from .mesh import Mesh, unique_edges
+from .mesh import Mesh, unique_edges, unique_rows
 from .sites import cell_sites, grid_cells
 
 __all__ = ["Coarse", "CoarsenConfig", "coarse_mesh", "coarse_to_count", "uniform_cells_for_count"]
@@ -56,7 +56,7 @@ def _clustered(mesh: Mesh, cells: np.ndarray) -> Coarse | None:
     f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 2] != f[:, 0])]
     if f.shape[0] == 0:
         return None
-    _, first = np.unique(np.sort(f, axis=1), axis=0, return_index=True)
+    _, first = unique_rows(np.sort(f, axis=1), return_index=True)
     return Coarse(Mesh(mesh.vertices[sites], f[np.sort(first)]), sites, owner)
 
 

@@ -41,6 +41,7 @@ __all__ = [
     "seam_edges",
     "seam_welds",
     "unique_edges",
+    "unique_rows",
     "vertex_components",
 ]
 
@@ -213,6 +214,33 @@ def _edge_counts(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.stack([keys // n, keys % n], axis=1).astype(e.dtype, copy=False), count
 
 
+def unique_rows(rows: np.ndarray, **returns) -> tuple:
+    """``np.unique(rows, axis=0, **returns)`` for an (m, c) array of non-negative integers,
+    through one int64 key per row when the keys fit (their sorted order is the rows'
+    lexicographic order, and np.unique sorts stably when it returns indices): the same
+    result, from a 1-D sort many times faster. Always a tuple, the distinct rows first."""
+    r = np.asarray(rows)
+    m, c = r.shape
+    n = int(r.max()) + 1 if r.size else 1
+    if r.size == 0 or r.min() < 0 or c * np.log2(max(n, 2)) >= 62:
+        out = np.unique(r, axis=0, **returns)
+        return out if isinstance(out, tuple) else (out,)
+    key = np.zeros(m, dtype=np.int64)
+    for j in range(c):
+        key = key * n + r[:, j].astype(np.int64)
+    first = returns.get("return_index", False)
+    keys, *rest = np.unique(
+        key, return_index=True, **{k: v for k, v in returns.items() if k != "return_index"}
+    )
+    index = rest[0]
+    distinct = r[index]
+    out = [distinct]
+    if first:
+        out.append(index)
+    out += rest[1:]
+    return tuple(out)
+
+
 def unique_edges(faces: np.ndarray) -> np.ndarray:
     """The undirected edges of ``faces``, each once as ``(low, high)``, sorted."""
     return _edge_counts(faces)[0]
@@ -233,7 +261,7 @@ def face_pieces(faces: np.ndarray) -> np.ndarray:
     f = np.sort(np.asarray(faces, dtype=np.int64), axis=1)
     if len(f) == 0:
         return np.zeros(0, dtype=np.int64)
-    distinct, which = np.unique(f, axis=0, return_inverse=True)
+    distinct, which = unique_rows(f, return_inverse=True)
     m = len(distinct)
     # A face with a repeated corner has no surface and shares nothing: it is a piece alone
     # (its edge would count as a third face on the edge it lies on).
@@ -301,7 +329,7 @@ def _seams(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] 
     if edges.size == 0:
         return None
     merged = np.sort(new_id[edges], axis=1)
-    _, where, merged_count = np.unique(merged, axis=0, return_inverse=True, return_counts=True)
+    _, where, merged_count = unique_rows(merged, return_inverse=True, return_counts=True)
     where = where.reshape(-1)
     piece = vertex_components(mesh.n_vertices, edges)[edges[:, 0]]
     low = np.full(merged_count.size, piece.max() + 1)

@@ -64,18 +64,36 @@ def _text(data: bytes) -> str:
         return data.decode("latin-1")
 
 
-def _lines(data: bytes, comment: str = "#") -> list[tuple[int, list[str]]]:
-    """The non-empty lines as (1-based line number, tokens), comments removed."""
+def _lines(
+    data: bytes, comment: str = "#", *, continued: bool = False
+) -> list[tuple[int, list[str]]]:
+    """The non-empty lines as (1-based line number, tokens), comments removed. ``continued``:
+    a line ending in a backslash (outside its comment) goes on on the next line, as OBJ's long
+    statements do; the statement takes its first line's number."""
     out = []
     text = _text(data)
     if "\r" in text:  # Windows (CR LF) and classic Mac (CR alone) line ends
         text = text.replace("\r\n", "\n").replace("\r", "\n")
+    held: list[str] = []
+    first = 0
     for no, ln in enumerate(text.split("\n"), 1):
         if comment in ln:
             ln = ln.split(comment, 1)[0]
+        if continued:
+            ln = ln.rstrip()
+            if not held:
+                first = no
+            if ln.endswith("\\"):
+                held.append(ln[:-1])
+                continue
+            ln, held = " ".join([*held, ln]), []
         tok = ln.split()
         if tok:
-            out.append((no, tok))
+            out.append((first if continued else no, tok))
+    if held:
+        tok = " ".join(held).split()
+        if tok:
+            out.append((first, tok))
     return out
 
 
@@ -262,7 +280,7 @@ def read_obj(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     verts: list[list[float]] = []
     tris: list[list[int]] = []
     tri_line: list[int] = []
-    for no, t in _lines(data):
+    for no, t in _lines(data, continued=True):
         key = t[0]
         if key == "v":
             if len(t) not in (4, 5, 7, 8):

@@ -23,10 +23,14 @@ ROUGHNESS_FLOOR = 0.02
 
 def _ring_sums(v: np.ndarray, e: np.ndarray) -> np.ndarray:
     """Per vertex, the sum of its 1-ring's points (``e``: the unique edges)."""
-    ring = np.zeros_like(v, dtype=np.float64)
-    np.add.at(ring, e[:, 0], v[e[:, 1]])
-    np.add.at(ring, e[:, 1], v[e[:, 0]])
-    return ring
+    # One bincount per coordinate adds in the order np.add.at over e[:, 0], then e[:, 1] would
+    # (the same sums bit for bit), several times faster.
+    at = np.concatenate([e[:, 0], e[:, 1]])
+    src = np.concatenate([e[:, 1], e[:, 0]])
+    n = len(v)
+    return np.column_stack(
+        [np.bincount(at, weights=v[src, k].astype(np.float64), minlength=n) for k in range(3)]
+    )
 
 
 def normal_roughness(mesh: Mesh) -> float:

@@ -29,7 +29,7 @@ import dataclasses
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..geometry.mesh import Mesh, face_pieces, seam_welds
+from ..geometry.mesh import Mesh, face_pieces, seam_welds, unique_rows
 from .landmarks import check_landmarks
 from .result import MatchResult
 
@@ -68,7 +68,7 @@ def _loose(mesh: Mesh, min_piece: float) -> np.ndarray:
     if min_piece <= 0.0 or piece.min() == piece.max():
         return np.zeros(len(faces), dtype=bool)
     # A face listed twice (double-sided on the same vertices) counts once.
-    _, once = np.unique(np.sort(faces, axis=1), axis=0, return_index=True)
+    _, once = unique_rows(np.sort(faces, axis=1), return_index=True)
     area = np.bincount(piece[once], mesh.face_areas[once], minlength=piece.max() + 1)
     if area.max() < 0.5 * area.sum():  # no body for the pieces to be debris around
         return np.zeros(len(faces), dtype=bool)
