@@ -65,6 +65,7 @@ from hope_rs.pipeline.confidence import (
     MatchQuality,
     confidence_features,
     flipped_share,
+    judged_shapes,
     match_quality,
     vertex_confidence,
 )
@@ -189,6 +190,9 @@ def _internal(pair: Pair, m: dict, config: MatchConfig):
     b = Shape(hope_rs.load_mesh(pair.b), k_max=config.k_max, config=config.shape)
     z = None if (m["zoomout"] < 0).any() else a.map_in(b, m["zoomout"])
     f = a.map_in(b, m.get("judged", m["map"]))
+    flipped = flipped_share(a, b, a.map_in(b, m["map"]))
+    # As the stage measures them: a noisy scan much denser than the other shape smoothed.
+    a, b = judged_shapes(a, b, config.confidence)
     x = confidence_features(
         a,
         b,
@@ -199,7 +203,7 @@ def _internal(pair: Pair, m: dict, config: MatchConfig):
         min_consistent=config.refine.min_consistent,
         repair=config.refine.repair,
     )
-    return a, b, f, x, flipped_share(a, b, a.map_in(b, m["map"]))
+    return a, b, f, x, flipped
 
 
 def features_of(pair: Pair, m: dict, config: MatchConfig) -> tuple[np.ndarray, float]:

@@ -6,7 +6,12 @@ from meshes import bumpy_sphere, flat_grid
 
 import hope_rs
 from hope_rs.geometry.collapse import collapse_to_count
-from hope_rs.geometry.roughness import at_owner_means, normal_roughness, umbrella_smoothed
+from hope_rs.geometry.roughness import (
+    _ring_sums,
+    at_owner_means,
+    normal_roughness,
+    umbrella_smoothed,
+)
 from hope_rs.geometry.subdivide import subdivide
 
 
@@ -48,3 +53,17 @@ def test_umbrella_smoothing_takes_noise_out_and_keeps_the_faces():
     ring = [j for f in noisy.faces if 0 in f for j in f if j != 0]
     centroid = noisy.vertices[sorted(set(ring))].mean(axis=0)
     np.testing.assert_allclose(one[0], 0.5 * noisy.vertices[0] + 0.5 * centroid)
+
+
+def test_ring_sums_add_in_np_add_at_order():
+    """The bincount sums are np.add.at's over e[:, 0], then e[:, 1], bit for bit."""
+    rng = np.random.default_rng(5)
+    for dtype in (np.float64, np.float32):
+        v = (rng.normal(size=(300, 3)) * 10.0 ** rng.integers(-8, 8, size=(300, 1))).astype(dtype)
+        e = np.sort(rng.integers(0, 300, size=(2000, 2)), axis=1)
+        want = np.zeros(v.shape, dtype=np.float64)
+        np.add.at(want, e[:, 0], v[e[:, 1]])
+        np.add.at(want, e[:, 1], v[e[:, 0]])
+        got = _ring_sums(v, e)
+        assert got.dtype == np.float64
+        np.testing.assert_array_equal(got, want)

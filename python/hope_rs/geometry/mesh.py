@@ -222,11 +222,11 @@ def unique_rows(rows: np.ndarray, **returns) -> tuple:
     r = np.asarray(rows)
     m, c = r.shape
     n = int(r.max()) + 1 if r.size else 1
-    if r.size == 0 or r.min() < 0 or c * np.log2(max(n, 2)) >= 62:
+    if r.size == 0 or r.min() < 0 or c * (n - 1).bit_length() > 63:
         out = np.unique(r, axis=0, **returns)
         return out if isinstance(out, tuple) else (out,)
-    key = np.zeros(m, dtype=np.int64)
-    for j in range(c):
+    key = r[:, 0].astype(np.int64)
+    for j in range(1, c):
         key = key * n + r[:, j].astype(np.int64)
     first = returns.get("return_index", False)
     keys, *rest = np.unique(

@@ -86,7 +86,8 @@ def _lines(
             if ln.endswith("\\"):
                 held.append(ln[:-1])
                 continue
-            ln, held = " ".join([*held, ln]), []
+            if held:
+                ln, held = " ".join([*held, ln]), []
         tok = ln.split()
         if tok:
             out.append((first if continued else no, tok))

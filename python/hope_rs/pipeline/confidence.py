@@ -56,6 +56,7 @@ __all__ = [
     "MatchQuality",
     "confidence_features",
     "flipped_share",
+    "judged_shapes",
     "map_quality",
     "match_quality",
     "predict_confidence",
@@ -104,6 +105,9 @@ def map_quality(
     or not ``config`` asks for a confidence); ``flipped``: the map's :func:`flipped_share`
     when the caller has measured it."""
     cfg = config.confidence
+    if flipped is None:
+        flipped = flipped_share(a, b, f)
+    a, b = judged_shapes(a, b, cfg)
     x = confidence_features(
         a,
         b,
@@ -115,9 +119,33 @@ def map_quality(
         repair=config.refine.repair,
     )
     confidence = vertex_confidence(a, b, f, x, cfg)
-    if flipped is None:
-        flipped = flipped_share(a, b, f)
     return match_quality(confidence, cfg, flipped=flipped)
+
+
+def judged_shapes(a: Shape, b: Shape, config: ConfidenceConfig) -> tuple[Shape, Shape]:
+    """The shapes as the confidence measures a map between them: a noisy one (one umbrella
+    smoothing takes more than ``config.noisy`` of its normal roughness out,
+    :meth:`~hope_rs.Shape.smoothing_drop`) more than ``config.denser`` times as dense as the
+    other (vertices per unit area in the units matched in) smoothed ``config.rough_smoothing``
+    times (:meth:`~hope_rs.Shape.smoothed`, same numbering). The images of a sparser shape's
+    2-rings and anchors lie many short edges apart on a dense scan, whose noisy edge paths
+    zigzag: its geodesic distances run long and a right map reads as distorted. At like
+    densities the model reads noise as it reads it on its own (the pair matched at a common
+    resolution is judged on copies of like density). The features and the per-vertex turned
+    factor (a right map turns a noisy scan's own small triangles over at random) are measured
+    on them; the pair's turned-over share is not: it stays at full resolution, where the
+    orient stage's trigger and the flag were set."""
+    n = config.rough_smoothing
+
+    def judged(s: Shape, other: Shape) -> Shape:
+        if (
+            n == 0
+            or s.n_vertices / s.unit_area <= config.denser * other.n_vertices / other.unit_area
+        ):
+            return s
+        return s.smoothed(n) if s.smoothing_drop > config.noisy else s
+
+    return judged(a, b), judged(b, a)
 
 
 def state_quality(state: MatchState) -> MatchQuality | None:
@@ -307,9 +335,10 @@ class ConfidenceStage(Stage):
         t = state.log.start("confidence", detail="per-vertex confidence of the map")
         counterpart = None if state.partial is None else state.partial.counterpart
         assert state.f is not None  # the stages before it made the map
+        a, b = judged_shapes(state.a, state.b, cfg)
         x = confidence_features(
-            state.a,
-            state.b,
+            a,
+            b,
             state.f,
             state.hope_map,
             state.zoomout,
@@ -318,7 +347,7 @@ class ConfidenceStage(Stage):
             repair=state.config.refine.repair,
             among=counterpart,
         )
-        state.confidence = vertex_confidence(state.a, state.b, state.f, x, cfg)
+        state.confidence = vertex_confidence(a, b, state.f, x, cfg)
         if counterpart is not None:
             # A vertex of the whole without a counterpart on the part has no right match.
             state.confidence = np.where(counterpart, state.confidence, 0.0)

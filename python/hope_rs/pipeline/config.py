@@ -892,6 +892,18 @@ class ConfidenceConfig:
         2-rings span the whole shape and the long-range features have no far anchors, so
         nothing the model reads can tell a right map from a wrong one (a lone triangle
         matched to itself rotated).
+    noisy : float
+        A shape more than ``denser`` times as dense as the other is judged on its copy
+        smoothed ``rough_smoothing`` times when one umbrella smoothing takes more than this
+        share of its normal roughness out (:meth:`~hope_rs.Shape.smoothing_drop`: vertex noise
+        goes at once, the offsets of smooth curvature barely move). The images of a sparser
+        shape's 2-rings lie many short edges apart on a dense scan, whose noisy edge paths
+        zigzag: its distances run long and a right map reads as distorted
+        (:func:`~hope_rs.pipeline.confidence.judged_shapes`).
+    denser : float
+        See ``noisy`` (a ratio of vertices per unit area).
+    rough_smoothing : int
+        See ``noisy``; 0 measures both shapes as they are.
     """
 
     enabled: bool = True
@@ -916,6 +928,9 @@ class ConfidenceConfig:
     failed_flipped: float = 0.3
     turned_weight: float = 0.5
     min_vertices: int = 32
+    noisy: float = 0.3
+    denser: float = 2.0
+    rough_smoothing: int = 5
 
     def __post_init__(self):
         # Checked here, not when the confidence stage runs after the whole match.
@@ -923,6 +938,7 @@ class ConfidenceConfig:
             ("n_anchors", 1, 10_000),
             ("rings", 0, 10_000),
             ("min_vertices", 0, None),
+            ("rough_smoothing", 0, 100),
         ):
             x = getattr(self, name)
             if (
@@ -952,10 +968,18 @@ class ConfidenceConfig:
                 f"ConfidenceConfig.weights must hold one finite number per feature, got {bad[0]}"
             )
         object.__setattr__(self, "weights", weights)
-        shares = ("threshold", "failed_mean", "failed_share", "failed_flipped", "turned_weight")
+        shares = (
+            "threshold",
+            "failed_mean",
+            "failed_share",
+            "failed_flipped",
+            "turned_weight",
+            "noisy",
+        )
         for name, fits, span in (
             ("floor", lambda x: x > 0.0, "a finite positive number"),
             ("intercept", lambda x: True, "a finite number"),
+            ("denser", lambda x: x >= 1.0, "a finite number >= 1"),
             *((n, lambda x: 0.0 <= x <= 1.0, "a number in [0, 1]") for n in shares),
         ):
             x = getattr(self, name)
