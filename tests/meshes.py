@@ -182,6 +182,49 @@ def subdivided(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.vstack([v, v[uniq].mean(axis=1)]), np.concatenate([*corners, mid])
 
 
+def slivered(
+    v: np.ndarray, f: np.ndarray, k: int = 3, axis: int = 0
+) -> tuple[np.ndarray, np.ndarray]:
+    """Long thin triangles on one side: on each face whose centroid lies beyond the median of
+    coordinate ``axis``, ``k`` evenly spaced points inserted on its longest edge; a face with
+    one split edge fanned from the opposite corner into slivers, a face with more split edges
+    fanned from its centroid. The original vertices come first (ground truth stays valid)."""
+    v = np.asarray(v, dtype=np.float64)
+    side = v[f].mean(axis=1)[:, axis] > np.median(v[:, axis])
+    ts = [(j + 1) / (k + 1) for j in range(k)]
+    split: dict[tuple[int, int], list[int]] = {}
+    new: list[np.ndarray] = []
+    for face in f[side]:
+        pairs = [(face[0], face[1]), (face[1], face[2]), (face[2], face[0])]
+        p, q = pairs[int(np.argmax([np.linalg.norm(v[p] - v[q]) for p, q in pairs]))]
+        key = (int(min(p, q)), int(max(p, q)))
+        if key not in split:
+            lo, hi = key
+            split[key] = [len(v) + len(new) + j for j in range(k)]
+            new += [(1 - t) * v[lo] + t * v[hi] for t in ts]
+
+    def chain(a: int, b: int) -> list[int]:
+        ids = split.get((min(a, b), max(a, b)), [])
+        return ids if a < b else ids[::-1]
+
+    out = []
+    for face in f.tolist():
+        ch = [chain(face[0], face[1]), chain(face[1], face[2]), chain(face[2], face[0])]
+        cut = [i for i in range(3) if ch[i]]
+        if not cut:
+            out.append(face)
+        elif len(cut) == 1:
+            i = cut[0]
+            seq = [face[i], *ch[i], face[(i + 1) % 3]]
+            out += [[p, q, face[(i + 2) % 3]] for p, q in zip(seq[:-1], seq[1:])]
+        else:
+            ring = [face[0], *ch[0], face[1], *ch[1], face[2], *ch[2]]
+            centre = len(v) + len(new)
+            new.append(v[face].mean(axis=0))
+            out += [[centre, p, q] for p, q in zip(ring, ring[1:] + ring[:1])]
+    return np.vstack([v, np.array(new).reshape(-1, 3)]), np.array(out, dtype=np.int64)
+
+
 def legless(a: hope_rs.Mesh) -> tuple[hope_rs.Mesh, np.ndarray]:
     """A without its lowest 30% of vertices (a FAUST body's legs), and the kept vertices."""
     keep = a.vertices[:, 1] > np.quantile(a.vertices[:, 1], 0.3)

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 from conftest import shared_pair
-from meshes import bumpy_sphere
+from meshes import bumpy_sphere, slivered
 from scipy.spatial import ConvexHull, cKDTree
 
 import hope_rs
@@ -178,6 +178,22 @@ def test_a_region_torn_off_under_noise_is_repaired():
     assert info.ran and "torn off" in info.reason and "chose torn" in info.reason
     assert torn.share(a.map_in(b, res.map)) == 0.0
     assert geodesic_errors(mb, res.map, a_idx=ai, b_idx=bi).mean() < 0.035
+
+
+@pytest.mark.slow
+def test_a_torn_map_too_wrong_to_place_back_takes_the_reverse_match():
+    # FAUST remeshed tr_reg_002 -> tr_reg_007 with B's left side cut into slivers (17k
+    # vertices, so matched at a common resolution): on the coarse copy the upper body lands
+    # turned about the vertical axis (orientation kept, 12% turned over, not flagged) and
+    # tears 6% of A off; placed back from the core it is no better, the reverse match is.
+    ma, mb, ai, bi = shared_pair("faust_r", "tr_reg_002->tr_reg_007")
+    b = hope_rs.Mesh(*slivered(mb.vertices, mb.faces))
+    only_torn = MatchConfig(orient=OrientConfig(torn_hypotheses=("torn",)))
+    before = hope_rs.match(ma, b, config=only_torn)
+    assert geodesic_errors(b, before.map, a_idx=ai, b_idx=bi).mean() > 0.2
+    assert not before.quality.likely_failed
+    res = hope_rs.match(ma, b)
+    assert geodesic_errors(b, res.map, a_idx=ai, b_idx=bi).mean() < 0.03
 
 
 @pytest.mark.slow

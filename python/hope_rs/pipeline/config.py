@@ -1028,7 +1028,9 @@ class OrientConfig:
     torn_hypotheses : tuple of str
         ... with these hypotheses ("torn": every vertex off the core of a mesh component
         with a piece torn off placed by its geodesic distances to anchors in that core, then
-        refined) and the same stop rule.
+        refined; "reverse", for a region too large to place back from the rest: see
+        ``hypotheses``; a part tries only those of
+        :data:`~hope_rs.pipeline.orientation_repair.PART_HYPOTHESES`) and the same stop rule.
     tear_length : float
         An edge of A is torn when its ends land farther apart on B (in space) than this many
         sqrt(area) of B (never one with an end on A's boundary: a part's rim lands
@@ -1070,7 +1072,7 @@ class OrientConfig:
     on_topology: bool = True
     topology_hypotheses: tuple[str, ...] = ("reseed", "reverse")
     on_torn: bool = True
-    torn_hypotheses: tuple[str, ...] = ("torn",)
+    torn_hypotheses: tuple[str, ...] = ("torn", "reverse")
     tear_length: float = field(default=0.08, metadata={"range": (0.0, None), "finite": True})
     tear_edges: float = field(default=3.0, metadata={"range": (0.0, None), "finite": True})
     min_torn: float = field(default=0.01, metadata={"range": (0.0, 1.0)})
