@@ -220,6 +220,12 @@ class Shape:
         return self.scale == self.internal.scale
 
     @property
+    def density(self) -> float:
+        """Vertices per unit area, in the units the shape is measured in (its own sqrt(area),
+        or a whole's for a part viewed at that scale, which then has less than unit area)."""
+        return self.n_vertices / self.unit_area
+
+    @property
     def unit_area(self) -> float:
         """The shape's area in the units it is measured in: 1 at its own scale, less for a
         part viewed at its whole's scale."""

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mesh import Mesh, scale_exponent
+from .mesh import Mesh, scale_exponent, unique_rows
 from .orientation import orient_faces
 
 #: Bits per axis of the Morton code (3 x 21 = 63 bits in one uint64).
@@ -93,11 +93,7 @@ def _without_repeated_faces(f: np.ndarray) -> np.ndarray:
     if f.shape[0] < 2:
         return f
     lo, hi = np.minimum(f[:, 1], f[:, 2]), np.maximum(f[:, 1], f[:, 2])
-    n = int(f.max()) + 1
-    if n < 2**21:  # one int64 per face: ten times faster than rows
-        _, first = np.unique((f[:, 0] * n + lo) * n + hi, return_index=True)
-    else:
-        _, first = np.unique(np.column_stack([f[:, 0], lo, hi]), axis=0, return_index=True)
+    _, first = unique_rows(np.column_stack([f[:, 0], lo, hi]), return_index=True)
     if first.size == f.shape[0]:
         return f
     return f[np.sort(first)]

@@ -138,10 +138,7 @@ def judged_shapes(a: Shape, b: Shape, config: ConfidenceConfig) -> tuple[Shape, 
     n = config.rough_smoothing
 
     def judged(s: Shape, other: Shape) -> Shape:
-        if (
-            n == 0
-            or s.n_vertices / s.unit_area <= config.denser * other.n_vertices / other.unit_area
-        ):
+        if n == 0 or s.density <= config.denser * other.density:
             return s
         return s.smoothed(n) if s.smoothing_drop > config.noisy else s
 

@@ -99,7 +99,7 @@ __all__ = [
 def density(s: Shape) -> float:
     """Vertices per unit area, in the units the shape is matched in (its own sqrt(area) for a
     whole shape; a part viewed at the whole's scale has less than unit area)."""
-    return s.n_vertices / s.unit_area
+    return s.density
 
 
 def common_count(dense: Shape, sparse: Shape) -> int:
