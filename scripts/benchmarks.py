@@ -5,10 +5,12 @@ and ZoomOut from the same SHOT initial map, wall time from meshes to map), the s
 partial-shape sets, and ``benches/bench_landmarks.py`` (each remeshed pair without and with
 four landmarks), then writes
 ``docs/benchmarks.md`` with the commit, date and machine, and replaces the table between the
-``results:start`` / ``results:end`` markers of README.md.
+``results:start`` / ``results:end`` markers of README.md. Each section's tables and provenance
+are kept in docs/results, so a ``--*-only`` run on any clone renders the other sections from
+their last run.
 
     python scripts/benchmarks.py                 # run, then write both documents
-    python scripts/benchmarks.py --render-only   # rewrite them from the last run's CSVs
+    python scripts/benchmarks.py --render-only   # rewrite them from docs/results
     python scripts/benchmarks.py --partial-only  # the partial-shape sets only, then rewrite
     python scripts/benchmarks.py --landmarks-only  # the landmark bench only, then rewrite
     python scripts/benchmarks.py --resolution-only  # the mixed-resolution sets only, then rewrite
@@ -36,6 +38,10 @@ from provenance import header, load
 ROOT = Path(__file__).resolve().parents[1]
 DATA = Path(os.environ.get("HOPE_DATA", ROOT.parent / "shared" / "data"))
 RUN = ROOT / "bench-results" / "benchmarks"
+#: The tables and provenance of the last run of each section, kept in the repository so that
+#: one section can be run again on any clone and the document rendered with the others.
+RESULTS = ROOT / "docs" / "results"
+KEPT = ("*.csv", "*.jsonl", "provenance*.txt")
 METHODS = ["init", "hope", "zoomout"]
 #: Data sets in the order of the tables, with a line on what each exercises.
 SETS = {
@@ -89,6 +95,14 @@ PERTURBED_METHODS = ["init", "hope"]
 LANDMARK_SETS = ("faust_r", "tosca_r", "tosca_nonisometric_r")
 LANDMARKS, SWAP_ERROR, SWAP_SHARE = 4, 0.3, 0.05
 MARK_START, MARK_END = "<!-- results:start -->", "<!-- results:end -->"
+
+
+def _copy_results(src: Path, dst: Path) -> None:
+    """The tables, landmark rows and provenance of ``src`` copied over those of ``dst``."""
+    dst.mkdir(parents=True, exist_ok=True)
+    for pattern in KEPT:
+        for f in sorted(src.glob(pattern)):
+            shutil.copy2(f, dst / f.name)
 
 
 def _remove(paths) -> None:
@@ -699,10 +713,12 @@ def main() -> int:
         or args.partial_resolution_only
         or args.render_only
     )
-    if only and not (RUN / "provenance.txt").exists():
-        # The document is rendered from every section's results: without the shared sets'
-        # the rewrite would drop their tables.
-        p.error(f"no earlier full run in {RUN}; run scripts/benchmarks.py without --*-only")
+    if only:
+        if not (RESULTS / "provenance.txt").exists():
+            # The document is rendered from every section's results: without the shared
+            # sets' the rewrite would drop their tables.
+            p.error(f"no earlier full run in {RESULTS}; run scripts/benchmarks.py without --*-only")
+        _copy_results(RESULTS, RUN)
     if args.resolution_only:
         run_resolution()
     elif args.perturbed_only:
@@ -723,6 +739,10 @@ def main() -> int:
             run_perturbed()
             run_reversed()
             run_partial_resolution()
+    if not args.render_only:
+        if not only:
+            _remove([RESULTS])
+        _copy_results(RUN, RESULTS)
     render()
     return 0
 
