@@ -8,6 +8,7 @@ import hope_rs
 from hope_rs.batch.cache import ShapeCache, cached_shape, file_digest
 from hope_rs.batch.driver import imatch_many, map_name, read_pairs
 from hope_rs.batch.manifest import MANIFEST, Manifest
+from hope_rs.batch.pairs_file import landmark_files
 from hope_rs.cli import main
 from hope_rs.features.descriptors import DescriptorConfig
 from hope_rs.pipeline.config import OrientConfig
@@ -287,6 +288,37 @@ def test_match_many_landmarks_are_checked_per_pair(folder, tmp_path):
         shapes, [(0, 1), (1, 0)], landmarks=[[[0, n]], None], jobs=1, cache=False
     )
     assert not res[0].ok and f"vertex {n} is not a vertex of B" in res[0].error and res[1].ok
+
+
+def test_a_landmark_file_out_of_range_for_its_pair_is_named(folder, tmp_path, capsys):
+    """Landmarks read from a file and out of range for their pair's shapes fail that pair with
+    an error naming the file, from the pairs file and from ``match_many``'s paths alike."""
+    m = (folder / "m").resolve()
+    n = hope_rs.load_mesh(m / "s1.off").n_vertices
+    (tmp_path / "far.lm").write_text(f"0 {n}\n")
+    (tmp_path / "near.lm").write_text("0 0\n")
+    pairs_file = tmp_path / "pairs.txt"
+    pairs_file.write_text(
+        f"{m / 's0.off'} {m / 's1.off'} far.lm\n{m / 's1.off'} {m / 's2.off'} near.lm\n"
+    )
+    assert landmark_files(pairs_file) == [tmp_path / "far.lm", tmp_path / "near.lm"]
+    cache = ["--cache", str(tmp_path / "c"), "-q", "-j", "1"]
+    assert main(["batch", str(pairs_file), "--out", str(tmp_path / "o")] + cache) == 1
+    err = capsys.readouterr().err
+    assert f"landmark file {str(tmp_path / 'far.lm')!r}: " in err
+    assert f"vertex {n} is not a vertex of B" in err
+    assert (tmp_path / "o" / "s1__s2.txt").is_file() and not (
+        tmp_path / "o" / "s0__s1.txt"
+    ).exists()
+    shapes = [m / "s0.off", m / "s1.off"]
+    res = hope_rs.match_many(
+        shapes, [(0, 1), (1, 0)], landmarks=[tmp_path / "far.lm", None], jobs=1, cache=False
+    )
+    assert not res[0].ok and "far.lm" in res[0].error and res[1].ok
+    with pytest.raises(FileNotFoundError, match=r"landmarks\[0\] .*no such landmark file"):
+        hope_rs.match_many(shapes, [(0, 1)], landmarks=[tmp_path / "gone.lm"], cache=False)
+    with pytest.raises(TypeError, match="one entry per pair"):
+        hope_rs.match_many(shapes, [(0, 1)], landmarks=str(tmp_path / "far.lm"), cache=False)
 
 
 def test_a_rerun_redoes_a_map_that_does_not_keep_its_new_landmarks(folder, tmp_path):

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry.map_io import check_writable_folder
+from ..geometry.map_io import check_writable_folder, read_landmarks
 from ..geometry.mesh import as_mesh
 from ..matching import check_match_options, unknown_options
 from ..pipeline.config import INIT_KINDS, KEYWORDS, MatchConfig
@@ -183,29 +183,39 @@ def _resolve_pairs(pairs, names: list[str], keys: list | None = None) -> list[tu
     return out
 
 
-def _pair_landmarks(landmarks, pairs, n_pairs: int) -> list:
+def _pair_landmarks(landmarks, pairs, n_pairs: int) -> tuple[list, list]:
     """One landmark array (form checked; indices are checked per pair once its shapes are
-    read) or ``None`` per pair."""
+    read) or ``None`` per pair, and the landmark file each was read from (or ``None``)."""
     if landmarks is None:
-        return [None] * n_pairs
+        return [None] * n_pairs, [None] * n_pairs
     if pairs is None:
         raise ValueError("landmarks belong to pairs: give the pairs they are for as well")
+    if isinstance(landmarks, (str, os.PathLike)):
+        raise TypeError(
+            "landmarks must be a list with one entry per pair: None, an (m, 2) array or the "
+            "path of a landmark file"
+        )
     try:
         marks = list(landmarks)
     except TypeError:
         raise TypeError(
-            "landmarks must be a list with one entry per pair: None or an (m, 2) array"
+            "landmarks must be a list with one entry per pair: None, an (m, 2) array or the "
+            "path of a landmark file"
         ) from None
     if len(marks) != n_pairs:
         raise ValueError(
             f"landmarks has {len(marks)} entries for {n_pairs} pairs; give one per pair"
         )
+    files: list = [None] * n_pairs
     for n, lm in enumerate(marks):
         try:
+            if isinstance(lm, (str, os.PathLike)):
+                files[n] = os.fspath(lm)
+                lm = read_landmarks(lm)
             marks[n] = check_landmarks(lm, None, None)
-        except (TypeError, ValueError) as e:
+        except (OSError, TypeError, ValueError) as e:
             raise type(e)(f"landmarks[{n}] (for pairs[{n}]): {e}") from None
-    return marks
+    return marks, files
 
 
 #: :func:`match_many`'s own keyword options (besides those of :func:`hope_rs.match`).
@@ -309,7 +319,7 @@ def imatch_many(
     cfg = batch_config(config, init, match_options)
     check_backend(backend, jobs)
     ij = _resolve_pairs(pairs, names, keys)
-    marks = _pair_landmarks(landmarks, pairs, len(ij))
+    marks, mark_files = _pair_landmarks(landmarks, pairs, len(ij))
     specs = [_spec(s, cfg.shape) for s in shapes]
     _same_settings(ij, names, specs)
     largest = max((_vertex_bound(s) for s in specs), default=0)
@@ -338,7 +348,8 @@ def imatch_many(
                 tmp.cleanup()
             raise
         plan = Plan(
-            names=names, specs=specs, pairs=ij, paths=paths, landmarks=marks, settings=settings,
+            names=names, specs=specs, pairs=ij, paths=paths, landmarks=marks,
+            landmark_files=mark_files, settings=settings,
             job={"cache_root": str(shape_cache.root), "config": cfg,
                  "threads": getattr(ex, "threads", None), "basis": basis},
             kinds=(cfg.initial.descriptor,), basis=basis, code=code_fingerprint(),
@@ -411,9 +422,11 @@ def match_many(
         Every setting of every pair, as for :func:`hope_rs.match`; ``init`` and the keyword
         options are set over it through :meth:`MatchConfig.with_options`.
     landmarks : list, optional
-        One entry per pair of ``pairs`` (which must then be given): ``None`` or an (m, 2)
+        One entry per pair of ``pairs`` (which must then be given): ``None``, an (m, 2)
         array of (vertex of a, vertex of b) that the pair's map keeps, as for
-        :func:`hope_rs.match`. Indices out of range fail that pair only, before it is matched.
+        :func:`hope_rs.match`, or the path of a landmark file (read with
+        :func:`hope_rs.read_landmarks`; a pair's error then names it). Indices out of range
+        fail that pair only, before it is matched.
     init, **match_options
         As for :func:`hope_rs.match` (``init`` must name descriptors).
     progress : bool or callable

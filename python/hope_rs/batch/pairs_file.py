@@ -13,7 +13,7 @@ from ..geometry.map_io import read_landmarks
 from ..geometry.readers import READERS
 from ..pipeline.landmarks import check_landmarks
 
-__all__ = ["all_pairs", "read_pairs", "strip_comment"]
+__all__ = ["all_pairs", "landmark_files", "read_pairs", "strip_comment"]
 
 
 def strip_comment(line: str) -> str:
@@ -95,6 +95,30 @@ def read_pairs(path: str | os.PathLike, *, ext: str = "", with_landmarks: bool =
     >>> [(a.name, b.name) for a, b in pairs], landmarks[0].tolist(), landmarks[1]
     ([('template.off', 'scan.off'), ('template.off', 'scan#2.off')], [[0, 5], [17, 3]], None)
     """
+    pairs, files, lines = _parse(path, ext, with_landmarks)
+    if not with_landmarks:
+        return pairs
+    marks = []
+    for lm, no in zip(files, lines):
+        try:
+            marks.append(None if lm is None else check_landmarks(read_landmarks(lm), None, None))
+        except (OSError, TypeError, ValueError) as e:
+            raise ValueError(
+                f"{path}:{no}: a third field names the pair's landmark file: {e}"
+            ) from None
+    return pairs, marks
+
+
+def landmark_files(path: str | os.PathLike, *, ext: str = "") -> list[Path | None]:
+    """The landmark file a pairs file names for each of its pairs (its third field, resolved
+    against the file's folder), or ``None``: what :func:`hope_rs.match_many` takes as
+    ``landmarks`` to name the file in a pair's error. Checked as :func:`read_pairs` checks it,
+    without reading the landmark files."""
+    return _parse(path, ext, True)[1]
+
+
+def _parse(path, ext: str, with_landmarks: bool) -> tuple[list, list, list[int]]:
+    """The pairs of a pairs file, each one's landmark file (or ``None``) and line number."""
     path = Path(path)
     if path.is_dir():
         raise ValueError(f"{str(path)!r} is a folder; give the pairs file (one 'A B' per line)")
@@ -107,7 +131,7 @@ def read_pairs(path: str | os.PathLike, *, ext: str = "", with_landmarks: bool =
         text = path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError:
         raise ValueError(f"{path} is not a text file of mesh paths") from None
-    out, marks = [], []
+    out, files, lines = [], [], []
     listed: dict[tuple[str, str], int] = {}  # each pair's first line, by its files
     for no, line in enumerate(text.splitlines(), 1):
         try:
@@ -122,20 +146,9 @@ def read_pairs(path: str | os.PathLike, *, ext: str = "", with_landmarks: bool =
                 f"{path}:{no}: expected {want} separated by white space or a tab, got "
                 f"{len(tokens)} field(s) (quote paths holding spaces): {line.strip()!r}"
             )
-        if len(tokens) == 3:
-            lm = Path(tokens[2])
-            try:
-                marks.append(
-                    check_landmarks(
-                        read_landmarks(lm if lm.is_absolute() else folder / lm), None, None
-                    )
-                )
-            except (OSError, TypeError, ValueError) as e:
-                raise ValueError(
-                    f"{path}:{no}: a third field names the pair's landmark file: {e}"
-                ) from None
-        else:
-            marks.append(None)
+        lm = Path(tokens[2]) if len(tokens) == 3 else None
+        files.append(lm if lm is None or lm.is_absolute() else folder / lm)
+        lines.append(no)
         pair = []
         for t in tokens[:2]:
             if ext and Path(t).suffix.lower() not in READERS:  # a bare name
@@ -151,7 +164,7 @@ def read_pairs(path: str | os.PathLike, *, ext: str = "", with_landmarks: bool =
         out.append((pair[0], pair[1]))
     if not out:
         raise ValueError(f"{path} lists no pairs (expected lines of two mesh paths)")
-    return (out, marks) if with_landmarks else out
+    return out, files, lines
 
 
 def all_pairs(n: int) -> list[tuple[int, int]]:

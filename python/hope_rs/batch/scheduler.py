@@ -75,6 +75,7 @@ class Plan:
     pairs: list[tuple[int, int]]
     paths: list[Path | None]  # map file per pair
     landmarks: list  # (m, 2) array or None per pair
+    landmark_files: list  # the file each pair's landmarks were read from, or None
     settings: list[str]  # settings key per pair
     job: dict  # what every pair task gets (the MatchConfig, the cache folder, ...)
     kinds: tuple[str, ...]  # descriptors computed per shape
@@ -95,12 +96,13 @@ def existing_map(path: Path, n_a: int, n_b: int) -> tuple[np.ndarray | None, str
     return m, None
 
 
-def _checked_landmarks(landmarks, n_a: int, n_b: int) -> tuple:
-    """(the pair's landmarks checked against its shapes' sizes, None) or (None, the error)."""
+def _checked_landmarks(landmarks, n_a: int, n_b: int, file: str | None) -> tuple:
+    """(the pair's landmarks checked against its shapes' sizes, None) or (None, the error,
+    naming the landmark file they were read from)."""
     try:
         return check_landmarks(landmarks, n_a, n_b), None
     except (TypeError, ValueError) as e:
-        return None, error_text(e)
+        return None, ("" if file is None else f"landmark file {file!r}: ") + error_text(e)
 
 
 def run(plan: Plan, ex: Backend, report: Callable) -> Iterator[PairResult]:
@@ -220,7 +222,9 @@ def run(plan: Plan, ex: Backend, report: Callable) -> Iterator[PairResult]:
                         if i not in sizes or j not in sizes:
                             still.append((n, check))
                             continue
-                        lm, bad = _checked_landmarks(plan.landmarks[n], sizes[i], sizes[j])
+                        lm, bad = _checked_landmarks(
+                            plan.landmarks[n], sizes[i], sizes[j], plan.landmark_files[n]
+                        )
                         if bad is not None:
                             yield result(n, error=bad)
                             continue
@@ -254,7 +258,9 @@ def run(plan: Plan, ex: Backend, report: Callable) -> Iterator[PairResult]:
                         prepare(i, True)
                         prepare(j, True)
                     if i in ready and j in ready:
-                        lm, bad = _checked_landmarks(plan.landmarks[n], sizes[i], sizes[j])
+                        lm, bad = _checked_landmarks(
+                            plan.landmarks[n], sizes[i], sizes[j], plan.landmark_files[n]
+                        )
                         if bad is not None:
                             yield result(n, error=bad)
                             continue

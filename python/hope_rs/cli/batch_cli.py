@@ -10,6 +10,7 @@ import time
 
 from .._terminate import interrupted_status
 from ..batch.driver import imatch_many, read_pairs
+from ..batch.pairs_file import landmark_files
 from ..matching import check_match_options
 from ..pipeline.config import MatchConfig, read_config
 
@@ -203,7 +204,10 @@ def cmd_batch(args) -> int:
         progress=not args.quiet,
         ray_options={"address": args.ray_address} if args.backend == "ray" else None,
         map_format=args.format,
-        landmarks=None if all(lm is None for lm in landmarks) else landmarks,
+        # Each pair's landmark file (its form checked above), so that a pair's error names it.
+        landmarks=None
+        if all(lm is None for lm in landmarks)
+        else landmark_files(args.pairs, ext=args.ext),
     )
     interrupted: KeyboardInterrupt | None = None
     started = False
