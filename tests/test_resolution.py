@@ -21,7 +21,7 @@ from hope_rs.evaluation.resolution import write_resolution_sets
 from hope_rs.features.descriptors import shot_at
 from hope_rs.geometry.coarsen import coarse_to_count
 from hope_rs.geometry.subdivide import subdivide
-from hope_rs.pipeline import multiscale, orientation_repair
+from hope_rs.pipeline import multiscale, orientation_repair, resolution
 from hope_rs.pipeline.confidence import flipped_share
 from hope_rs.pipeline.config import ResolutionConfig
 from hope_rs.pipeline.options import check_config
@@ -574,3 +574,35 @@ def test_a_copy_that_keeps_no_face_leaves_the_pair_at_full_resolution():
         stage = res.stage("resolution")
         assert stage.ran and "leaves no face: matched at full resolution" in stage.reason
         assert res.map.shape == (len(a[0]),) and res.map.max() < len(b[0])
+
+
+@pytest.mark.parametrize("dense_side", ["a", "b"])
+def test_a_clean_copy_takes_the_dense_meshs_shot_a_smoothed_one_its_own(monkeypatch, dense_side):
+    """With ``dense_shot`` a clean copy's SHOT is the dense mesh's at the copy's vertices
+    (every dense vertex voting); a noisy dense B's smoothed copy keeps its own."""
+    m = hope_rs.Mesh(*bumpy_sphere(400, 3))
+    dense = subdivide(m, 2)
+    noise = np.random.default_rng(0).normal(0.0, 0.005 * dense.scale, dense.vertices.shape)
+    noisy = hope_rs.Mesh(dense.vertices + noise, dense.faces)
+    seen = []
+    lifted = resolution.ResolutionStage.lifted
+
+    def spy(self, state, coarse, cs, nested):
+        big = state.a if self.side == "a" else state.b
+        seen.append((big, coarse, cs))
+        return lifted(self, state, coarse, cs, nested)
+
+    monkeypatch.setattr(resolution.ResolutionStage, "lifted", spy)
+    on = MatchConfig(resolution=dataclasses.replace(MatchConfig().resolution, dense_shot=True))
+    pair = (dense, m) if dense_side == "a" else (m, dense)
+    hope_rs.match(*pair, max_passes=1, config=on)
+    (big, coarse, cs), *_ = seen
+    want = shot_at(big.internal, coarse.sites, big.shot_radius())
+    np.testing.assert_array_equal(cs.descriptors("shot"), want)
+    own = hope_rs.Shape(coarse.mesh).descriptors("shot")  # what the copy alone would give
+    assert not np.allclose(own, want)
+    seen.clear()
+    hope_rs.match(m, noisy, max_passes=1, config=on)  # its copy smoothed: its own SHOT
+    (big, coarse, cs), *_ = seen
+    dense_shot = shot_at(big.internal, coarse.sites, big.shot_radius())
+    assert not np.allclose(cs.descriptors("shot"), dense_shot)

@@ -553,6 +553,12 @@ class ResolutionConfig:
         those the first lifted map sends there, every other vertex collapsed into its nearest
         such site; the lift of that match is kept. A template denser at its hands and face
         than a uniform copy of a scan then meets like neighbourhoods there.
+    dense_shot : bool
+        The copy's SHOT descriptors are those of the dense mesh at the copy's vertices (each
+        a vertex of the dense mesh), every dense vertex voting in their supports, rather than
+        the copy's own: the copy's few, irregular faces bend its normals and reference
+        frames. Not for a copy whose vertices move or that was made on the mesh smoothed (a
+        noisy scan), nor for a noisy dense A (:func:`~hope_rs.pipeline.resolution.rough_scan`).
     smooth_rougher : float
         When B is the denser shape, its copy's vertices move to the mean of the dense
         vertices each owns when the copy is more than this many times as rough along its
@@ -586,6 +592,7 @@ class ResolutionConfig:
     refine_min_handles: float = field(default=0.04, metadata={"range": (0.0, 1.0)})
     refine_seed_share: float = field(default=0.005, metadata={"range": (0.0, 1.0)})
     follow_density: bool = True
+    dense_shot: bool = True
     smooth_rougher: float = field(default=1.5, metadata={"range": (1.0, None)})
     collapse_excess: float = field(default=1.25, metadata={"range": (1.0, None)})
     collapse_smoothing: int = field(default=5, metadata={"range": (1, 100)})

@@ -71,6 +71,7 @@ from typing import Callable
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..features.descriptors import shot_at
 from ..geometry.coarsen import Coarse
 from ..geometry.collapse import collapse_to_count, collapse_to_sites
 from ..geometry.mesh import Mesh
@@ -290,7 +291,7 @@ class ResolutionStage(Stage):
             ratio = rougher_than(coarse, sparse, cfg.resolution.smooth_rougher)
         if ratio is not None:
             coarse = smoothed(coarse, dense)
-        cs = dense.derived(coarse.mesh)
+        cs = self.copy(state, dense, coarse, clean=ratio is None and not made_again)
         nested = dataclasses.replace(
             cfg,
             resolution=dataclasses.replace(cfg.resolution, enabled=False),
@@ -323,7 +324,7 @@ class ResolutionStage(Stage):
                 denoised,
             )
             if second is not None:
-                cs2 = dense.derived(second.mesh)
+                cs2 = self.copy(state, dense, second, clean=not redone)
                 state.timings["resolution.first"] = time.perf_counter() - t
                 again = self.lifted(state, second, cs2, nested)
                 if self.trusted(state, again[0], second, cs2, again[1]):
@@ -360,6 +361,15 @@ class ResolutionStage(Stage):
             f"{detail}: {name} clustered to {counts}, matched there, lifted{note}",
         )
         return Halt(f"the map is lifted from the match at {cs.n_vertices} vertices of {name}")
+
+    def copy(self, state: MatchState, dense: Shape, coarse: Coarse, clean: bool) -> Shape:
+        """The Shape of ``coarse``, a copy of ``dense``; with ``ResolutionConfig.dense_shot``,
+        a ``clean`` copy (its vertices where the dense mesh has them) of a shape that is not a
+        rough scan takes the dense mesh's SHOT at its vertices."""
+        cs = dense.derived(coarse.mesh)
+        if state.config.resolution.dense_shot and clean and not self.rough:
+            cs.set_descriptors("shot", shot_at(dense.internal, coarse.sites, dense.shot_radius()))
+        return cs
 
     def trusted(
         self, state: MatchState, res: MatchResult, coarse: Coarse, cs: Shape, f: np.ndarray
