@@ -97,12 +97,18 @@ LANDMARKS, SWAP_ERROR, SWAP_SHARE = 4, 0.3, 0.05
 MARK_START, MARK_END = "<!-- results:start -->", "<!-- results:end -->"
 
 
+def _kept(folder: Path) -> list[Path]:
+    """The tables, landmark rows and provenance files in ``folder``."""
+    return sorted(f for pattern in KEPT for f in folder.glob(pattern))
+
+
 def _copy_results(src: Path, dst: Path) -> None:
-    """The tables, landmark rows and provenance of ``src`` copied over those of ``dst``."""
+    """``dst``'s tables, landmark rows and provenance replaced by exactly those of ``src``
+    (one run at a time per clone: both folders are shared by every run)."""
     dst.mkdir(parents=True, exist_ok=True)
-    for pattern in KEPT:
-        for f in sorted(src.glob(pattern)):
-            shutil.copy2(f, dst / f.name)
+    _remove(_kept(dst))
+    for f in _kept(src):
+        shutil.copy2(f, dst / f.name)
 
 
 def _remove(paths) -> None:
@@ -670,8 +676,10 @@ def render() -> None:
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--render-only", action="store_true", help="reuse the last run's CSVs")
     only = p.add_mutually_exclusive_group()
+    only.add_argument(
+        "--render-only", action="store_true", help="rewrite the documents from docs/results"
+    )
     only.add_argument(
         "--partial-only",
         action="store_true",
@@ -714,6 +722,8 @@ def main() -> int:
         or args.render_only
     )
     if only:
+        if not (RESULTS / "provenance.txt").exists() and (RUN / "provenance.txt").exists():
+            _copy_results(RUN, RESULTS)  # a full run from before the results were kept
         if not (RESULTS / "provenance.txt").exists():
             # The document is rendered from every section's results: without the shared
             # sets' the rewrite would drop their tables.
@@ -740,8 +750,6 @@ def main() -> int:
             run_reversed()
             run_partial_resolution()
     if not args.render_only:
-        if not only:
-            _remove([RESULTS])
         _copy_results(RUN, RESULTS)
     render()
     return 0

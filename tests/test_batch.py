@@ -290,6 +290,19 @@ def test_match_many_landmarks_are_checked_per_pair(folder, tmp_path):
     assert not res[0].ok and f"vertex {n} is not a vertex of B" in res[0].error and res[1].ok
 
 
+def test_landmark_files_are_each_pairs_third_field_resolved(tmp_path):
+    elsewhere = tmp_path / "lm" / "b.lm"
+    (tmp_path / "pairs.txt").write_text(
+        f"a b a.lm\nb c\nc d {elsewhere}\n# a comment\nd e sub/e.lm  # trailing\n"
+    )
+    assert landmark_files(tmp_path / "pairs.txt", ext=".off") == [
+        tmp_path / "a.lm", None, elsewhere, tmp_path / "sub" / "e.lm"
+    ]  # fmt: skip
+    (tmp_path / "bad.txt").write_text("a b c d\n")
+    with pytest.raises(ValueError, match=r"bad.txt:1: expected two mesh paths \(and a landmark"):
+        landmark_files(tmp_path / "bad.txt")
+
+
 def test_a_landmark_file_out_of_range_for_its_pair_is_named(folder, tmp_path, capsys):
     """Landmarks read from a file and out of range for their pair's shapes fail that pair with
     an error naming the file, from the pairs file and from ``match_many``'s paths alike."""

@@ -425,8 +425,10 @@ def match_many(
         One entry per pair of ``pairs`` (which must then be given): ``None``, an (m, 2)
         array of (vertex of a, vertex of b) that the pair's map keeps, as for
         :func:`hope_rs.match`, or the path of a landmark file (read with
-        :func:`hope_rs.read_landmarks`; a pair's error then names it). Indices out of range
-        fail that pair only, before it is matched.
+        :func:`hope_rs.read_landmarks`, a relative path against the current folder; a pair's
+        error then names it). A file that cannot be read, or landmarks not of (m, 2) form,
+        fail the call before any work; indices out of range fail that pair only, before it
+        is matched.
     init, **match_options
         As for :func:`hope_rs.match` (``init`` must name descriptors).
     progress : bool or callable

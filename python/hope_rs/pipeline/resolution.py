@@ -24,7 +24,9 @@ when one shape has more than ``ResolutionConfig.max_ratio`` times the other's de
    moves to the mean of the dense vertices it owns (:func:`smoothed`);
 2. matches the pair at that common resolution with the whole stage list (descriptors,
    refinement, spectral pass, finish), or from a given initial map carried to the copy
-   (:func:`coarse_start`; the orient stage's hypotheses after a lift are such maps);
+   (:func:`coarse_start`; the orient stage's hypotheses after a lift are such maps); a clean
+   copy's SHOT is the dense mesh's at its vertices (``ResolutionConfig.dense_shot``: the
+   copy's few, irregular faces bend its normals and reference frames);
 3. lifts the map (:func:`hope_rs.pipeline.multiscale.lift_map`, ``centred``): each vertex
    of A (when A is the dense shape, the coarse vertex of its cell) is carried by the local
    linear map of its ring's edges onto their images, anchored at the ring's centroid and the
@@ -291,7 +293,7 @@ class ResolutionStage(Stage):
             ratio = rougher_than(coarse, sparse, cfg.resolution.smooth_rougher)
         if ratio is not None:
             coarse = smoothed(coarse, dense)
-        cs = self.copy(state, dense, coarse, clean=ratio is None and not made_again)
+        cs = self.copy_shape(state, dense, coarse, clean=ratio is None and not made_again)
         nested = dataclasses.replace(
             cfg,
             resolution=dataclasses.replace(cfg.resolution, enabled=False),
@@ -324,7 +326,7 @@ class ResolutionStage(Stage):
                 denoised,
             )
             if second is not None:
-                cs2 = self.copy(state, dense, second, clean=not redone)
+                cs2 = self.copy_shape(state, dense, second, clean=not redone)
                 state.timings["resolution.first"] = time.perf_counter() - t
                 again = self.lifted(state, second, cs2, nested)
                 if self.trusted(state, again[0], second, cs2, again[1]):
@@ -362,10 +364,12 @@ class ResolutionStage(Stage):
         )
         return Halt(f"the map is lifted from the match at {cs.n_vertices} vertices of {name}")
 
-    def copy(self, state: MatchState, dense: Shape, coarse: Coarse, clean: bool) -> Shape:
+    def copy_shape(self, state: MatchState, dense: Shape, coarse: Coarse, clean: bool) -> Shape:
         """The Shape of ``coarse``, a copy of ``dense``; with ``ResolutionConfig.dense_shot``,
-        a ``clean`` copy (its vertices where the dense mesh has them) of a shape that is not a
-        rough scan takes the dense mesh's SHOT at its vertices."""
+        a ``clean`` copy (neither smoothed nor collapsed on the mesh smoothed: its dense mesh
+        is not noisy) of a shape that is not a rough scan takes the dense mesh's SHOT at its
+        vertices (every dense vertex voting). A view of the copy at another scale computes
+        its own."""
         cs = dense.derived(coarse.mesh)
         if state.config.resolution.dense_shot and clean and not self.rough:
             cs.set_descriptors("shot", shot_at(dense.internal, coarse.sites, dense.shot_radius()))
