@@ -38,10 +38,23 @@ def load() -> str:
         return "load average unknown"
 
 
+#: What the generators write: a change there is not a change to the code that ran.
+GENERATED = (
+    "docs/benchmarks.md",
+    "docs/confidence.md",
+    "docs/speed.md",
+    "docs/results",
+    "README.md",
+)
+
+
 def header() -> str:
-    """The commit (marked when the tree has uncommitted changes), the UTC date, the machine
-    and the load average, one line each."""
-    dirty = git("status", "--porcelain", "--untracked-files=no")
+    """The commit (marked when the tree has uncommitted changes outside the generated
+    documents), the UTC date, the machine and the load average, one line each."""
+    dirty = git(
+        "status", "--porcelain", "--untracked-files=no", "--", ".",
+        *(f":(exclude){p}" for p in GENERATED),
+    )  # fmt: skip
     return (
         f"commit {git('rev-parse', '--short', 'HEAD')}{' (uncommitted changes)' if dirty else ''}\n"
         f"date {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC\n"
