@@ -183,6 +183,12 @@ def _resolve_pairs(pairs, names: list[str], keys: list | None = None) -> list[tu
     return out
 
 
+_LANDMARKS_FORM = (
+    "landmarks must be a list with one entry per pair: None, an (m, 2) array or the path of a "
+    "landmark file"
+)
+
+
 def _pair_landmarks(landmarks, pairs, n_pairs: int) -> tuple[list, list]:
     """One landmark array (form checked; indices are checked per pair once its shapes are
     read) or ``None`` per pair, and the landmark file each was read from (or ``None``)."""
@@ -191,17 +197,11 @@ def _pair_landmarks(landmarks, pairs, n_pairs: int) -> tuple[list, list]:
     if pairs is None:
         raise ValueError("landmarks belong to pairs: give the pairs they are for as well")
     if isinstance(landmarks, (str, os.PathLike)):
-        raise TypeError(
-            "landmarks must be a list with one entry per pair: None, an (m, 2) array or the "
-            "path of a landmark file"
-        )
+        raise TypeError(_LANDMARKS_FORM)
     try:
         marks = list(landmarks)
     except TypeError:
-        raise TypeError(
-            "landmarks must be a list with one entry per pair: None, an (m, 2) array or the "
-            "path of a landmark file"
-        ) from None
+        raise TypeError(_LANDMARKS_FORM) from None
     if len(marks) != n_pairs:
         raise ValueError(
             f"landmarks has {len(marks)} entries for {n_pairs} pairs; give one per pair"
