@@ -4,6 +4,7 @@ the lifted map on subdivided copies, and the mixed-resolution benchmark sets."""
 from __future__ import annotations
 
 import dataclasses
+import re
 
 import numpy as np
 import pytest
@@ -66,6 +67,8 @@ def test_coarsening_hits_the_vertex_count(target):
         ({"count_tolerance": 1.0}, r"count_tolerance must be a number in \(0.0, 1.0\)"),
         ({"refine_min_handles": 1.5}, r"refine_min_handles must be a number in \[0.0, 1.0\]"),
         ({"refine_seed_share": -0.1}, r"refine_seed_share must be a number in \[0.0, 1.0\]"),
+        ({"refine_patch_share": 2.0}, r"refine_patch_share must be a number in \[0.0, 1.0\]"),
+        ({"refine_min_patched": -1.0}, r"refine_min_patched must be a number in \[0.0, 1.0\]"),
     ],
 )
 def test_the_setting_is_checked_before_any_work(bad, why):
@@ -532,6 +535,33 @@ def test_collapses_a_noisy_scan_refuses_are_made_again_on_it_smoothed():
 
 
 @pytest.mark.slow
+def test_remeshed_shapes_skip_the_pass_at_full_resolution(monkeypatch):
+    """A 5k remeshed FAUST body against another subdivided once (20k): the lifted map has
+    enough handles for the old rule (4% of the vertices), but they are coincidences scattered
+    in small patches, so the pass at full resolution does not run; forced to run, it is
+    not kept (the finish never qualifies), so the map is the same."""
+    a, b, _, _ = shared_pair("faust_r", "tr_reg_000->tr_reg_001")
+    dense = hope_rs.Shape(subdivide(b, 1))
+    passes = []
+    qualifies = resolution.qualifies
+
+    def spy(*args):
+        passes.append(qualifies(*args))
+        return passes[-1]
+
+    monkeypatch.setattr(resolution, "qualifies", spy)
+    res = hope_rs.match(a, dense)
+    why = res.stage("resolution").reason
+    handles, patched = (float(x) for x in re.findall(r"([0-9.]+)% ", why.split("(")[-1])[:2])
+    rc = ResolutionConfig()
+    assert handles >= 100 * rc.refine_min_handles and patched < 100 * rc.refine_min_patched, why
+    assert "no shared faces to refine" in why and passes == []
+    old = dataclasses.replace(rc, refine_min_patched=0.0)
+    forced = hope_rs.match(a, dense, config=MatchConfig(resolution=old))
+    assert passes == [False]
+    np.testing.assert_array_equal(forced.map, res.map)
+
+
 def test_a_remeshed_body_against_a_noisy_dense_scan_of_another(tmp_path):
     """A 5k remeshed FAUST body against another, subdivided twice (80k) with Gaussian noise of
     0.5% of sqrt(area): the copy is smoothed and the map is right."""

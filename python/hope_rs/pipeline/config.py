@@ -542,6 +542,14 @@ class ResolutionConfig:
         The pass runs only when this share of the vertices are handles of the lifted map
         (:func:`~hope_rs.pipeline.handles.face_handles`): shapes remeshed independently have
         almost none, and there the pass would cost time for nothing.
+    refine_patch_share : float
+        With ``refine_min_patched``: a handle patch (connected over the edges) counts when it
+        holds at least this share of the vertices.
+    refine_min_patched : float
+        The pass runs only when this share of the vertices lie in handle patches that count:
+        a shared triangulation's handles cluster in patches, while the few handles of shapes
+        remeshed independently are coincidences scattered in small ones
+        (docs/decisions.md#refine-patches).
     refine_seed_share : float
         The shared-face finish of that pass takes handle patches of at least this share of
         the vertices as seeds (``GrowthConfig.seed_share`` there): after one short pass the
@@ -590,6 +598,8 @@ class ResolutionConfig:
     refine: bool = True
     refine_schedule: tuple[int, ...] = (3, 2, 1)
     refine_min_handles: float = field(default=0.04, metadata={"range": (0.0, 1.0)})
+    refine_patch_share: float = field(default=0.001, metadata={"range": (0.0, 1.0)})
+    refine_min_patched: float = field(default=0.006, metadata={"range": (0.0, 1.0)})
     refine_seed_share: float = field(default=0.005, metadata={"range": (0.0, 1.0)})
     follow_density: bool = True
     dense_shot: bool = True

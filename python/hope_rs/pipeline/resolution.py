@@ -47,8 +47,10 @@ when one shape has more than ``ResolutionConfig.max_ratio`` times the other's de
    is matched from the lifted map with one short pass of HOPE steps and the shared-face
    finish (which makes a shape and its subdivided copy exact), and each vertex of the
    subdivided shape is carried back to the nearest vertex of the sparser one (an original
-   vertex is itself). Kept only when the finish ran: shapes remeshed independently share no
-   faces, and there the HOPE steps alone did worse than the lift.
+   vertex is itself). Run only when the lifted map's handles cluster in patches
+   (:meth:`ResolutionStage.shares_faces`: shapes remeshed independently share no faces, and
+   their few handles are scattered), and kept only when the finish ran: without shared
+   faces the HOPE steps alone did worse than the lift.
 
 The map is final, and its confidence is the coarse match's (each dense vertex of A takes its
 coarse vertex's): a dense A's many-to-one map to a sparse B keeps few of its 2-rings'
@@ -82,7 +84,8 @@ from ..geometry.sites import cell_sites
 from ..geometry.subdivide import subdivide
 from ..shape import Shape
 from .confidence import flipped_share, match_quality
-from .handles import face_handles
+from .config import ResolutionConfig
+from .handles import face_handles, large_patches
 from .landmarks import coarse_landmarks
 from .multiscale import lift_map
 from .result import MatchResult
@@ -253,6 +256,7 @@ class ResolutionStage(Stage):
     def __init__(self):
         self.side: str | None = None
         self.start_handles = 0.0  # share of handles of the refinement's start
+        self.start_patched = 0.0  # share of them in patches that count (shares_faces)
         self.rough = False  # A is a noisy dense scan (rough_scan)
 
     def skip_reason(self, state: MatchState):
@@ -340,7 +344,10 @@ class ResolutionStage(Stage):
         note = ""
         if cfg.resolution.refine:
             fine = self.refined(state, f, dense, sparse, None if self.side == "b" else lift)
-            h = f"{self.start_handles:.1%} of the vertices handles at the start"
+            h = (
+                f"{self.start_handles:.1%} of the vertices handles at the start, "
+                f"{self.start_patched:.1%} in patches"
+            )
             if fine is None:
                 note = f"; no shared faces to refine at full resolution ({h})"
             else:
@@ -429,6 +436,18 @@ class ResolutionStage(Stage):
 
         return res, lift(b.points).astype(np.int64), lift
 
+    def shares_faces(self, shape: Shape, handles: np.ndarray, rc: ResolutionConfig) -> bool:
+        """Whether the lifted map's ``handles`` (bool per vertex of ``shape``, the side of
+        the pair at full resolution whose faces are tested) are enough for the pass at full
+        resolution: ``rc.refine_min_handles`` of the vertices, and ``rc.refine_min_patched``
+        in patches of at least ``rc.refine_patch_share`` of them. Records both shares."""
+        self.start_handles = float(handles.mean())
+        self.start_patched = float(large_patches(shape, handles, rc.refine_patch_share).mean())
+        return (
+            self.start_handles >= rc.refine_min_handles
+            and self.start_patched >= rc.refine_min_patched
+        )
+
     def refined(
         self,
         state: MatchState,
@@ -471,8 +490,7 @@ class ResolutionStage(Stage):
             owner = cKDTree(a.points).query(points)[1]
             init = lift_map(a.internal, b.internal, f, points, owner, b.points, centred=True)
             init[: a.n_vertices] = f
-            self.start_handles = float(face_handles(up, b, init[up.order]).mean())
-            if self.start_handles < cfg.resolution.refine_min_handles:
+            if not self.shares_faces(up, face_handles(up, b, init[up.order]), cfg.resolution):
                 return None
             # The landmarks in the nested shapes' input numbering: A's vertices come first in
             # the subdivided copy, in A's internal numbering.
@@ -487,8 +505,7 @@ class ResolutionStage(Stage):
         # lift onto the subdivided B (the lift onto B itself maps many vertices to one).
         assert lift is not None
         f = lift(points)
-        self.start_handles = float(face_handles(a, up, up.rank[f]).mean())
-        if self.start_handles < cfg.resolution.refine_min_handles:
+        if not self.shares_faces(a, face_handles(a, up, up.rank[f]), cfg.resolution):
             return None
         lm = None
         if state.landmarks is not None:
