@@ -53,6 +53,12 @@ def test_trimesh_open3d_and_a_one_mesh_scene():
     two = trimesh.Scene([tm, trimesh.creation.box()])
     with pytest.raises(TypeError, match=r"a scene of 2 meshes.*force='mesh'"):
         as_mesh(two, "a")
+    # One mesh placed at two nodes is two bodies, not the mesh.
+    twice = trimesh.Scene(tm)
+    shift = trimesh.transformations.translation_matrix([3.0, 0.0, 0.0])
+    twice.graph.update(frame_to="again", geometry=next(iter(twice.geometry)), matrix=shift)
+    with pytest.raises(TypeError, match=r"placing its one mesh at 2 nodes.*to_geometry"):
+        as_mesh(twice, "a")
     with pytest.raises(TypeError, match="a mesh file's path"):
         hope_rs.match(3, tm)
 

@@ -135,8 +135,8 @@ def as_mesh(x, name: str = "mesh") -> Mesh:
     path (read by :func:`load_mesh`), or any object with ``vertices`` and ``faces`` (such as
     ``trimesh.Trimesh``, used as stored: trimesh's processing is not applied again) or
     ``vertices`` and ``triangles`` (such as ``open3d.geometry.TriangleMesh``). A
-    ``trimesh.Scene`` of one mesh (as a ``.glb`` file loads) is that mesh, placed as the scene
-    places it. Polygons of more than three corners (an (M, k) array, or a list of index lists
+    ``trimesh.Scene`` of one mesh placed once (as a ``.glb`` file loads) is that mesh, placed
+    as the scene places it. Polygons of more than three corners (an (M, k) array, or a list of index lists
     of mixed lengths) are fan-triangulated, as the file readers do; the vertices keep their
     numbering.
 
@@ -160,6 +160,14 @@ def as_mesh(x, name: str = "mesh") -> Mesh:
                 f"{name} is a scene of {len(geometry)} meshes (as a .glb or multi-object file "
                 "loads in trimesh); pass one of them (scene.geometry[key], placed as stored) or "
                 "all as one mesh (trimesh.load(path, force='mesh'))"
+            )
+        # One mesh placed at several nodes is as many bodies as placements.
+        placed = len(getattr(getattr(x, "graph", None), "nodes_geometry", ()) or ())
+        if placed > 1:
+            raise TypeError(
+                f"{name} is a scene placing its one mesh at {placed} nodes (so {placed} "
+                "bodies); pass the mesh (next(iter(scene.geometry.values())), placed as "
+                "stored) or all placements as one mesh (scene.to_geometry())"
             )
         whole = x.to_geometry() if hasattr(x, "to_geometry") else x.dump(concatenate=True)
         return as_mesh(whole, name)
