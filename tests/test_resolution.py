@@ -534,14 +534,15 @@ def test_collapses_a_noisy_scan_refuses_are_made_again_on_it_smoothed():
     np.testing.assert_array_equal(made.sites, coarse_copy(clean, target, 0.05)[0].sites)
 
 
-@pytest.mark.slow
-def test_remeshed_shapes_skip_the_pass_at_full_resolution(monkeypatch):
-    """A 5k remeshed FAUST body against another subdivided once (20k): the lifted map's few
-    handles are coincidences scattered in small patches, so the pass at full resolution does
-    not run, whatever share of handles it needs; forced to run, it is not kept (the finish
-    never qualifies), so the map is the same."""
+@pytest.mark.parametrize("dense_side", ["a", "b"])
+def test_remeshed_shapes_skip_the_pass_at_full_resolution(monkeypatch, dense_side):
+    """A 5k remeshed FAUST body against another subdivided once (20k), either way round: the
+    lifted map's few handles are coincidences scattered in small patches, so the pass at full
+    resolution does not run, whatever share of handles it needs; forced to run, it is not
+    kept (the finish never qualifies), so the map is the same."""
     a, b, _, _ = shared_pair("faust_r", "tr_reg_000->tr_reg_001")
     dense = hope_rs.Shape(subdivide(b, 1))
+    pair = (dense, a) if dense_side == "a" else (a, dense)
     passes = []
     qualifies = resolution.qualifies
 
@@ -551,17 +552,18 @@ def test_remeshed_shapes_skip_the_pass_at_full_resolution(monkeypatch):
 
     monkeypatch.setattr(resolution, "qualifies", spy)
     rc = dataclasses.replace(ResolutionConfig(), refine_min_handles=0.0)
-    res = hope_rs.match(a, dense, config=MatchConfig(resolution=rc))
+    res = hope_rs.match(*pair, config=MatchConfig(resolution=rc))
     why = res.stage("resolution").reason
     handles, patched = (float(x) for x in re.findall(r"([0-9.]+)% ", why.split("(")[-1])[:2])
     assert handles > 0 and patched < 100 * rc.refine_min_patched, why
     assert "no shared faces to refine" in why and passes == []
     forced = dataclasses.replace(rc, refine_min_patched=0.0)
-    again = hope_rs.match(a, dense, config=MatchConfig(resolution=forced))
+    again = hope_rs.match(*pair, config=MatchConfig(resolution=forced))
     assert passes == [False]
     np.testing.assert_array_equal(again.map, res.map)
 
 
+@pytest.mark.slow
 def test_a_remeshed_body_against_a_noisy_dense_scan_of_another(tmp_path):
     """A 5k remeshed FAUST body against another, subdivided twice (80k) with Gaussian noise of
     0.5% of sqrt(area): the copy is smoothed and the map is right."""

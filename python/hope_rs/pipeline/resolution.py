@@ -256,7 +256,7 @@ class ResolutionStage(Stage):
     def __init__(self):
         self.side: str | None = None
         self.start_handles = 0.0  # share of handles of the refinement's start
-        self.start_patched = 0.0  # share of them in patches that count (shares_faces)
+        self.start_patched = 0.0  # share of the vertices: handles in patches that count
         self.rough = False  # A is a noisy dense scan (rough_scan)
 
     def skip_reason(self, state: MatchState):
