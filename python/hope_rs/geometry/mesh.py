@@ -136,9 +136,9 @@ def as_mesh(x, name: str = "mesh") -> Mesh:
     ``trimesh.Trimesh``, used as stored: trimesh's processing is not applied again) or
     ``vertices`` and ``triangles`` (such as ``open3d.geometry.TriangleMesh``). A
     ``trimesh.Scene`` of one mesh placed once (as a ``.glb`` file loads) is that mesh, placed
-    as the scene places it. Polygons of more than three corners (an (M, k) array, or a list of index lists
-    of mixed lengths) are fan-triangulated, as the file readers do; the vertices keep their
-    numbering.
+    as the scene places it. Polygons of more than three corners (an (M, k) array, or a list
+    of index lists of mixed lengths) are fan-triangulated, as the file readers do; the
+    vertices keep their numbering.
 
     Raises
     ------
@@ -162,7 +162,7 @@ def as_mesh(x, name: str = "mesh") -> Mesh:
                 "all as one mesh (trimesh.load(path, force='mesh'))"
             )
         # One mesh placed at several nodes is as many bodies as placements.
-        placed = len(getattr(getattr(x, "graph", None), "nodes_geometry", ()) or ())
+        placed = len(x.graph.nodes_geometry) if hasattr(x, "graph") else 1
         if placed > 1:
             raise TypeError(
                 f"{name} is a scene placing its one mesh at {placed} nodes (so {placed} "
