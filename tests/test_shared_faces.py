@@ -7,6 +7,7 @@ from meshes import bumpy_sphere, cli_maps, drifted, legless, moved_copy, random_
 
 import hope_rs
 from hope_rs import _core
+from hope_rs.geometry.subdivide import subdivide
 from hope_rs.pipeline import handles
 from hope_rs.pipeline import shared_faces as SF
 from hope_rs.pipeline.config import FinishConfig, PartialConfig
@@ -45,6 +46,29 @@ def test_handles_are_the_vertices_whose_faces_all_map_onto_faces_one_to_one():
     assert not SF.face_handles(s, mirror, to_mirror).any()
     rewound = hope_rs.Shape(hope_rs.Mesh(s.mesh.vertices, s.mesh.faces[:, ::-1]))
     assert SF.face_handles(s, rewound, f).all()
+
+
+def test_handles_and_patches_of_a_mesh_are_those_of_its_shape_renumbered():
+    # The resolution stage tests a subdivided copy's mesh before making it a Shape: the
+    # handles and their large patches must be the Shape's, read in the mesh's numbering.
+    s = hope_rs.Shape(bumpy_sphere(300, 1))
+    mesh = subdivide(s.internal, 1)
+    up = s.derived(mesh)
+    own = np.arange(mesh.n_vertices)
+    # The identity unknown on a band around a cap: two patches of handles, the cap small.
+    d = np.linalg.norm(mesh.vertices - mesh.vertices[0], axis=1) / mesh.scale
+    banded = np.where((d > 0.2) & (d < 0.3), -1, own)
+    rng = np.random.default_rng(0)
+    for case, g in enumerate((banded, drifted(mesh, own, 0, 0.4), rng.permutation(own))):
+        h = handles.mesh_face_handles(mesh, mesh, g)
+        internal = np.where(g >= 0, up.rank[np.maximum(g, 0)], -1)[up.order]
+        assert np.array_equal(h, SF.face_handles(up, up, internal)[up.rank])
+        kept = [handles.mesh_large_patches(mesh, h, share) for share in (0.0, 0.2, 0.9)]
+        for share, mask in zip((0.0, 0.2, 0.9), kept):
+            assert np.array_equal(mask, handles.large_patches(up, h[up.order], share)[up.rank])
+        if case == 0:
+            assert np.array_equal(kept[0], h) and 0 < kept[1].sum() < h.sum()
+            assert not kept[2].any()
 
 
 def test_arap_puts_a_rigidly_moved_mesh_back_from_a_third_of_its_vertices():

@@ -30,6 +30,7 @@ __all__ = [
     "drop_disagreeing_anchors",
     "farthest_witnesses",
     "firm_regions",
+    "masked_components",
     "reachable",
     "shift_lower_bound",
     "swapped_regions",
@@ -205,13 +206,18 @@ class AnchorPlacement:
 def firm_regions(a: Shape, firm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(label, sizes)``: the connected components of A's ``firm`` vertices (joined by edges
     between firm vertices), ``label`` -1 elsewhere, and each component's vertex count."""
-    n = a.n_vertices
-    e = a.edges
-    keep = firm[e[:, 0]] & firm[e[:, 1]]
-    graph = sp.csr_matrix((np.ones(int(keep.sum())), (e[keep, 0], e[keep, 1])), shape=(n, n))
+    return masked_components(a.edges, a.n_vertices, firm)
+
+
+def masked_components(edges: np.ndarray, n: int, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`firm_regions` on the graph of ``n`` vertices and undirected ``edges``."""
+    keep = mask[edges[:, 0]] & mask[edges[:, 1]]
+    graph = sp.csr_matrix(
+        (np.ones(int(keep.sum())), (edges[keep, 0], edges[keep, 1])), shape=(n, n)
+    )
     _, label = connected_components(graph, directed=False)
-    label[~firm] = -1
-    return label, np.bincount(label[firm])
+    label[~mask] = -1
+    return label, np.bincount(label[mask])
 
 
 def core_fields(

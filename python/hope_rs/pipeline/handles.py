@@ -12,25 +12,40 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..geometry.mesh import Mesh, unique_edges
 from ..geometry.orientation import face_keys
 from ..shape import Shape
-from .anchors import firm_regions
+from .anchors import masked_components
 
-__all__ = ["face_handles", "face_keys", "irregular_vertices", "large_patches", "seed_handles"]
+__all__ = [
+    "face_handles",
+    "face_keys",
+    "irregular_vertices",
+    "large_patches",
+    "mesh_face_handles",
+    "mesh_large_patches",
+    "seed_handles",
+]
 
 
 def face_handles(a: Shape, b: Shape, f: np.ndarray) -> np.ndarray:
     """Vertices of A whose faces all map onto faces of B, with the same orientation, and
     whose image is the image of no other vertex. ``f`` may be partial (-1 where unknown):
     unknown vertices are not handles, nor are those with an unknown neighbour on a face."""
-    fa, fb = a.internal.faces.astype(np.int64), b.internal.faces.astype(np.int64)
-    n_b = b.n_vertices
+    return mesh_face_handles(a.internal, b.internal, f)
+
+
+def mesh_face_handles(ma: Mesh, mb: Mesh, f: np.ndarray) -> np.ndarray:
+    """:func:`face_handles` of the map ``f`` from mesh ``ma`` to mesh ``mb``, in their own
+    numberings (a mesh not yet made a Shape)."""
+    fa, fb = ma.faces.astype(np.int64), mb.faces.astype(np.int64)
+    n_b = mb.n_vertices
     f = np.asarray(f, dtype=np.int64)
     known = f >= 0
     f = np.where(known, f, 0)
     mapped = f[fa]
     ok = np.isin(face_keys(mapped, n_b), face_keys(fb, n_b)) & known[fa].all(axis=1)
-    bad = np.zeros(a.n_vertices, dtype=bool)
+    bad = np.zeros(ma.n_vertices, dtype=bool)
     bad[fa[~ok].ravel()] = True
     shared = np.bincount(f[known], minlength=n_b)[f] > 1
     return known & ~bad & ~shared
@@ -65,12 +80,30 @@ def large_patches(
     ``min_share`` of A's vertices and at least ``min_irregular`` irregular vertices of
     ``mask`` (:func:`irregular_vertices`): wrong handles lie in small patches or in patches
     of a regular lattice (see :mod:`hope_rs.pipeline.growth` and docs/decisions.md#growth)."""
+    pinned = irregular_vertices(a) if min_irregular > 0 else None
+    return _large(a.edges, mask, min_share, pinned, min_irregular)
+
+
+def mesh_large_patches(mesh: Mesh, mask: np.ndarray, min_share: float) -> np.ndarray:
+    """:func:`large_patches` (without the irregular-vertex condition) on a mesh not yet made
+    a Shape, in its own numbering."""
+    return _large(unique_edges(mesh.faces), mask, min_share, None, 0)
+
+
+def _large(
+    edges: np.ndarray,
+    mask: np.ndarray,
+    min_share: float,
+    pinned: np.ndarray | None,
+    min_pinned: int,
+) -> np.ndarray:
+    """``mask`` restricted to its connected patches over ``edges`` of at least ``min_share``
+    of the vertices and, with ``pinned`` (bool per vertex), ``min_pinned`` pinned vertices."""
     if not mask.any():
         return mask
-    label, sizes = firm_regions(a, mask)
-    keep = sizes >= min_share * a.n_vertices
-    if min_irregular > 0:
-        pinned = np.bincount(label[mask & irregular_vertices(a)], minlength=len(sizes))
-        keep &= pinned >= min_irregular
+    label, sizes = masked_components(edges, len(mask), mask)
+    keep = sizes >= min_share * len(mask)
+    if pinned is not None:
+        keep &= np.bincount(label[mask & pinned], minlength=len(sizes)) >= min_pinned
     # Vertices outside ``mask`` (label -1) are dropped by the ``&`` whatever they read.
     return mask & keep[label]

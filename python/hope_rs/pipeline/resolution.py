@@ -85,7 +85,7 @@ from ..geometry.subdivide import subdivide
 from ..shape import Shape
 from .confidence import flipped_share, match_quality
 from .config import ResolutionConfig
-from .handles import face_handles, large_patches
+from .handles import mesh_face_handles, mesh_large_patches
 from .landmarks import coarse_landmarks
 from .multiscale import lift_map
 from .result import MatchResult
@@ -131,13 +131,6 @@ def subdivisions(sparse: float, dense: float) -> int:
     """How many times to subdivide a mesh of ``sparse`` vertices (each time about 4x) to come
     nearest ``dense`` (or of one density to come nearest another): at least once."""
     return max(1, round(np.log(dense / sparse) / np.log(4.0)))
-
-
-def subdivided_copy(shape: Shape, times: int) -> Shape:
-    """``shape``'s internal mesh subdivided ``times`` (its vertices first, in the internal
-    numbering), as a Shape of the same settings and orientation."""
-    mesh = subdivide(shape.internal, times)
-    return shape.derived(mesh)
 
 
 def sites_like(f: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -436,13 +429,13 @@ class ResolutionStage(Stage):
 
         return res, lift(b.points).astype(np.int64), lift
 
-    def shares_faces(self, shape: Shape, handles: np.ndarray, rc: ResolutionConfig) -> bool:
-        """Whether the lifted map's ``handles`` (bool per vertex of ``shape``, the side of
+    def shares_faces(self, mesh: Mesh, handles: np.ndarray, rc: ResolutionConfig) -> bool:
+        """Whether the lifted map's ``handles`` (bool per vertex of ``mesh``, the side of
         the pair at full resolution whose faces are tested) are enough for the pass at full
         resolution: ``rc.refine_min_handles`` of the vertices, and ``rc.refine_min_patched``
         in patches of at least ``rc.refine_patch_share`` of them. Records both shares."""
         self.start_handles = float(handles.mean())
-        self.start_patched = float(large_patches(shape, handles, rc.refine_patch_share).mean())
+        self.start_patched = float(mesh_large_patches(mesh, handles, rc.refine_patch_share).mean())
         return (
             self.start_handles >= rc.refine_min_handles
             and self.start_patched >= rc.refine_min_patched
@@ -464,7 +457,8 @@ class ResolutionStage(Stage):
         shape subdivided)."""
         a, b, cfg = state.a, state.b, state.config
         times = subdivisions(density(sparse), density(dense))
-        up = subdivided_copy(sparse, times)
+        # The copy's own numbering: the sparser shape's vertices first (internal numbering).
+        mesh = subdivide(sparse.internal, times)
         nested = dataclasses.replace(
             cfg,
             partial=dataclasses.replace(cfg.partial, enabled=False),
@@ -484,14 +478,18 @@ class ResolutionStage(Stage):
             ),
         )
         assert state.run is not None
-        points = up.points[up.rank]  # in the subdivided mesh's own numbering
+        points = mesh.vertices
+        # The check runs on the mesh: its Shape (k-hop graph and all) only if the pass runs.
         if self.side == "b":
             # A subdivided: its new vertices take the lift of the map by their ring's edges.
             owner = cKDTree(a.points).query(points)[1]
             init = lift_map(a.internal, b.internal, f, points, owner, b.points, centred=True)
             init[: a.n_vertices] = f
-            if not self.shares_faces(up, face_handles(up, b, init[up.order]), cfg.resolution):
+            if not self.shares_faces(
+                mesh, mesh_face_handles(mesh, b.internal, init), cfg.resolution
+            ):
                 return None
+            up = sparse.derived(mesh)
             # The landmarks in the nested shapes' input numbering: A's vertices come first in
             # the subdivided copy, in A's internal numbering.
             lm = None
@@ -505,8 +503,11 @@ class ResolutionStage(Stage):
         # lift onto the subdivided B (the lift onto B itself maps many vertices to one).
         assert lift is not None
         f = lift(points)
-        if not self.shares_faces(a, face_handles(a, up, up.rank[f]), cfg.resolution):
+        if not self.shares_faces(
+            a.internal, mesh_face_handles(a.internal, mesh, f), cfg.resolution
+        ):
             return None
+        up = sparse.derived(mesh)
         lm = None
         if state.landmarks is not None:
             # B's vertices come first in its subdivided copy, in B's internal numbering.
