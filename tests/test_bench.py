@@ -1,6 +1,7 @@
 """Data-set adapters, named methods, the bench runner and the colour-transfer renderer."""
 
 import csv
+import importlib.util
 
 import numpy as np
 import pytest
@@ -9,6 +10,7 @@ from meshes import bumpy_sphere, relabel, write_off
 
 import hope_rs
 from hope_rs.cli import main
+from hope_rs.evaluation import bench
 from hope_rs.evaluation.datasets import Pair, datasets_in, pairs_of
 from hope_rs.evaluation.methods import PairContext, check_methods, run_method
 
@@ -156,7 +158,7 @@ def test_bench_command_writes_tables_plots_and_renders(identity_set, tmp_path, c
     assert "| confidence AUROC |" in md
     assert "| hope | 2 |" in md and "Ablations" in md and "| hope-k4 | 1 |" in md
     assert (out / "spheres_curves.png").read_bytes()[:4] == b"\x89PNG"
-    assert "5 results written" in capsys.readouterr().out
+    assert "5 of 5 results scored" in capsys.readouterr().out
 
 
 def test_bench_refuses_bad_arguments(identity_set, tmp_path, capsys):
@@ -181,6 +183,27 @@ def test_bench_refuses_bad_arguments(identity_set, tmp_path, capsys):
     write_off(lonely / "a.off", *bumpy_sphere(100, 0))
     assert main(["bench", str(lonely.parent), "--out", str(tmp_path / "o"), "-q"]) == 2
     assert "no pair to run" in capsys.readouterr().err
+
+
+def test_bench_refuses_up_front_without_the_packages_it_needs(
+    identity_set, tmp_path, capsys, monkeypatch
+):
+    real = importlib.util.find_spec
+    gone = {"potpourri3d", "pyFM"}
+    monkeypatch.setattr(
+        importlib.util, "find_spec", lambda name, *a: None if name in gone else real(name, *a)
+    )
+    out = tmp_path / "o"
+    assert main(["bench", str(identity_set), "--out", str(out), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "needs potpourri3d, pyfmaps" in err and "pip install potpourri3d pyfmaps" in err
+    assert not out.exists()  # checked before any work
+    # Without a ZoomOut method pyFM is not needed.
+    assert main(["bench", str(identity_set), "--out", str(out), "--methods", "init", "-q"]) == 2
+    assert "needs potpourri3d for" in capsys.readouterr().err
+    assert bench.missing_packages(["init", "hope"]) == ["potpourri3d"]
+    gone.clear()
+    assert bench.missing_packages(list(bench.METHODS)) == []
 
 
 def test_bench_leaves_other_csv_files_alone(identity_set, tmp_path):

@@ -22,6 +22,7 @@ pairs and methods still run.
 from __future__ import annotations
 
 import csv
+import importlib.util
 import io
 import sys
 import time
@@ -33,7 +34,15 @@ from ..geometry.map_io import atomic_write, check_writable_folder
 from ..geometry.mesh import load_mesh
 from .datasets import GIVE_PAIRS, Pair, datasets_in, pairs_of
 from .evaluate import confidence_auroc, error_curve, geodesic_errors, score, smoothness
-from .methods import ABLATIONS, DEFAULT_METHODS, METHODS, PairContext, check_methods, run_method
+from .methods import (
+    ABLATIONS,
+    DEFAULT_METHODS,
+    METHODS,
+    PYFM_METHODS,
+    PairContext,
+    check_methods,
+    run_method,
+)
 from .perturbed import shortcut_errors
 from .show import render_pair
 
@@ -300,6 +309,15 @@ def _select(folders: list[Path], names, data_dir) -> list[Path]:
     return [f for f in folders if f.name in wanted]
 
 
+def missing_packages(methods) -> list[str]:
+    """The packages (pip names) :func:`run_bench` needs for ``methods`` that are not
+    installed: potpourri3d (surface geodesics), matplotlib (the curves), pyFM (ZoomOut)."""
+    needs = {"potpourri3d": "potpourri3d", "matplotlib": "matplotlib"}
+    if any(m in PYFM_METHODS for m in methods):
+        needs["pyFM"] = "pyfmaps"
+    return [pip for module, pip in needs.items() if importlib.util.find_spec(module) is None]
+
+
 def run_bench(
     data_dir,
     out,
@@ -329,6 +347,12 @@ def run_bench(
     """
 
     methods = check_methods(methods)
+    missing = missing_packages(methods)
+    if missing:
+        raise ValueError(
+            f"hope-rs bench needs {', '.join(missing)} for scoring, plots or the methods "
+            f"asked for: pip install {' '.join(missing)} (or hope-rs[eval])"
+        )
     found = datasets_in(data_dir)
     folders = _select(found, sets, data_dir)
     abl_sets = {f.name for f in _select(folders, ablation_sets, data_dir)}
@@ -469,8 +493,11 @@ def cmd_bench(args) -> int:
         ablation_pairs=args.ablation_pairs, ablation_sets=args.ablation_sets, render=not args.no_render, up=args.up,
         progress=not args.quiet,
     )  # fmt: skip
-    print(f"{len(rows)} results written to {args.out} (summary.md, *.csv, *.md, *.png)")
     failed = [r for r in rows if r.get("failed")]
+    print(
+        f"{len(rows) - len(failed)} of {len(rows)} results scored; tables written to {args.out} "
+        "(summary.md, SET.csv, SET.md and the plots of the scored ones)"
+    )
     if failed:
         print(f"{len(failed)} failed (listed in the tables):", file=sys.stderr)
         for r in failed:

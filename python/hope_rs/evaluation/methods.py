@@ -185,6 +185,8 @@ METHODS: dict[str, tuple[str, Callable[[PairContext], MethodResult]]] = {
     "hope-rand75": ("HOPE from SHOT with 75% of it randomised", _hope(degrade=0.75)),
 }
 DEFAULT_METHODS = ("init", "hope", "zoomout")
+#: Methods that need pyFM (``pip install pyfmaps``).
+PYFM_METHODS = ("zoomout", "zoomout-wks")
 ABLATIONS = tuple(n for n in METHODS if n.startswith("hope-"))
 
 
