@@ -7,6 +7,7 @@ from meshes import bumpy_sphere, cli_maps, drifted, legless, moved_copy, random_
 
 import hope_rs
 from hope_rs import _core
+from hope_rs.geometry.numbering import canonical_mesh
 from hope_rs.geometry.subdivide import subdivide
 from hope_rs.pipeline import handles
 from hope_rs.pipeline import shared_faces as SF
@@ -48,24 +49,39 @@ def test_handles_are_the_vertices_whose_faces_all_map_onto_faces_one_to_one():
     assert SF.face_handles(s, rewound, f).all()
 
 
-def test_handles_and_patches_of_a_mesh_are_those_of_its_shape_renumbered():
-    # The resolution stage tests a subdivided copy's mesh before making it a Shape: the
-    # handles and their large patches must be the Shape's, read in the mesh's numbering.
+def test_the_resolution_stage_checks_a_subdivided_copy_as_its_shape_would():
+    # The resolution stage tests a subdivided copy's handles on its canonical mesh before
+    # making it a Shape: that mesh and numbering must be the Shape's, even where subdividing
+    # a face with a repeated vertex made a face twice, once each way round.
     s = hope_rs.Shape(bumpy_sphere(300, 1))
-    mesh = subdivide(s.internal, 1)
-    up = s.derived(mesh)
-    own = np.arange(mesh.n_vertices)
+    faces = s.internal.faces
+    a, b = faces[0, 0], faces[0, 1]
+    degenerate = hope_rs.Mesh(s.internal.vertices, np.vstack([faces, [[a, a, b]]]))
+    for base in (s.internal, degenerate):
+        mesh = subdivide(base, 1)
+        up = s.derived(mesh)
+        internal, order, rank = canonical_mesh(mesh, orient=False)
+        assert not np.array_equal(order, np.arange(len(order)))  # a real renumbering
+        assert np.array_equal(internal.faces, up.internal.faces)
+        assert np.array_equal(order, up.order) and np.array_equal(rank, up.rank)
+        assert np.array_equal(internal.vertices, up.points)
+        assert np.array_equal(mesh.vertices, up.points[up.rank])  # the stage's points
+    assert len(mesh.faces) > len(up.internal.faces)  # the repeated face was dropped
+
+
+def test_handle_patches_of_a_mesh_are_those_of_its_shape():
+    s = hope_rs.Shape(subdivide(hope_rs.Mesh(*bumpy_sphere(300, 1)), 1))
+    own = np.arange(s.n_vertices)
     # The identity unknown on a band around a cap: two patches of handles, the cap small.
-    d = np.linalg.norm(mesh.vertices - mesh.vertices[0], axis=1) / mesh.scale
+    d = np.linalg.norm(s.points - s.points[0], axis=1) / s.scale
     banded = np.where((d > 0.2) & (d < 0.3), -1, own)
     rng = np.random.default_rng(0)
-    for case, g in enumerate((banded, drifted(mesh, own, 0, 0.4), rng.permutation(own))):
-        h = handles.mesh_face_handles(mesh, mesh, g)
-        internal = np.where(g >= 0, up.rank[np.maximum(g, 0)], -1)[up.order]
-        assert np.array_equal(h, SF.face_handles(up, up, internal)[up.rank])
-        kept = [handles.mesh_large_patches(mesh, h, share) for share in (0.0, 0.2, 0.9)]
+    for case, g in enumerate((banded, drifted(s.internal, own, 0, 0.4), rng.permutation(own))):
+        h = handles.mesh_face_handles(s.internal, s.internal, g)
+        assert np.array_equal(h, SF.face_handles(s, s, g))
+        kept = [handles.mesh_large_patches(s.internal, h, share) for share in (0.0, 0.2, 0.9)]
         for share, mask in zip((0.0, 0.2, 0.9), kept):
-            assert np.array_equal(mask, handles.large_patches(up, h[up.order], share)[up.rank])
+            assert np.array_equal(mask, handles.large_patches(s, h, share))
         if case == 0:
             assert np.array_equal(kept[0], h) and 0 < kept[1].sum() < h.sum()
             assert not kept[2].any()

@@ -348,10 +348,15 @@ def run_bench(
 
     methods = check_methods(methods)
     missing = missing_packages(methods)
+    if "pyfmaps" in missing:
+        raise ValueError(
+            "the zoomout methods need pyFM: pip install pyfmaps (Python >= 3.10), or leave "
+            "zoomout out of --methods"
+        )
     if missing:
         raise ValueError(
-            f"hope-rs bench needs {', '.join(missing)} for scoring, plots or the methods "
-            f"asked for: pip install {' '.join(missing)} (or hope-rs[eval])"
+            f"hope-rs bench needs {', '.join(missing)} for scoring and plots: "
+            f"pip install {' '.join(missing)} (or hope-rs[eval])"
         )
     found = datasets_in(data_dir)
     folders = _select(found, sets, data_dir)

@@ -186,7 +186,7 @@ METHODS: dict[str, tuple[str, Callable[[PairContext], MethodResult]]] = {
 }
 DEFAULT_METHODS = ("init", "hope", "zoomout")
 #: Methods that need pyFM (``pip install pyfmaps``).
-PYFM_METHODS = ("zoomout", "zoomout-wks")
+PYFM_METHODS = tuple(n for n in METHODS if n.startswith("zoomout"))
 ABLATIONS = tuple(n for n in METHODS if n.startswith("hope-"))
 
 

@@ -79,6 +79,7 @@ from ..features.descriptors import shot_at
 from ..geometry.coarsen import Coarse
 from ..geometry.collapse import collapse_to_count, collapse_to_sites
 from ..geometry.mesh import Mesh
+from ..geometry.numbering import canonical_mesh
 from ..geometry.roughness import at_owner_means, rougher, umbrella_smoothed
 from ..geometry.sites import cell_sites
 from ..geometry.subdivide import subdivide
@@ -430,8 +431,8 @@ class ResolutionStage(Stage):
         return res, lift(b.points).astype(np.int64), lift
 
     def shares_faces(self, mesh: Mesh, handles: np.ndarray, rc: ResolutionConfig) -> bool:
-        """Whether the lifted map's ``handles`` (bool per vertex of ``mesh``, the side of
-        the pair at full resolution whose faces are tested) are enough for the pass at full
+        """Whether the lifted map's ``handles`` (bool per vertex of ``mesh``, the internal
+        mesh of the side of the pair at full resolution whose faces are tested) are enough for the pass at full
         resolution: ``rc.refine_min_handles`` of the vertices, and ``rc.refine_min_patched``
         in patches of at least ``rc.refine_patch_share`` of them. Records both shares."""
         self.start_handles = float(handles.mean())
@@ -459,6 +460,9 @@ class ResolutionStage(Stage):
         times = subdivisions(density(sparse), density(dense))
         # The copy's own numbering: the sparser shape's vertices first (internal numbering).
         mesh = subdivide(sparse.internal, times)
+        # Its internal mesh and numbering as its Shape has them (repeated faces dropped),
+        # without the Shape's k-hop graph: the check below decides whether the pass runs.
+        internal, order, rank = canonical_mesh(mesh, orient=False)
         nested = dataclasses.replace(
             cfg,
             partial=dataclasses.replace(cfg.partial, enabled=False),
@@ -479,15 +483,13 @@ class ResolutionStage(Stage):
         )
         assert state.run is not None
         points = mesh.vertices
-        # The check runs on the mesh: its Shape (k-hop graph and all) only if the pass runs.
         if self.side == "b":
             # A subdivided: its new vertices take the lift of the map by their ring's edges.
             owner = cKDTree(a.points).query(points)[1]
             init = lift_map(a.internal, b.internal, f, points, owner, b.points, centred=True)
             init[: a.n_vertices] = f
-            if not self.shares_faces(
-                mesh, mesh_face_handles(mesh, b.internal, init), cfg.resolution
-            ):
+            handles = mesh_face_handles(internal, b.internal, init[order])
+            if not self.shares_faces(internal, handles, cfg.resolution):
                 return None
             up = sparse.derived(mesh)
             # The landmarks in the nested shapes' input numbering: A's vertices come first in
@@ -504,7 +506,7 @@ class ResolutionStage(Stage):
         assert lift is not None
         f = lift(points)
         if not self.shares_faces(
-            a.internal, mesh_face_handles(a.internal, mesh, f), cfg.resolution
+            a.internal, mesh_face_handles(a.internal, internal, rank[f]), cfg.resolution
         ):
             return None
         up = sparse.derived(mesh)
