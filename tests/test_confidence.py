@@ -231,6 +231,10 @@ def test_confidence_auroc():
     assert confidence_auroc([0.5, 0.5, 0.5, 0.5], errors) == 0.5
     assert confidence_auroc([0.9, 0.3, 0.5, 0.2], errors) == 0.75
     assert np.isnan(confidence_auroc([0.1, 0.2], [0.0, 0.0]))
+    # A NaN would rank as it happens to sort: refused.
+    for conf, err in (([np.nan, 0.1, 0.5], [0.0, 1.0, 0.0]), ([0.9, 0.1], [np.nan, 0.0])):
+        with pytest.raises(ValueError, match="must not hold NaN"):
+            confidence_auroc(conf, err)
 
 
 def test_cli_writes_the_confidence_for_show(tmp_path, capsys):

@@ -145,6 +145,19 @@ def test_curve_and_areas_of_known_errors():
         assert np.isnan(score([]).mean) and np.isnan(score([]).exact)
     with pytest.raises(ValueError, match=r"map must be a 1-D array .* got shape \(9, 1\)"):
         geodesic_errors(grid(3), np.arange(9)[:, None])
+    with pytest.raises(ValueError, match="errors hold NaN"):
+        score([0.0, np.nan])
+
+
+def test_the_identity_ground_truth_needs_one_vertex_count():
+    b = grid(3)
+    assert geodesic_errors(b, np.arange(9)).tolist() == [0.0] * 9
+    # A map of 8 vertices onto 9: no identity to score against unless the pairs are given.
+    with pytest.raises(ValueError, match=r"the map has 8, B 9\); pass the scored pairs"):
+        geodesic_errors(b, np.arange(8))
+    assert geodesic_errors(b, np.arange(8), a_idx=[0, 7], b_idx=[0, 7]).tolist() == [0.0, 0.0]
+    with pytest.raises(ValueError, match="b_idx needs a_idx"):
+        geodesic_errors(b, np.arange(9), b_idx=[0, 1])
 
 
 def test_smoothness_of_identity_and_of_a_scrambled_map():

@@ -103,7 +103,8 @@ def geodesic_errors(b, mapping, *, a_idx=None, b_idx=None, method: str = "graph"
     """Geodesic error of each scored correspondence, divided by sqrt(area) of B.
 
     ``error_i = d_B(mapping[a_idx[i]], b_idx[i]) / sqrt(area(B))``; with no indices given,
-    the ground truth is the identity (vertex i of A ↔ vertex i of B).
+    the ground truth is the identity (vertex i of A ↔ vertex i of B; A and B of one vertex
+    count).
 
     Parameters
     ----------
@@ -129,8 +130,16 @@ def geodesic_errors(b, mapping, *, a_idx=None, b_idx=None, method: str = "graph"
         )
     n_a = mapping.shape[0]
     mapping = as_index_map(mapping, n_a, mesh_b.n_vertices, name="map")
+    if a_idx is None and b_idx is not None:
+        raise ValueError("b_idx needs a_idx: pass the scored vertices of A beside their truths")
     if a_idx is None:
-        a_idx = np.arange(min(n_a, mesh_b.n_vertices))
+        if n_a != mesh_b.n_vertices:
+            raise ValueError(
+                f"without a_idx and b_idx the ground truth is the identity, which needs A and B "
+                f"of one vertex count (the map has {n_a}, B {mesh_b.n_vertices}); pass the "
+                "scored pairs as a_idx and b_idx"
+            )
+        a_idx = np.arange(n_a)
     if b_idx is None:
         b_idx = a_idx
     a_idx = as_index_map(a_idx, len(a_idx), n_a, name="a_idx")
@@ -201,6 +210,8 @@ def score(errors: np.ndarray, *, max_error: float = MAX_ERROR) -> Score:
         raise ValueError(f"errors must be a 1-D array, got shape {e.shape}")
     if e.size == 0:  # nothing scored
         return Score(math.nan, math.nan, math.nan, math.nan)
+    if np.isnan(e).any():
+        raise ValueError("errors hold NaN; an error is a distance >= 0 (inf: unreachable)")
     if (e < 0).any():
         raise ValueError(f"errors are distances, >= 0; got {e.min()}")
     finite = np.where(np.isfinite(e), e, 1.0)
@@ -267,6 +278,8 @@ def confidence_auroc(confidence, errors, *, wrong_above: float = 0.05) -> float:
     right = np.asarray(errors, dtype=np.float64) <= wrong_above
     if c.shape != right.shape:
         raise ValueError(f"confidence {c.shape} and errors {right.shape} must have one shape")
+    if np.isnan(c).any() or np.isnan(np.asarray(errors, dtype=np.float64)).any():
+        raise ValueError("confidence and errors must not hold NaN")
     pos, neg = c[right], np.sort(c[~right])
     if pos.size == 0 or neg.size == 0:
         return float("nan")
