@@ -147,12 +147,16 @@ def detect_part(a: Shape, b: Shape, config: PartialConfig | None = None) -> Part
 def part_match_config(cfg: MatchConfig) -> MatchConfig:
     """The settings of a part's own match at a given scale: this stage off (the part is
     already measured at the whole's scale), the deformation pass off (a part's spectrum is
-    not the whole's) and, with ``PartialConfig.max_turned``, the refinement's witnesses
-    limited to vertices not mostly turned over."""
+    not the whole's), the landmarks' trust rule off (``LandmarkConfig.refine_trust``: a
+    part's distances to its landmarks run around the missing region, so right matches read
+    off and lose their witnesses; docs/decisions.md#landmarks) and, with
+    ``PartialConfig.max_turned``, the refinement's witnesses limited to vertices not mostly
+    turned over."""
     off = dataclasses.replace(
         cfg,
         partial=dataclasses.replace(cfg.partial, enabled=False),
         deform=dataclasses.replace(cfg.deform, enabled=False),
+        landmarks=dataclasses.replace(cfg.landmarks, refine_trust=False),
     )
     if cfg.partial.max_turned is not None:
         off = dataclasses.replace(
