@@ -233,7 +233,7 @@ def test_confidence_auroc():
     assert np.isnan(confidence_auroc([0.1, 0.2], [0.0, 0.0]))
     # A NaN would rank as it happens to sort: refused.
     for conf, err in (([np.nan, 0.1, 0.5], [0.0, 1.0, 0.0]), ([0.9, 0.1], [np.nan, 0.0])):
-        with pytest.raises(ValueError, match="must not hold NaN"):
+        with pytest.raises(ValueError, match=r"holds NaN \(at index 0\)"):
             confidence_auroc(conf, err)
 
 

@@ -406,7 +406,8 @@ def test_landmarks_on_a_part_are_kept_and_the_map_stays_accurate():
 def test_landmarks_on_a_part_do_not_distrust_its_right_matches(pair):
     # A part's distances to its landmarks run around the missing region, so a right match
     # there reads "off" by its landmark coordinates. Four ground-truth landmarks on the
-    # lower 55% of a body (spread by farthest points in space) must not make its map worse.
+    # lower 55% of a body (spread by farthest points in space): the map no more than 30%
+    # worse than without them (it was 70% worse, and flagged), and not flagged.
     a = hope_rs.load_mesh(data_path("faust_r", f"tr_reg_{pair[0]}.off"))
     b = hope_rs.load_mesh(data_path("faust_r", f"tr_reg_{pair[1]}.off"))
     gta = hope_rs.load_vts(data_path("faust_r", "corres", f"tr_reg_{pair[0]}.vts"))
@@ -426,6 +427,7 @@ def test_landmarks_on_a_part_do_not_distrust_its_right_matches(pair):
     lm = np.column_stack([ai[chosen], bi[chosen]])
     without = geodesic_errors(b, hope_rs.match(part, b).map, a_idx=ai, b_idx=bi).mean()
     res = hope_rs.match(part, b, landmarks=lm)
+    assert res.stage("partial").ran and without < 0.04
     np.testing.assert_array_equal(res.map[lm[:, 0]], lm[:, 1])
     assert geodesic_errors(b, res.map, a_idx=ai, b_idx=bi).mean() < 1.3 * without
     assert not res.quality.likely_failed

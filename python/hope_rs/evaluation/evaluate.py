@@ -114,7 +114,7 @@ def geodesic_errors(b, mapping, *, a_idx=None, b_idx=None, method: str = "graph"
         ``mapping[i]`` is the vertex of B matched to vertex i of A.
     a_idx, b_idx : array_like of int, optional
         Scored ground-truth pairs (0-based); only these are scored, so pass a subsample to score
-        a large identity pair quickly.
+        a large identity pair quickly. ``b_idx`` defaults to ``a_idx`` and needs it.
     method : {"graph", "surface"}
         ``"graph"``: edge-graph shortest paths (fast, a few percent long). ``"surface"``: edge-flip
         surface geodesics (near-exact, used by ``hope-rs bench``; needs potpourri3d). Distances
@@ -204,7 +204,8 @@ class Score:
 
 def score(errors: np.ndarray, *, max_error: float = MAX_ERROR) -> Score:
     """Fraction exactly right, mean error and curve AUCs (0..max_error and 0..0.10) of an array
-    of geodesic errors (NaN for none)."""
+    of geodesic errors (each figure NaN for an empty array; a NaN error is refused, an inf one
+    counts as 1)."""
     e = np.asarray(errors, dtype=np.float64)
     if e.ndim != 1:
         raise ValueError(f"errors must be a 1-D array, got shape {e.shape}")
@@ -272,14 +273,16 @@ def confidence_auroc(confidence, errors, *, wrong_above: float = 0.05) -> float:
     -------
     float
         In [0, 1]; 0.5 for a confidence that tells nothing. NaN when every match is right, or
-        every match wrong.
+        every match wrong. NaN in either argument is refused.
     """
     c = np.asarray(confidence, dtype=np.float64)
     right = np.asarray(errors, dtype=np.float64) <= wrong_above
     if c.shape != right.shape:
         raise ValueError(f"confidence {c.shape} and errors {right.shape} must have one shape")
-    if np.isnan(c).any() or np.isnan(np.asarray(errors, dtype=np.float64)).any():
-        raise ValueError("confidence and errors must not hold NaN")
+    for name, values in (("confidence", c), ("errors", np.asarray(errors, dtype=np.float64))):
+        if np.isnan(values).any():
+            i = int(np.flatnonzero(np.isnan(values))[0])
+            raise ValueError(f"{name} holds NaN (at index {i}); pass numbers, inf for unreachable")
     pos, neg = c[right], np.sort(c[~right])
     if pos.size == 0 or neg.size == 0:
         return float("nan")

@@ -102,7 +102,9 @@ class LandmarkConfig:
         ... at the nearest descriptor among the vertices of B whose landmark coordinates are
         the nearest this many to the vertex's own.
     refine_trust : bool
-        An off match is never a witness of the refinement.
+        An off match is never a witness of the refinement (not applied in a part's own
+        matches, whose distances to the landmarks run around the missing region:
+        docs/decisions.md#landmarks).
     swap_anchors : bool
         The refinement's swapped-region step takes the landmarks as anchors (what moves a
         mirrored region back).
