@@ -7,6 +7,7 @@ from meshes import bumpy_sphere, cli_maps, drifted, legless, moved_copy, random_
 
 import hope_rs
 from hope_rs import _core
+from hope_rs.geometry.mesh import unique_edges
 from hope_rs.geometry.numbering import canonical_mesh
 from hope_rs.geometry.subdivide import subdivide
 from hope_rs.pipeline import handles
@@ -79,7 +80,8 @@ def test_handle_patches_of_a_mesh_are_those_of_its_shape():
     for case, g in enumerate((banded, drifted(s.internal, own, 0, 0.4), rng.permutation(own))):
         h = handles.mesh_face_handles(s.internal, s.internal, g)
         assert np.array_equal(h, SF.face_handles(s, s, g))
-        kept = [handles.mesh_large_patches(s.internal, h, share) for share in (0.0, 0.2, 0.9)]
+        edges = unique_edges(s.internal.faces)
+        kept = [handles.edge_large_patches(edges, h, share) for share in (0.0, 0.2, 0.9)]
         for share, mask in zip((0.0, 0.2, 0.9), kept):
             assert np.array_equal(mask, handles.large_patches(s, h, share))
         if case == 0:

@@ -275,11 +275,11 @@ def confidence_auroc(confidence, errors, *, wrong_above: float = 0.05) -> float:
         In [0, 1]; 0.5 for a confidence that tells nothing. NaN when every match is right, or
         every match wrong. NaN in either argument is refused.
     """
-    c = np.asarray(confidence, dtype=np.float64)
-    right = np.asarray(errors, dtype=np.float64) <= wrong_above
+    c, e = np.asarray(confidence, dtype=np.float64), np.asarray(errors, dtype=np.float64)
+    right = e <= wrong_above
     if c.shape != right.shape:
         raise ValueError(f"confidence {c.shape} and errors {right.shape} must have one shape")
-    for name, values in (("confidence", c), ("errors", np.asarray(errors, dtype=np.float64))):
+    for name, values in (("confidence", c), ("errors", e)):
         if np.isnan(values).any():
             i = int(np.flatnonzero(np.isnan(values))[0])
             raise ValueError(f"{name} holds NaN (at index {i}); pass numbers, inf for unreachable")

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry.mesh import Mesh, unique_edges
+from ..geometry.mesh import Mesh
 from ..geometry.orientation import face_keys
 from ..shape import Shape
 from .anchors import masked_components
@@ -21,9 +21,9 @@ __all__ = [
     "face_handles",
     "face_keys",
     "irregular_vertices",
+    "edge_large_patches",
     "large_patches",
     "mesh_face_handles",
-    "mesh_large_patches",
     "seed_handles",
 ]
 
@@ -84,10 +84,10 @@ def large_patches(
     return _large(a.edges, mask, min_share, pinned, min_irregular)
 
 
-def mesh_large_patches(mesh: Mesh, mask: np.ndarray, min_share: float) -> np.ndarray:
-    """:func:`large_patches` (without the irregular-vertex condition) on a mesh not yet made
-    a Shape, in its own numbering."""
-    return _large(unique_edges(mesh.faces), mask, min_share, None, 0)
+def edge_large_patches(edges: np.ndarray, mask: np.ndarray, min_share: float) -> np.ndarray:
+    """:func:`large_patches` (without the irregular-vertex condition) over undirected
+    ``edges`` (a Shape's ``edges``, or ``unique_edges`` of a mesh not yet made a Shape)."""
+    return _large(edges, mask, min_share, None, 0)
 
 
 def _large(

@@ -78,7 +78,7 @@ from scipy.spatial import cKDTree
 from ..features.descriptors import shot_at
 from ..geometry.coarsen import Coarse
 from ..geometry.collapse import collapse_to_count, collapse_to_sites
-from ..geometry.mesh import Mesh
+from ..geometry.mesh import Mesh, unique_edges
 from ..geometry.numbering import canonical_mesh
 from ..geometry.roughness import at_owner_means, rougher, umbrella_smoothed
 from ..geometry.sites import cell_sites
@@ -86,7 +86,7 @@ from ..geometry.subdivide import subdivide
 from ..shape import Shape
 from .confidence import flipped_share, match_quality
 from .config import ResolutionConfig
-from .handles import mesh_face_handles, mesh_large_patches
+from .handles import edge_large_patches, mesh_face_handles
 from .landmarks import coarse_landmarks
 from .multiscale import lift_map
 from .result import MatchResult
@@ -430,13 +430,14 @@ class ResolutionStage(Stage):
 
         return res, lift(b.points).astype(np.int64), lift
 
-    def shares_faces(self, mesh: Mesh, handles: np.ndarray, rc: ResolutionConfig) -> bool:
-        """Whether the lifted map's ``handles`` (bool per vertex of ``mesh``, the internal
-        mesh of the side of the pair at full resolution whose faces are tested) are enough for the pass at full
+    def shares_faces(self, edges: np.ndarray, handles: np.ndarray, rc: ResolutionConfig) -> bool:
+        """Whether the lifted map's ``handles`` (bool per vertex of the side of the pair at
+        full resolution whose faces are tested; ``edges``: that side's undirected edges,
+        internal numbering) are enough for the pass at full
         resolution: ``rc.refine_min_handles`` of the vertices, and ``rc.refine_min_patched``
         in patches of at least ``rc.refine_patch_share`` of them. Records both shares."""
         self.start_handles = float(handles.mean())
-        self.start_patched = float(mesh_large_patches(mesh, handles, rc.refine_patch_share).mean())
+        self.start_patched = float(edge_large_patches(edges, handles, rc.refine_patch_share).mean())
         return (
             self.start_handles >= rc.refine_min_handles
             and self.start_patched >= rc.refine_min_patched
@@ -489,7 +490,7 @@ class ResolutionStage(Stage):
             init = lift_map(a.internal, b.internal, f, points, owner, b.points, centred=True)
             init[: a.n_vertices] = f
             handles = mesh_face_handles(internal, b.internal, init[order])
-            if not self.shares_faces(internal, handles, cfg.resolution):
+            if not self.shares_faces(unique_edges(internal.faces), handles, cfg.resolution):
                 return None
             up = sparse.derived(mesh)
             # The landmarks in the nested shapes' input numbering: A's vertices come first in
@@ -506,7 +507,7 @@ class ResolutionStage(Stage):
         assert lift is not None
         f = lift(points)
         if not self.shares_faces(
-            a.internal, mesh_face_handles(a.internal, internal, rank[f]), cfg.resolution
+            a.edges, mesh_face_handles(a.internal, internal, rank[f]), cfg.resolution
         ):
             return None
         up = sparse.derived(mesh)
