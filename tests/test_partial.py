@@ -4,6 +4,7 @@ import inspect
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 from conftest import data_path
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -38,6 +39,7 @@ from hope_rs.pipeline.partial import (
     covered_share,
     covering_rings,
     detect_part,
+    invert_given_map,
     part_scale,
 )
 from hope_rs.pipeline.runner import run_match
@@ -202,10 +204,14 @@ def test_partial_stage_runs_only_on_a_part(sphere):
     given = match(part, sphere, init=cut.origin)
     assert (given.map == cut.origin).mean() > 0.95
     np.testing.assert_array_equal(given.init_map, cut.origin)
-    # The whole matched to the part from a given start goes directly, without the orient
-    # stage, and says so.
+    # The whole matched to the part from a given start goes through the part's match too;
+    # asked to go directly, it does, without the orient stage, and says so.
     start = np.zeros(sphere.n_vertices, dtype=np.int64)
-    direct = match(sphere, part, init=start, max_passes=1)
+    given = match(sphere, part, init=start, max_passes=1)
+    assert "B -> A and inverted" in given.stage("partial").reason
+    np.testing.assert_array_equal(given.init_map, start)
+    to_part = MatchConfig(partial=PartialConfig(whole_to_part="direct"))
+    direct = match(sphere, part, init=start, max_passes=1, config=to_part)
     assert "matched directly" in direct.stage("orient").reason
     # Two whole shapes, or the stage turned off: not on the match's path.
     whole = match(sphere, sphere)
@@ -271,6 +277,47 @@ def test_whole_to_part_inverts_the_part_match_and_says_which_vertices_have_a_par
     share = covered_share(sa, sa.rank[part.origin][sb.order])
     truth = part.mesh.area / sphere.area
     assert truth <= share < truth + 0.12
+
+
+def test_a_given_map_of_the_whole_onto_its_part_is_inverted(sphere):
+    """A map of the whole onto its part (each vertex to the part's vertex nearest in space)
+    inverted: a vertex of the part that one vertex of the whole maps to takes that vertex; one
+    on the cut takes, of the vertices mapped to it, the one nearest their centroid; a vertex
+    that nothing maps to takes what its nearest mapped neighbour took."""
+    cut = cut_by_plane(sphere, plane_normal(2), 0.3)
+    sa, sb = Shape(sphere), Shape(cut.mesh)
+    _, f = cKDTree(cut.mesh.vertices).query(sphere.vertices)
+    g = sb.map_out(sa, invert_given_map(sa, sb, sa.map_in(sb, f)))
+    once = np.bincount(f, minlength=cut.mesh.n_vertices) == 1
+    assert once.mean() > 0.8
+    np.testing.assert_array_equal(g[once], cut.origin[once])
+    for j in np.flatnonzero(~once)[:20]:
+        pre = np.flatnonzero(f == j)
+        d = np.linalg.norm(sphere.vertices[pre] - sphere.vertices[pre].mean(axis=0), axis=1)
+        assert g[j] in pre and d[pre == g[j]][0] <= d.min() + 1e-12  # ties: either
+    # Vertex 0 of the part no longer hit: it takes what its nearest hit vertex took.
+    f2 = np.where(f == 0, f[cut.origin[1]], f)
+    h = sb.map_out(sa, invert_given_map(sa, sb, sa.map_in(sb, f2)))
+    hit = np.flatnonzero(np.bincount(f2, minlength=cut.mesh.n_vertices) > 0)
+    near = hit[np.argmin(np.linalg.norm(cut.mesh.vertices[hit] - cut.mesh.vertices[0], axis=1))]
+    assert h[0] == h[near]
+    np.testing.assert_array_equal(h[1:], g[1:])
+
+
+@pytest.mark.slow
+def test_a_whole_matched_to_its_part_from_a_given_start_goes_through_the_part_s_match(tmp_path):
+    """A FAUST shape matched to another one cut by a plane (30%), from a given start: the
+    start is inverted and the part matched to the whole, as without one (directly, the
+    refinement's overlaps pull the vertices that have a partner off their place)."""
+    folders = write_partial_sets(data_path("faust_r"), tmp_path, conditions=["cut30"], max_pairs=1)
+    pair = pairs_of(next(f for f in folders if f.name.endswith("_rev")))[0]
+    a, b = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
+    ai, bi = pair.ground_truth(a.n_vertices, b.n_vertices)
+    start = match(a, b).init_map
+    res = match(a, b, init=start)
+    assert "B -> A and inverted" in res.stage("partial").reason
+    np.testing.assert_array_equal(res.init_map, start)
+    assert geodesic_errors(b, res.map, a_idx=ai, b_idx=bi).mean() < 0.04
 
 
 def test_the_covered_share_of_a_denser_whole_closes_the_gaps_between_images(sphere):

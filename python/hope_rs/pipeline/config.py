@@ -774,8 +774,8 @@ class PartialConfig:
         and its whole).
     whole_to_part : {"reverse", "direct"}
         When B is the part: "reverse" matches B → A and inverts the map (each vertex of A
-        takes the vertex of B whose image is nearest); "direct" matches A → B like any pair,
-        with B at A's scale.
+        takes the vertex of B whose image is nearest; a given initial map of A onto B starts
+        that match inverted); "direct" matches A → B like any pair, with B at A's scale.
     counterpart_edges : float
         With "reverse", a vertex of A has a counterpart on B when the nearest image of a
         vertex of B lies within this many of A's mean edge lengths.
@@ -814,8 +814,8 @@ class PartialConfig:
         the whole's missing side, a branch of the part can settle on another branch of the
         whole wound the other way (a leg laid over the other leg's place and the torso),
         keeping its distances; ``None``: the refinement's own setting. A whole matched
-        directly to its part (``whole_to_part="direct"``, or a given initial map) keeps the
-        refinement's own setting too.
+        directly to its part (``whole_to_part="direct"``) keeps the refinement's own setting
+        too.
     rough_smoothing : int
         The part's sqrt(area) for the guessed scale is measured on its copy smoothed this many
         times (each vertex halfway to its 1-ring's centroid) when that shrinks it by more

@@ -417,8 +417,8 @@ class OrientStage(Stage):
         part = info is not None
         if info is not None and info.part == "b" and info.counterpart is None:
             return (
-                "B is a part matched directly (a given start, or whole_to_part='direct'): the "
-                "stage repairs maps onto a whole"
+                "B is a part matched directly (whole_to_part='direct'): the stage repairs "
+                "maps onto a whole"
             )
         if info is not None and info.part == "b":
             return "B is a part: the partial stage's match of it to A has this stage"

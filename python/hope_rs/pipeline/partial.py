@@ -64,6 +64,7 @@ __all__ = [
     "covered_share",
     "covering_rings",
     "detect_part",
+    "invert_given_map",
     "invert_part_map",
     "mean_edge",
     "part_match_config",
@@ -90,6 +91,33 @@ def invert_part_map(a: Shape, g: np.ndarray, radius: float) -> tuple[np.ndarray,
     that image lies within ``radius`` (A's units) of it."""
     d, j = cKDTree(a.points[g]).query(a.points, workers=2)
     return j.astype(np.int64), d <= radius
+
+
+def invert_given_map(a: Shape, b: Shape, f: np.ndarray) -> np.ndarray:
+    """From ``f``, a given map of the whole A onto its part B (internal numbering), a map
+    B → A to start the part's match from: a vertex of B that ``f`` hits takes, of the
+    vertices of A sent to it, the one nearest (in space) their centroid; any other vertex
+    of B takes what the nearest hit vertex of B (in space) took."""
+    f = np.asarray(f, dtype=np.int64)
+    hit = np.unique(f)
+    # The preimages of each hit vertex, grouped: a stable sort of A's vertices by image.
+    by = np.argsort(f, kind="stable")
+    start = np.searchsorted(f[by], hit)
+    sizes = np.diff(np.append(start, f.size))
+    group = np.repeat(np.arange(hit.size), sizes)
+    centroid = np.zeros((hit.size, 3))
+    np.add.at(centroid, group, a.points[by])
+    centroid /= sizes[:, None]
+    d = np.linalg.norm(a.points[by] - centroid[group], axis=1)
+    # Within each group the nearest first (ties: the lowest vertex), then the group's first.
+    pick = by[np.lexsort((by, d, group))[start]]
+    g = np.empty(b.n_vertices, dtype=np.int64)
+    g[hit] = pick
+    missed = np.setdiff1d(np.arange(b.n_vertices), hit)
+    if missed.size:
+        _, j = cKDTree(b.points[hit]).query(b.points[missed], workers=2)
+        g[missed] = pick[j]
+    return g
 
 
 def covered_share(b: Shape, f: np.ndarray, rings: int = 1) -> float:
@@ -189,9 +217,7 @@ class PartialStage(Stage):
         cfg = state.config.partial
         la, lb = info.boundary
         detail = f"{info.part.upper()} is a part (boundary {la:.2f} vs {lb:.2f} sqrt(area))"
-        reverse = (
-            info.part == "b" and cfg.whole_to_part == "reverse" and isinstance(state.init, str)
-        )
+        reverse = info.part == "b" and cfg.whole_to_part == "reverse"
         detail += ": matched B -> A and inverted" if reverse else ": matched at the whole's scale"
         t = state.log.start("partial", detail=detail)
         halt = None
@@ -200,13 +226,20 @@ class PartialStage(Stage):
             info = self._rescale_part(state, info)
             halt = Halt("the map is the part's match at the whole's scale")
         elif reverse:
-            # The nested match detects B as the part of its pair and scales it itself.
+            # The nested match detects B as the part of its pair and scales it itself; a given
+            # map of A onto B starts it inverted (in the input numbering, as a caller's map).
             nested: dict = {}
+            given = not isinstance(state.init, str)
+            start = (
+                state.b.map_out(state.a, invert_given_map(state.a, state.b, state.init))
+                if given
+                else state.init
+            )
             assert state.run is not None  # the runner sets it
             back = state.run(
                 state.b,
                 state.a,
-                state.init,
+                start,
                 state.config,
                 callback=state.callback,  # its steps are this match's
                 progress=state.log.relay("partial"),
@@ -215,8 +248,12 @@ class PartialStage(Stage):
             )
             radius = cfg.counterpart_edges * mean_edge(state.a)
             f, has = invert_part_map(state.a, state.b.map_in(state.a, back.map), radius)
-            # The initial map is the nested match's, inverted alike.
-            f0, _ = invert_part_map(state.a, state.b.map_in(state.a, back.init_map), radius)
+            # The initial map is the caller's, or the nested match's inverted alike.
+            f0 = (
+                np.asarray(state.init, dtype=np.int64)
+                if given
+                else invert_part_map(state.a, state.b.map_in(state.a, back.init_map), radius)[0]
+            )
             # The scale the nested match measured the part at (it may have rescaled it).
             part = nested.get("partial")
             scale = part.scale if part is not None and part.part == "a" else info.scale
