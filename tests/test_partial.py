@@ -40,6 +40,8 @@ from hope_rs.pipeline.partial import (
     covering_rings,
     detect_part,
     invert_given_map,
+    invert_part_map,
+    mean_edge,
     part_scale,
 )
 from hope_rs.pipeline.runner import run_match
@@ -302,6 +304,38 @@ def test_a_given_map_of_the_whole_onto_its_part_is_inverted(sphere):
     near = hit[np.argmin(np.linalg.norm(cut.mesh.vertices[hit] - cut.mesh.vertices[0], axis=1))]
     assert h[0] == h[near]
     np.testing.assert_array_equal(h[1:], g[1:])
+
+
+def test_gaps_among_the_part_s_images_have_a_counterpart_and_its_missing_side_not(sphere):
+    """The part's true map into the whole with a few scattered vertices sent to a neighbour
+    instead (a locally many-to-one map): the whole's vertices left between the images are
+    gaps, filled; the side the part lacks stays without a counterpart."""
+    cut = cut_by_plane(sphere, plane_normal(2), 0.3)
+    sa = Shape(sphere)
+    truth = sa.rank[cut.origin]  # part (input numbering) -> whole (internal)
+    on = np.zeros(sa.n_vertices, dtype=bool)
+    on[truth] = True
+    # Every 7th vertex of the part two rings or more from its cut takes a neighbour's image.
+    near_cut = ~on
+    for _ in range(2):
+        grown = near_cut.copy()
+        grown[sa.edges[near_cut[sa.edges[:, 0]], 1]] = True
+        grown[sa.edges[near_cut[sa.edges[:, 1]], 0]] = True
+        near_cut = grown
+    inside = np.flatnonzero(~near_cut)
+    g = truth.copy()
+    rng = np.random.default_rng(0)
+    moved = rng.choice(np.flatnonzero(np.isin(truth, inside)), size=on.sum() // 7, replace=False)
+    for i in moved:
+        nb = sa.edges[(sa.edges == truth[i]).any(axis=1)].ravel()
+        g[i] = nb[nb != truth[i]][0]
+    radius = 0.5 * mean_edge(sa)
+    _, plain = invert_part_map(sa, g, radius)
+    _, filled = invert_part_map(sa, g, radius, gaps=0.01)  # patches under 8 vertices
+    gap = on & ~plain
+    assert gap.sum() >= 10  # the test makes gaps ...
+    assert filled[gap].all()  # ... and they are filled,
+    np.testing.assert_array_equal(filled[~on], plain[~on])  # the missing side left as it was
 
 
 @pytest.mark.slow

@@ -779,6 +779,12 @@ class PartialConfig:
     counterpart_edges : float
         With "reverse", a vertex of A has a counterpart on B when the nearest image of a
         vertex of B lies within this many of A's mean edge lengths.
+    counterpart_gaps : float
+        With "reverse", the vertices of A without a counterpart by ``counterpart_edges`` that
+        form a connected patch of fewer than this share of A's vertices have one too: where
+        the part's map is locally many-to-one its images leave gaps, enclosed by vertices
+        with a counterpart; the part's missing side and its holes are larger. 0: no gap
+        filled.
     rescale_tolerance : float
         A part (A) is first matched at the larger sqrt(area) of the two; when the share of B
         its map covers puts A's whole at a scale off by more than this fraction, A is matched
@@ -833,6 +839,7 @@ class PartialConfig:
     min_covered: float = 0.2
     whole_to_part: str = "reverse"
     counterpart_edges: float = 1.0
+    counterpart_gaps: float = field(default=0.002, metadata={"range": (0.0, 1.0)})
     scale_trials: tuple[float, ...] = (0.95, 1.05)
     merge_rings: int = field(default=32, metadata={"range": (0, 10_000)})
     wide_trials: tuple[float, ...] = (0.85, 0.9, 1.1)

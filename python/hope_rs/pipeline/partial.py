@@ -42,6 +42,7 @@ from scipy.spatial import cKDTree
 from ..geometry.mesh import boundary_edges
 from ..geometry.roughness import umbrella_smoothed
 from ..shape import Shape
+from .anchors import masked_components
 from .config import MatchConfig, PartialConfig
 from .landmarks import input_landmarks
 from .part_info import PartialInfo
@@ -85,12 +86,21 @@ def mean_edge(shape: Shape) -> float:
     return float(np.linalg.norm(p[e[:, 0]] - p[e[:, 1]], axis=1).mean())
 
 
-def invert_part_map(a: Shape, g: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+def invert_part_map(
+    a: Shape, g: np.ndarray, radius: float, gaps: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
     """From ``g``, a map of a part B into the whole A (internal numbering), the map A → B that
     sends each vertex of A to the vertex of B whose image is nearest (in space), and whether
-    that image lies within ``radius`` (A's units) of it."""
+    it has a counterpart on B: that image lies within ``radius`` (A's units) of it, or it lies
+    in a connected patch of vertices without one holding fewer than ``gaps`` of A's vertices
+    (a locally many-to-one map leaves such gaps among its images; the part's missing side
+    and its holes are larger)."""
     d, j = cKDTree(a.points[g]).query(a.points, workers=2)
-    return j.astype(np.int64), d <= radius
+    has = d <= radius
+    if gaps > 0.0 and not has.all():
+        label, size = masked_components(a.edges, a.n_vertices, ~has)
+        has[~has] = size[label[~has]] < gaps * a.n_vertices
+    return j.astype(np.int64), has
 
 
 def invert_given_map(a: Shape, b: Shape, f: np.ndarray) -> np.ndarray:
@@ -247,7 +257,9 @@ class PartialStage(Stage):
                 on_stage=lambda st, name: nested.update(partial=st.partial),
             )
             radius = cfg.counterpart_edges * mean_edge(state.a)
-            f, has = invert_part_map(state.a, state.b.map_in(state.a, back.map), radius)
+            f, has = invert_part_map(
+                state.a, state.b.map_in(state.a, back.map), radius, cfg.counterpart_gaps
+            )
             # The initial map is the caller's, or the nested match's inverted alike.
             f0 = (
                 np.asarray(state.init, dtype=np.int64)
