@@ -4,11 +4,11 @@ import inspect
 
 import numpy as np
 import pytest
-from scipy.spatial import cKDTree
 from conftest import data_path
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from meshes import bumpy_sphere, inverse, relabel, write_off
+from scipy.spatial import cKDTree
 from strategies import permutations
 
 import hope_rs
@@ -197,7 +197,7 @@ def test_at_scale_is_a_view_with_its_own_descriptors(sphere):
         s.at_scale(0.0)
 
 
-def test_partial_stage_runs_only_on_a_part(sphere):
+def test_partial_stage_runs_only_on_a_part(sphere, monkeypatch):
     cut = cut_by_plane(sphere, plane_normal(2), 0.3)
     part = cut.mesh
     res = match(part, sphere)
@@ -206,12 +206,24 @@ def test_partial_stage_runs_only_on_a_part(sphere):
     given = match(part, sphere, init=cut.origin)
     assert (given.map == cut.origin).mean() > 0.95
     np.testing.assert_array_equal(given.init_map, cut.origin)
-    # The whole matched to the part from a given start goes through the part's match too;
-    # asked to go directly, it does, without the orient stage, and says so.
-    start = np.zeros(sphere.n_vertices, dtype=np.int64)
+    # The whole matched to the part from a given start (right on the part, the missing side
+    # sent to the cut) goes through the part's match too, which starts from the start inverted:
+    # the part's true map.
+    _, start = cKDTree(part.vertices).query(sphere.vertices)
+    nested = []
+
+    def spy(a, b, init, *args, **kwargs):
+        nested.append(np.array(init, copy=True))
+        return run_match(a, b, init, *args, **kwargs)  # the runner's own, imported above
+
+    monkeypatch.setattr(runner, "run_match", spy)
     given = match(sphere, part, init=start, max_passes=1)
+    monkeypatch.undo()
     assert "B -> A and inverted" in given.stage("partial").reason
+    np.testing.assert_array_equal(nested[0], cut.origin)
     np.testing.assert_array_equal(given.init_map, start)
+    # Asked to go directly, it does, without the orient stage, and says so.
+    start = np.zeros(sphere.n_vertices, dtype=np.int64)
     to_part = MatchConfig(partial=PartialConfig(whole_to_part="direct"))
     direct = match(sphere, part, init=start, max_passes=1, config=to_part)
     assert "matched directly" in direct.stage("orient").reason
@@ -282,28 +294,28 @@ def test_whole_to_part_inverts_the_part_match_and_says_which_vertices_have_a_par
 
 
 def test_a_given_map_of_the_whole_onto_its_part_is_inverted(sphere):
-    """A map of the whole onto its part (each vertex to the part's vertex nearest in space)
-    inverted: a vertex of the part that one vertex of the whole maps to takes that vertex; one
-    on the cut takes, of the vertices mapped to it, the one nearest their centroid; a vertex
-    that nothing maps to takes what its nearest mapped neighbour took."""
+    """The map of the whole onto its part that is right on the part and sends the missing
+    side to the cut (each vertex to the part's vertex nearest in space) inverts to the part's
+    true map: where several vertices of the whole meet on the cut, the one that fits the
+    neighbours' picks is taken. A vertex that nothing maps to takes what its nearest mapped
+    neighbour took."""
     cut = cut_by_plane(sphere, plane_normal(2), 0.3)
     sa, sb = Shape(sphere), Shape(cut.mesh)
     _, f = cKDTree(cut.mesh.vertices).query(sphere.vertices)
+    several = np.bincount(f, minlength=cut.mesh.n_vertices) > 1
+    assert several.sum() >= 20  # the cut's vertices
     g = sb.map_out(sa, invert_given_map(sa, sb, sa.map_in(sb, f)))
-    once = np.bincount(f, minlength=cut.mesh.n_vertices) == 1
-    assert once.mean() > 0.8
-    np.testing.assert_array_equal(g[once], cut.origin[once])
-    for j in np.flatnonzero(~once)[:20]:
-        pre = np.flatnonzero(f == j)
-        d = np.linalg.norm(sphere.vertices[pre] - sphere.vertices[pre].mean(axis=0), axis=1)
-        assert g[j] in pre and d[pre == g[j]][0] <= d.min() + 1e-12  # ties: either
-    # Vertex 0 of the part no longer hit: it takes what its nearest hit vertex took.
-    f2 = np.where(f == 0, f[cut.origin[1]], f)
+    np.testing.assert_array_equal(g, cut.origin)
+    # Vertex 0 of the part no longer hit (its vertices of the whole sent to vertex 1).
+    f2 = np.where(f == 0, 1, f)
     h = sb.map_out(sa, invert_given_map(sa, sb, sa.map_in(sb, f2)))
     hit = np.flatnonzero(np.bincount(f2, minlength=cut.mesh.n_vertices) > 0)
     near = hit[np.argmin(np.linalg.norm(cut.mesh.vertices[hit] - cut.mesh.vertices[0], axis=1))]
     assert h[0] == h[near]
-    np.testing.assert_array_equal(h[1:], g[1:])
+    # Vertex 1's group changed; every other vertex keeps its pick.
+    np.testing.assert_array_equal(h[2:], g[2:])
+    with pytest.raises(ValueError, match="at least one vertex"):
+        invert_given_map(sa, sb, np.zeros(0, dtype=np.int64))
 
 
 def test_gaps_among_the_part_s_images_have_a_counterpart_and_its_missing_side_not(sphere):

@@ -782,9 +782,8 @@ class PartialConfig:
     counterpart_gaps : float
         With "reverse", the vertices of A without a counterpart by ``counterpart_edges`` that
         form a connected patch of fewer than this share of A's vertices have one too: where
-        the part's map is locally many-to-one its images leave gaps, enclosed by vertices
-        with a counterpart; the part's missing side and its holes are larger. 0: no gap
-        filled.
+        the part's map is locally many-to-one its images leave such gaps; the part's missing
+        side and its holes are larger. 0: no gap filled.
     rescale_tolerance : float
         A part (A) is first matched at the larger sqrt(area) of the two; when the share of B
         its map covers puts A's whole at a scale off by more than this fraction, A is matched

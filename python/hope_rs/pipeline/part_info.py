@@ -24,8 +24,9 @@ class PartialInfo:
         The scale the part is measured at: the larger sqrt(area) of the two.
     counterpart : (n_a,) bool ndarray or None
         Per vertex of A (internal numbering), whether it has a counterpart on B: all True when
-        A is the part; when B is, those whose image the reverse match places near them (see
-        the module notes); ``None`` until known.
+        A is the part; when B is, those whose image the reverse match places near them or
+        that lie in a small gap among those images (see :mod:`hope_rs.pipeline.partial`);
+        ``None`` until known.
     """
 
     part: str

@@ -28,7 +28,9 @@ none, and the refinement's overlaps then pull the vertices that do have one off 
 So the stage matches B → A instead (a part to a whole, which works) and inverts that map:
 each vertex of A takes the vertex of B whose image lies nearest to it, and has a counterpart
 (``PartialInfo.counterpart``) when that image lies within ``PartialConfig.counterpart_edges``
-mean edge lengths of it (``PartialConfig.whole_to_part="reverse"``).
+mean edge lengths of it or it lies in a small gap among the images
+(``PartialConfig.counterpart_gaps``) (``PartialConfig.whole_to_part="reverse"``). A given
+map A → B starts that match inverted (:func:`invert_given_map`).
 """
 
 from __future__ import annotations
@@ -41,6 +43,7 @@ from scipy.spatial import cKDTree
 
 from ..geometry.mesh import boundary_edges
 from ..geometry.roughness import umbrella_smoothed
+from ..geometry.sites import owner_means
 from ..shape import Shape
 from .anchors import masked_components
 from .config import MatchConfig, PartialConfig
@@ -94,7 +97,8 @@ def invert_part_map(
     it has a counterpart on B: that image lies within ``radius`` (A's units) of it, or it lies
     in a connected patch of vertices without one holding fewer than ``gaps`` of A's vertices
     (a locally many-to-one map leaves such gaps among its images; the part's missing side
-    and its holes are larger)."""
+    and its holes are larger; any patch that small is taken, also one on a separate small
+    piece of A)."""
     d, j = cKDTree(a.points[g]).query(a.points, workers=2)
     has = d <= radius
     if gaps > 0.0 and not has.all():
@@ -105,29 +109,37 @@ def invert_part_map(
 
 def invert_given_map(a: Shape, b: Shape, f: np.ndarray) -> np.ndarray:
     """From ``f``, a given map of the whole A onto its part B (internal numbering), a map
-    B → A to start the part's match from: a vertex of B that ``f`` hits takes, of the
-    vertices of A sent to it, the one nearest (in space) their centroid; any other vertex
-    of B takes what the nearest hit vertex of B (in space) took."""
+    B → A to start the part's match from. A vertex of B that one vertex of A is sent to takes
+    it; one that several are sent to (a locally many-to-one map; the part's cut, where a map
+    puts the whole's missing side) takes, of those, the one nearest (in space) the mean of what
+    its neighbours sent to once took, or without such neighbours nearest their centroid
+    (ties: the lowest vertex); any other vertex of B takes what the nearest vertex of B (in
+    space) that ``f`` hits took."""
     f = np.asarray(f, dtype=np.int64)
-    hit = np.unique(f)
-    # The preimages of each hit vertex, grouped: a stable sort of A's vertices by image.
-    by = np.argsort(f, kind="stable")
-    start = np.searchsorted(f[by], hit)
-    sizes = np.diff(np.append(start, f.size))
-    group = np.repeat(np.arange(hit.size), sizes)
-    centroid = np.zeros((hit.size, 3))
-    np.add.at(centroid, group, a.points[by])
-    centroid /= sizes[:, None]
-    d = np.linalg.norm(a.points[by] - centroid[group], axis=1)
-    # Within each group the nearest first (ties: the lowest vertex), then the group's first.
-    pick = by[np.lexsort((by, d, group))[start]]
-    g = np.empty(b.n_vertices, dtype=np.int64)
-    g[hit] = pick
-    missed = np.setdiff1d(np.arange(b.n_vertices), hit)
-    if missed.size:
-        _, j = cKDTree(b.points[hit]).query(b.points[missed], workers=2)
-        g[missed] = pick[j]
-    return g
+    if f.size == 0:
+        raise ValueError("a map of the whole onto its part needs at least one vertex")
+    n_b = b.n_vertices
+    count = np.bincount(f, minlength=n_b)
+    once = count == 1
+    pick = np.full(n_b, -1, dtype=np.int64)
+    pick[f[once[f]]] = np.flatnonzero(once[f])
+    # Where several vertices of A meet: the mean of the once-hit neighbours' picks on A.
+    e = b.edges
+    e = np.concatenate([e, e[:, ::-1]])
+    e = e[(count[e[:, 0]] > 1) & once[e[:, 1]]]
+    ref, has_ref = owner_means(a.points[pick[e[:, 1]]], e[:, 0], n_b)
+    many = np.flatnonzero(count[f] > 1)  # vertices of A in a group of several
+    centroid = owner_means(a.points[many], f[many], n_b)[0]
+    ref = np.where(has_ref[:, None], ref, centroid)
+    d2 = ((a.points[many] - ref[f[many]]) ** 2).sum(axis=1)
+    order = many[np.lexsort((many, d2, f[many]))]
+    first = np.r_[True, f[order][1:] != f[order][:-1]]
+    pick[f[order[first]]] = order[first]
+    hit = count > 0
+    if not hit.all():
+        _, j = cKDTree(b.points[hit]).query(b.points[~hit], workers=2)
+        pick[~hit] = pick[np.flatnonzero(hit)[j]]
+    return pick
 
 
 def covered_share(b: Shape, f: np.ndarray, rings: int = 1) -> float:
