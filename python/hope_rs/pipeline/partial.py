@@ -251,11 +251,12 @@ class PartialStage(Stage):
             # The nested match detects B as the part of its pair and scales it itself; a given
             # map of A onto B starts it inverted (in the input numbering, as a caller's map).
             nested: dict = {}
-            given = not isinstance(state.init, str)
+            init = state.init
+            given = not isinstance(init, str)
             start = (
-                state.b.map_out(state.a, invert_given_map(state.a, state.b, state.init))
-                if given
-                else state.init
+                init
+                if isinstance(init, str)
+                else state.b.map_out(state.a, invert_given_map(state.a, state.b, init))
             )
             assert state.run is not None  # the runner sets it
             back = state.run(
