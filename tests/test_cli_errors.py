@@ -369,3 +369,41 @@ def test_verbosity_adds_up_before_and_after_the_subcommand(meshes, tmp_path, cap
         assert main([*v, a, b, "-o", out]) == 0
         lines[" ".join(v)] = len(capsys.readouterr().err.splitlines())
     assert lines["-v match"] == lines["match -v"] < lines["-v match -v"] == lines["match -vv"]
+
+
+def test_a_starting_map_file_is_the_match_s_start_and_checked_against_the_meshes(
+    meshes, tmp_path, monkeypatch, capsys
+):
+    a, b = meshes
+    start = np.random.default_rng(0).integers(0, N, N)
+    start_file = tmp_path / "start.txt"
+    hope_rs.write_map(start_file, start)
+    seen = {}
+
+    def spy(*args, **kwargs):
+        seen.update(kwargs)
+        return hope_rs.matching.match(*args, **kwargs)
+
+    monkeypatch.setattr(hope_rs.cli.commands, "match", spy)
+    out = tmp_path / "map.txt"
+    assert main(["match", a, b, "-q", "--init-map", str(start_file), "-o", str(out)]) == 0
+    np.testing.assert_array_equal(seen["init"], start)
+    assert read_map(out, N, N).shape == (N,)
+    # Without it, the settings' descriptors.
+    assert main(["match", a, b, "-q", "--init", "wks", "-o", str(out)]) == 0
+    assert seen["init"] is None and seen["config"].initial.descriptor == "wks"
+    capsys.readouterr()
+    # Both at once, a map of another length, an index beyond B: one line each, nothing written.
+    out.unlink()
+    cases = [
+        (["--init", "wks", "--init-map", str(start_file)], "give --init"),
+        (["--init-map", str(tmp_path / "none.txt")], "no such map file"),
+    ]
+    hope_rs.write_map(tmp_path / "short.txt", start[:-1])
+    cases.append((["--init-map", str(tmp_path / "short.txt")], f"has {N - 1} entries but A has"))
+    (tmp_path / "far.txt").write_text("\n".join(["0"] * (N - 1) + [str(N)]) + "\n")
+    cases.append((["--init-map", str(tmp_path / "far.txt")], f"B has {N} vertices"))
+    for extra, why in cases:
+        assert main(["match", a, b, "-q", *extra, "-o", str(out)]) == 2
+        assert why in one_line_error(capsys.readouterr().err)
+        assert not out.exists()

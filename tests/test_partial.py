@@ -286,6 +286,11 @@ def test_whole_to_part_inverts_the_part_match_and_says_which_vertices_have_a_par
     res_a = run_match(sb, sa, "shot", MatchConfig(), on_stage=lambda st, name: seen.update(st=st))
     assert seen["st"].partial.counterpart.all()
     assert (res_a.map == part.origin).mean() > 0.9
+    # That match is the one the whole's went through: its maps inverted are the whole's.
+    radius = PartialConfig().counterpart_edges * mean_edge(sa)
+    for mine, theirs in ((res.map, res_a.map), (res.hope_map, res_a.hope_map)):
+        inverted, _ = invert_part_map(sa, sb.map_in(sa, theirs), radius)
+        np.testing.assert_array_equal(mine, sa.map_out(sb, inverted))
     # The share of the whole the part's true map covers is the part's share of its area, and
     # at most one ring of faces beyond it (800 vertices: a ring is about a tenth of the area).
     share = covered_share(sa, sa.rank[part.origin][sb.order])
@@ -364,6 +369,9 @@ def test_a_whole_matched_to_its_part_from_a_given_start_goes_through_the_part_s_
     assert "B -> A and inverted" in res.stage("partial").reason
     np.testing.assert_array_equal(res.init_map, start)
     assert geodesic_errors(b, res.map, a_idx=ai, b_idx=bi).mean() < 0.04
+    # HOPE's map is the part's match's own, inverted: the spectral pass and the finish
+    # changed the final map after it.
+    assert (res.hope_map != res.map).any()
 
 
 def test_the_covered_share_of_a_denser_whole_closes_the_gaps_between_images(sphere):

@@ -27,6 +27,7 @@ from ..geometry.map_io import (
     map_format,
     map_writer,
     read_landmarks,
+    read_map,
     same_file,
 )
 from ..geometry.mesh import load_mesh
@@ -98,7 +99,12 @@ def cmd_match(args) -> int:
             )
     if args.output is not None and not args.output.strip():
         raise ValueError("-o names no file (an empty path); leave -o out to print the map")
-    inputs = [args.a, args.b, args.landmarks, args.config]
+    if args.init_map is not None and args.init is not None:
+        raise ValueError(
+            "give --init (the descriptors of the starting map) or --init-map (a starting map "
+            "file), not both"
+        )
+    inputs = [args.a, args.b, args.landmarks, args.init_map, args.config]
     if args.output:  # before any work: a known suffix, a folder we can write to
         check_output_file(args.output, "-o")
         check_not_an_input(args.output, inputs, "-o")
@@ -121,7 +127,12 @@ def cmd_match(args) -> int:
                 "would overwrite the map: give two file names"
             )
     landmarks = None if args.landmarks is None else read_landmarks(args.landmarks)
+    # A starting map read before the meshes (its form), again with their sizes (its length
+    # and range); without one, the descriptors of the settings.
+    init = None if args.init_map is None else read_map(args.init_map)
     a, b = load_mesh(args.a), load_mesh(args.b)
+    if args.init_map is not None:
+        init = read_map(args.init_map, n=a.n_vertices, n_target=b.n_vertices)
     if landmarks is not None:  # again, with the meshes' sizes: a bad index named by its line
         landmarks = read_landmarks(args.landmarks, n_a=a.n_vertices, n_b=b.n_vertices)
         try:
@@ -146,7 +157,14 @@ def cmd_match(args) -> int:
     bar = ProgressBar()
     show_bar = bar.live and not args.quiet and not args.verbose
     try:
-        res = match(a, b, landmarks=landmarks, progress=bar if show_bar else None, config=config)
+        res = match(
+            a,
+            b,
+            init=init,
+            landmarks=landmarks,
+            progress=bar if show_bar else None,
+            config=config,
+        )
     except ValueError as e:
         # A mesh that cannot be matched, named "a: ..." or "b: ...": named by its file here.
         which = {"a: ": args.a, "b: ": args.b}.get(str(e)[:3])
@@ -223,6 +241,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--landmarks", metavar="FILE",
         help="vertex pairs known to correspond, one 'A_VERTEX B_VERTEX' line each (0-based): "
         "mapped exactly, and the map around them follows",
+    )  # fmt: skip
+    m.add_argument(
+        "--init-map", metavar="FILE",
+        help="start from this map instead of descriptors: a map file as -o writes it (one "
+        "0-based B vertex per vertex of A; .txt, .csv or .npy)",
     )  # fmt: skip
     m.add_argument(
         "--no-spectral",

@@ -119,6 +119,12 @@ def geodesic_errors(b, mapping, *, a_idx=None, b_idx=None, method: str = "graph"
         ``"graph"``: edge-graph shortest paths (fast, a few percent long). ``"surface"``: edge-flip
         surface geodesics (near-exact, used by ``hope-rs bench``; needs potpourri3d). Distances
         are computed only between the scored pairs, never as an n x n matrix.
+
+    Returns
+    -------
+    (len(a_idx),) float64
+        ``inf`` where the matched vertex lies on another piece of B than the true one (no path
+        joins them); :func:`score` counts such an error as 1.
     """
     if method not in GEODESIC_METHODS:
         raise ValueError(f"method must be one of {GEODESIC_METHODS}, got {method!r}")

@@ -265,7 +265,7 @@ class PartialStage(Stage):
                 start,
                 state.config,
                 callback=state.callback,  # its steps are this match's
-                progress=state.log.relay("partial"),
+                progress=state.log.relay("partial").labelled("B -> A"),
                 landmarks=input_landmarks(state, swap=True),
                 on_stage=lambda st, name: nested.update(partial=st.partial),
             )
@@ -283,7 +283,9 @@ class PartialStage(Stage):
             part = nested.get("partial")
             scale = part.scale if part is not None and part.part == "a" else info.scale
             info = dataclasses.replace(info, counterpart=has, scale=scale)
-            state.f0, state.f, state.hope_map = f0, f, f
+            assert back.hope_map is not None  # run_match always sets it
+            hope, _ = invert_part_map(state.a, state.b.map_in(state.a, back.hope_map), radius)
+            state.f0, state.f, state.hope_map = f0, f, hope
             state.history = back.history
             # The stages after this one (the confidence) measure the part at that scale too.
             if scale != state.b.scale:

@@ -194,9 +194,13 @@ class _Relay:
     """Passes a nested match's events on as steps of one stage of the outer match; ``last``
     is the time of the latest one (``time.perf_counter()``)."""
 
-    def __init__(self, log: StageLog, stage: str):
+    def __init__(self, log: StageLog, stage: str, label: str = ""):
         self.outer, self.stage, self.last = log, stage, time.perf_counter()
-        self.log_prefix = log.prefix + stage + " "
+        self.log_prefix = log.prefix + stage + " " + (label + " " if label else "")
+
+    def labelled(self, label: str) -> _Relay:
+        """The same relay, its nested match's log lines also headed by ``label`` (a trial's)."""
+        return _Relay(self.outer, self.stage, label)
 
     def __call__(self, ev: ProgressEvent) -> None:
         self.last = time.perf_counter()

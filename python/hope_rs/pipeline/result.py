@@ -52,7 +52,10 @@ class MatchResult:
         ``map[i]`` is the vertex of B matched to vertex ``i`` of A. For pyFM, see
         :meth:`to_pyfm`.
     init_map : (n_a,) int64
-        The map refinement started from.
+        The map refinement started from: the initial map, or the caller's ``init`` map. When
+        A is a part matched in trials, the kept trial's start (the merge of the trials' maps
+        when the merge is kept); when B is, the part's match's start inverted (the caller's
+        map when one was given).
     history : list of Iteration
         Per refinement step: k, witness fraction, vertices changed, seconds.
     timings : dict
@@ -70,7 +73,8 @@ class MatchResult:
     hope_map : (n_a,) int64
         HOPE's own map: the refinement's output, before the spectral pass chose between it and
         its ZoomOut refinement region by region and before the shared-face finish. Equal to
-        ``map`` when neither of those changed it (see :attr:`stages`).
+        ``map`` when neither of those changed it (see :attr:`stages`). When B is a part, the
+        part's match's HOPE map inverted like ``map``.
     stages : list of StageInfo
         Every stage in the order it ran, with whether it ran, why (or why not) and its seconds:
         "shapes", "descriptors", "init" ("coarse" and "lift" with ``multiscale``), "refine",

@@ -123,6 +123,9 @@ def run_trial(
     c = candidate
     assert state.run is not None  # the runner sets it
     last: dict = {}
+    labelled = getattr(progress, "labelled", None)
+    if labelled is not None:  # a relay: the trial's log lines headed by its label
+        progress = labelled(c.label)
 
     def grab(s: MatchState, name: str) -> None:
         last["zoomout"] = s.zoomout
