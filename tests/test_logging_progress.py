@@ -14,6 +14,7 @@ from meshes import bumpy_sphere, write_off
 import hope_rs
 from hope_rs import MatchConfig
 from hope_rs.cli import main
+from hope_rs.evaluation.partial import cut_by_plane, plane_normal
 from hope_rs.geometry.coarsen import CoarsenConfig
 from hope_rs.pipeline.progress import STAGES, ProgressBar, ProgressEvent
 from hope_rs.pipeline.refine import Iteration
@@ -251,3 +252,18 @@ def test_to_pyfm_is_p2p_21_with_mesh1_b(spheres):
     np.testing.assert_array_equal(p2p_21, res.map)
     p2p_21[0] = -1
     assert res.map[0] != -1  # a copy
+
+
+def test_a_part_s_trials_log_their_lines_under_their_labels(caplog):
+    """Each scale trial of a part's match, and the whole -> part match's nested one, heads its
+    log lines with its label, so four trials' stages can be told apart."""
+    sphere = hope_rs.Mesh(*bumpy_sphere(400, 0))
+    part = cut_by_plane(sphere, plane_normal(2), 0.3).mesh
+    caplog.set_level(logging.INFO, logger="hope_rs")
+    hope_rs.match(part, sphere, max_passes=1)
+    refine = [m for m in caplog.messages if m.startswith("partial ") and " refine:" in m]
+    heads = {m.split(" refine:")[0] for m in refine}
+    assert {"partial x1", "partial x0.95", "partial x1.05", "partial merge"} <= heads, heads
+    caplog.clear()
+    hope_rs.match(sphere, part, max_passes=1)
+    assert any(m.startswith("partial B -> A partial x1 refine:") for m in caplog.messages)
