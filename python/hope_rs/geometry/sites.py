@@ -74,13 +74,19 @@ def owner_means(v: np.ndarray, owner: np.ndarray, n: int) -> tuple[np.ndarray, n
         return sums / count[:, None], count > 0
 
 
+def nearest_members(v: np.ndarray, owner: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """Of each group that has points, the point nearest its centre (ties: the lowest index),
+    in the order of the groups' ids: point ``i`` of ``v`` is in group ``owner[i]``, whose
+    centre is ``centre[owner[i]]``."""
+    d2 = ((v - centre[owner]) ** 2).sum(axis=1)
+    by_group = np.lexsort((np.arange(v.shape[0]), d2, owner))
+    first = np.r_[True, owner[by_group][1:] != owner[by_group][:-1]]
+    return by_group[first]
+
+
 def _sites_of(v: np.ndarray, owner: np.ndarray, n_cells: int) -> np.ndarray:
     """The site of each of ``n_cells`` cells, vertex ``i`` being in cell ``owner[i]``."""
-    centroid = owner_means(v, owner, n_cells)[0]
-    d2 = ((v - centroid[owner]) ** 2).sum(axis=1)
-    by_cell = np.lexsort((np.arange(v.shape[0]), d2, owner))
-    first = np.r_[True, owner[by_cell][1:] != owner[by_cell][:-1]]
-    return by_cell[first]
+    return nearest_members(v, owner, owner_means(v, owner, n_cells)[0])
 
 
 def shot_sites(

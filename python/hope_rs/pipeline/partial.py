@@ -43,7 +43,7 @@ from scipy.spatial import cKDTree
 
 from ..geometry.mesh import boundary_edges
 from ..geometry.roughness import umbrella_smoothed
-from ..geometry.sites import owner_means
+from ..geometry.sites import nearest_members, owner_means
 from ..shape import Shape
 from .anchors import masked_components
 from .config import MatchConfig, PartialConfig
@@ -131,10 +131,7 @@ def invert_given_map(a: Shape, b: Shape, f: np.ndarray) -> np.ndarray:
     many = np.flatnonzero(count[f] > 1)  # vertices of A in a group of several
     centroid = owner_means(a.points[many], f[many], n_b)[0]
     ref = np.where(has_ref[:, None], ref, centroid)
-    d2 = ((a.points[many] - ref[f[many]]) ** 2).sum(axis=1)
-    order = many[np.lexsort((many, d2, f[many]))]
-    first = np.r_[True, f[order][1:] != f[order][:-1]]
-    pick[f[order[first]]] = order[first]
+    pick[np.unique(f[many])] = many[nearest_members(a.points[many], f[many], ref)]
     hit = count > 0
     if not hit.all():
         _, j = cKDTree(b.points[hit]).query(b.points[~hit], workers=2)
