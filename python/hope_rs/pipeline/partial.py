@@ -249,7 +249,6 @@ class PartialStage(Stage):
             # map of A onto B starts it inverted (in the input numbering, as a caller's map).
             nested: dict = {}
             init = state.init
-            given = not isinstance(init, str)
             start = (
                 init
                 if isinstance(init, str)
@@ -272,9 +271,9 @@ class PartialStage(Stage):
             )
             # The initial map is the caller's, or the nested match's inverted alike.
             f0 = (
-                np.asarray(state.init, dtype=np.int64)
-                if given
-                else invert_part_map(state.a, state.b.map_in(state.a, back.init_map), radius)[0]
+                invert_part_map(state.a, state.b.map_in(state.a, back.init_map), radius)[0]
+                if isinstance(init, str)
+                else np.asarray(init, dtype=np.int64)
             )
             # The scale the nested match measured the part at (it may have rescaled it).
             part = nested.get("partial")
