@@ -407,3 +407,14 @@ def test_a_starting_map_file_is_the_match_s_start_and_checked_against_the_meshes
         assert main(["match", a, b, "-q", *extra, "-o", str(out)]) == 2
         assert why in one_line_error(capsys.readouterr().err)
         assert not out.exists()
+
+
+def test_quiet_keeps_the_warning_that_a_match_likely_failed(meshes, tmp_path, capsys):
+    """-q removes the progress bar and hints, not the warning about the map: a single
+    triangle against a sphere cannot be matched confidently."""
+    tri = tmp_path / "tri.off"
+    tri.write_text("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")
+    for quiet in ([], ["-q"]):
+        assert main(["match", str(tri), meshes[0], "-o", str(tmp_path / "m.txt"), *quiet]) == 0
+        err = capsys.readouterr().err
+        assert "hope-rs: warning: this match likely failed" in err, (quiet, err)

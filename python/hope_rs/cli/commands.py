@@ -176,7 +176,8 @@ def cmd_match(args) -> int:
     coarse = next((s for s in res.stages if s.name == "coarse"), None)
     if coarse is not None and not coarse.ran and not args.quiet and not args.verbose:
         print(f"hope-rs: note: --multiscale: {coarse.reason}", file=sys.stderr)
-    if res.quality is not None and res.quality.likely_failed and not args.quiet:
+    # A warning about the map itself, printed with -q too (it is not progress).
+    if res.quality is not None and res.quality.likely_failed:
         print(
             f"hope-rs: warning: this match likely failed (mean confidence "
             f"{res.quality.mean_confidence:.2f}, {res.quality.share_confident:.0%} of A's "
@@ -266,7 +267,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--json", action="store_true",
         help="print timings and a summary as JSON (without -o, with the map as its \"map\")",
     )  # fmt: skip
-    m.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    m.add_argument(
+        "-q", "--quiet", action="store_true",
+        help="no progress bar, hints or notes (a warning that the match likely failed still "
+        "prints)",
+    )  # fmt: skip
     m.add_argument(
         "-v", "--verbose", action="count", default=0, dest="match_verbose",
         help="as hope-rs -v, adding up with it: log each stage (-vv: every step) instead of "
