@@ -507,3 +507,32 @@ def test_8b_a_folder_where_a_map_goes_fails_its_pair_before_matching_it(files, t
                              [(0, 1), (1, 2)], out_dir=out, jobs=1, cache=False, **FAST)  # fmt: skip
     assert not res[0].ok and "a folder is there" in res[0].error and res[1].ok
     assert len(configs) == 1  # the other pair only
+
+
+def test_13_a_pair_whose_map_likely_failed_is_marked_and_a_rerun_keeps_the_mark(
+    files, tmp_path, capsys
+):
+    """Each PairResult carries the match's MatchQuality (a skipped pair's from the manifest),
+    and the command line marks a pair that likely failed: a single triangle against a sphere
+    is matched (its map written) but flagged, as `match` flags it."""
+    tri = tmp_path / "tri.off"
+    tri.write_text("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")
+    shapes, out = [files / "s0.off", files / "s1.off", tri], tmp_path / "out"
+    run = {"out_dir": out, "jobs": 1, "cache": False, **FAST}
+    results = hope_rs.match_many(shapes, [(0, 1), (2, 0)], **run)
+    for r, (i, j) in zip(results, [(0, 1), (2, 0)]):
+        alone = hope_rs.match(hope_rs.load_mesh(shapes[i]), hope_rs.load_mesh(shapes[j]), **FAST)
+        assert r.ok and r.quality == alone.quality
+    assert results[1].quality.likely_failed
+    again = hope_rs.match_many(shapes, [(0, 1), (2, 0)], **run)
+    assert all(r.skipped for r in again)
+    assert [r.quality for r in again] == [r.quality for r in results]
+    # The command line: the pair's line, a warning with the figures, the count; status 0.
+    (tmp_path / "pairs.txt").write_text(f"{tri} {shapes[0]}\n{shapes[0]} {shapes[1]}\n")
+    args = ["batch", str(tmp_path / "pairs.txt"), "--out", str(tmp_path / "o"), "-j", "1",
+            "--no-cache", "--no-spectral"]  # fmt: skip
+    assert main(args) == 0
+    captured = capsys.readouterr()
+    assert "tri -> s0: ok, likely failed" in captured.err
+    assert "hope-rs: warning: tri -> s0: likely failed (mean confidence 0.00" in captured.err
+    assert ", 1 likely failed in " in captured.out

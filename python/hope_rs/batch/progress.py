@@ -45,5 +45,7 @@ class BatchProgress:
             self.stream.write("\r" + line + ("\n" if self.done == self.total else ""))
         else:
             status = "skipped" if r.skipped else ("ok" if r.ok else f"FAILED: {r.error}")
+            if r.quality is not None and r.quality.likely_failed:
+                status += ", likely failed"
             self.stream.write(f"{line} | {r.a} -> {r.b}: {status}\n")
         self.stream.flush()

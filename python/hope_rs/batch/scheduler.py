@@ -20,6 +20,7 @@ import numpy as np
 
 from ..geometry.map_io import read_map, text_map_is_complete, write_map
 from ..pipeline.landmarks import check_landmarks
+from ..pipeline.result import MatchQuality
 from .backends import Backend
 from .manifest import Manifest, landmarks_digest, map_digest
 from .tasks import error_text, pair_task, prepare_task
@@ -50,6 +51,11 @@ class PairResult:
         The map file, when an output folder was given.
     timings : dict
         ``MatchResult.timings`` of the pair, plus "load" (seconds to get both shapes ready).
+    quality : MatchQuality or None
+        ``MatchResult.quality`` of the pair (``likely_failed``: look at the map before using
+        it); for a skipped pair as the manifest recorded it. ``None`` without a confidence
+        (``ConfidenceConfig.enabled`` off), for a failed pair, or for a skipped one whose
+        entry an older hope_rs wrote.
     """
 
     index: int
@@ -60,6 +66,7 @@ class PairResult:
     skipped: bool = False
     path: Path | None = None
     timings: dict = field(default_factory=dict)
+    quality: MatchQuality | None = None
 
     @property
     def ok(self) -> bool:
@@ -103,6 +110,16 @@ def _checked_landmarks(landmarks, n_a: int, n_b: int, file: str | None) -> tuple
         return check_landmarks(landmarks, n_a, n_b), None
     except (TypeError, ValueError) as e:
         return None, ("" if file is None else f"landmark file {file!r}: ") + error_text(e)
+
+
+def _quality(fields: dict | None) -> MatchQuality | None:
+    """A :class:`MatchQuality` from its fields as a pair task or the manifest gives them."""
+    if not isinstance(fields, dict):
+        return None
+    try:
+        return MatchQuality(**fields)
+    except TypeError:  # an entry another version of hope_rs wrote
+        return None
 
 
 def run(plan: Plan, ex: Backend, report: Callable) -> Iterator[PairResult]:
@@ -184,7 +201,11 @@ def run(plan: Plan, ex: Backend, report: Callable) -> Iterator[PairResult]:
                 return result(n, error=f"cannot write the map {str(path)!r}: {e.strerror or e}")
             if manifest is not None:
                 try:
-                    manifest.record(path.name, entry(n) | {"map_digest": map_digest(value["map"])})
+                    manifest.record(
+                        path.name,
+                        entry(n)
+                        | {"map_digest": map_digest(value["map"]), "quality": value["quality"]},
+                    )
                 except OSError as e:
                     warnings.warn(
                         f"cannot update the batch manifest {str(manifest.path)!r} "
@@ -192,7 +213,9 @@ def run(plan: Plan, ex: Backend, report: Callable) -> Iterator[PairResult]:
                         RuntimeWarning,
                         stacklevel=2,
                     )
-        return result(n, map=value["map"], timings=value["timings"])
+        return result(
+            n, map=value["map"], timings=value["timings"], quality=_quality(value["quality"])
+        )
 
     def loop() -> Iterator[PairResult]:
         """Start tasks as their inputs are ready; yield each pair's result."""
@@ -243,7 +266,9 @@ def run(plan: Plan, ex: Backend, report: Callable) -> Iterator[PairResult]:
                                 path.name, entry(n) | {"map_digest": map_digest(m)}
                             )
                         if why is None:
-                            yield result(n, map=m, skipped=True)
+                            old = {} if manifest is None else manifest.entries.get(path.name, {})
+                            recorded = old.get("quality")
+                            yield result(n, map=m, skipped=True, quality=_quality(recorded))
                             continue
                         warnings.warn(
                             f"{path.name}: {why}; computing it again",

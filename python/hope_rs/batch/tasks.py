@@ -5,6 +5,7 @@ They never raise: a failure is returned as ``{"error": ...}`` and reported per s
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 from collections import OrderedDict
@@ -137,6 +138,7 @@ def pair_task(job: dict, a: dict, b: dict, landmarks=None) -> dict:
         sb = _shape(b, job["cache_root"], kinds, config.k_max, basis)
         load = time.perf_counter() - t0
         res = match(sa, sb, config=config, landmarks=landmarks)
-        return {"map": res.map, "timings": {"load": load, **res.timings}}
+        quality = None if res.quality is None else dataclasses.asdict(res.quality)
+        return {"map": res.map, "timings": {"load": load, **res.timings}, "quality": quality}
     except Exception as e:  # noqa: BLE001 - reported per pair, the batch goes on
         return {"error": error_text(e)}

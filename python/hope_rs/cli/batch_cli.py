@@ -192,7 +192,7 @@ def cmd_batch(args) -> int:
     index = {p: i for i, p in enumerate(shapes)}
     t0 = time.perf_counter()
     counts = {"matched": 0, "skipped": 0, "failed": 0}
-    failures = []
+    failures, doubtful = [], []
     results = imatch_many(
         shapes,
         [(index[a], index[b]) for a, b in pairs],
@@ -217,13 +217,15 @@ def cmd_batch(args) -> int:
             counts["skipped" if r.skipped else ("matched" if r.ok else "failed")] += 1
             if not r.ok:
                 failures.append(f"{r.a} -> {r.b}: {r.error}")
+            elif r.quality is not None and r.quality.likely_failed:
+                doubtful.append(f"{r.a} -> {r.b}: likely failed ({r.quality.describe()})")
     except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM (hope_rs._terminate)
         interrupted, started = e, True
     finally:
         results.close()  # on any early exit: end the workers now
         if started:
             seconds = time.perf_counter() - t0
-            _summary(args, len(pairs), counts, failures, seconds, interrupted is not None)
+            _summary(args, len(pairs), counts, failures, doubtful, seconds, interrupted is not None)
     if interrupted is not None:
         print(
             "hope-rs: interrupted; the maps written are kept, rerun the same command to finish",
@@ -233,14 +235,26 @@ def cmd_batch(args) -> int:
     return 1 if counts["failed"] else 0
 
 
-def _summary(args, total: int, counts: dict, failures: list, seconds: float, interrupted: bool):
+def _summary(
+    args,
+    total: int,
+    counts: dict,
+    failures: list,
+    doubtful: list,
+    seconds: float,
+    interrupted: bool,
+):
     for line in failures:
         print(f"hope-rs: pair failed: {line}", file=sys.stderr)
+    for line in doubtful:
+        print(f"hope-rs: warning: {line}", file=sys.stderr)
     rate = 60 * counts["matched"] / seconds if seconds > 0 else 0.0
     left = total - sum(counts.values())
     print(
         f"{total} pairs: {counts['matched']} matched, {counts['skipped']} skipped, "
-        f"{counts['failed']} failed, {left} not run" + (" (interrupted)" if interrupted else "")
+        f"{counts['failed']} failed, {left} not run"
+        + (f", {len(doubtful)} likely failed" if doubtful else "")
+        + (" (interrupted)" if interrupted else "")
         + f" in {seconds:.1f} s ({rate:.1f} pairs/min) -> {args.out}",
         flush=True,
     )  # fmt: skip

@@ -179,9 +179,7 @@ def cmd_match(args) -> int:
     # A warning about the map itself, printed with -q too (it is not progress).
     if res.quality is not None and res.quality.likely_failed:
         print(
-            f"hope-rs: warning: this match likely failed (mean confidence "
-            f"{res.quality.mean_confidence:.2f}, {res.quality.share_confident:.0%} of A's "
-            f"vertices confident, {res.quality.flipped_share:.0%} of its area turned over); "
+            f"hope-rs: warning: this match likely failed ({res.quality.describe()}); "
             "look at it with hope-rs show --color-by confidence",
             file=sys.stderr,
         )

@@ -41,6 +41,14 @@ class MatchQuality:
     likely_failed: bool
     flipped_share: float = 0.0
 
+    def describe(self) -> str:
+        """The figures the flag reads, for a message: "mean confidence 0.41, 38% of A's
+        vertices confident, 12% of its area turned over"."""
+        return (
+            f"mean confidence {self.mean_confidence:.2f}, {self.share_confident:.0%} of A's "
+            f"vertices confident, {self.flipped_share:.0%} of its area turned over"
+        )
+
 
 @dataclass(eq=False)  # == is identity: comparing its arrays element-wise has no one answer
 class MatchResult:
