@@ -239,3 +239,21 @@ def test_fins_standing_on_edges_are_left_out_as_debris(pair):
     # other way and inverted), 3.5% of a faust_r pair's vertices went unmatched and 32 landed
     # on fin tips. A fin hangs off the surface by an edge of three faces: a piece of its own.
     left_out_on_either_side(pair, lambda v, f, seed: with_fins(v, f, 50, seed), (12, 13), 50)
+
+
+def test_a_landmark_on_a_welded_copy_of_b_is_mapped_to_that_copy(pair):
+    """B as a triangle soup (every corner its own vertex; the match welds the copies of a
+    point): a landmark naming any copy is mapped to that copy, as landmarks are mapped
+    exactly; the other vertices go to the first copy of their image."""
+    (va, fa), (vb, fb) = pair
+    soup_v, soup_f = vb[fb].reshape(-1, 3), np.arange(3 * len(fb)).reshape(-1, 3)
+    corners = fb.reshape(-1)
+    # The last copy (a face corner) of B's vertices 3, 7 and 11, given to A's 0, 1 and 2.
+    last = [int(np.flatnonzero(corners == v)[-1]) for v in (3, 7, 11)]
+    lm = np.array([[0, last[0]], [1, last[1]], [2, last[2]]])
+    res = hope_rs.match((va, fa), (soup_v, soup_f), landmarks=lm, max_passes=1)
+    np.testing.assert_array_equal(res.map[lm[:, 0]], lm[:, 1])
+    first = np.full(len(vb), len(corners))
+    np.minimum.at(first, corners, np.arange(len(corners)))
+    rest = np.setdiff1d(np.arange(len(va)), lm[:, 0])
+    assert np.isin(res.map[rest], first).all()

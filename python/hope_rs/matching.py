@@ -161,7 +161,7 @@ def match(
     config = _shape_settings(ma, mb, config)
     if not isinstance(init, str):
         init = as_index_map(init, ma.n_vertices, mb.n_vertices, name="init")
-    landmarks = check_landmarks(landmarks, ma.n_vertices, mb.n_vertices)
+    landmarks = given = check_landmarks(landmarks, ma.n_vertices, mb.n_vertices)
     # Vertices in no face and small loose pieces have no surface to match by: the pair is
     # matched without them.
     ref = referenced(_mesh_of(ma), _mesh_of(mb), config.min_piece)
@@ -185,7 +185,7 @@ def match(
         res = run_match(
             sa, sb, init, config, callback=callback, log=log, timings=timings, landmarks=landmarks
         )
-        return res if ref is None else ref.expand(res)
+        return res if ref is None else ref.expand(res, given)
     finally:
         if bar is not None:
             bar.close()

@@ -229,16 +229,23 @@ class Referenced:
             out = out[self.weld_a]  # a welded copy: its first copy's image
         return out
 
-    def expand(self, res: MatchResult) -> MatchResult:
-        """``res`` (of the compact shapes) in the meshes' own numbering."""
+    def expand(self, res: MatchResult, landmarks: np.ndarray | None = None) -> MatchResult:
+        """``res`` (of the compact shapes) in the meshes' own numbering; each of the caller's
+        ``landmarks`` (meshes' numbering) keeps its own vertex of B where the map sends its
+        vertex of A to a welded copy of it (the same point: the compact shapes know one)."""
         conf = res.confidence
         if conf is not None and self.keep_a is not None:
             full = np.zeros(self.n_a)
             full[self.keep_a] = conf
             conf = full if self.weld_a is None else full[self.weld_a]
+        f = self._map_out(res.map)
+        if landmarks is not None and len(landmarks) and self.weld_b is not None:
+            la, lb = landmarks[:, 0], landmarks[:, 1]
+            same = self.weld_b[f[la]] == self.weld_b[lb]
+            f[la[same]] = lb[same]
         return dataclasses.replace(
             res,
-            map=self._map_out(res.map),
+            map=f,
             init_map=self._map_out(res.init_map),
             hope_map=None if res.hope_map is None else self._map_out(res.hope_map),
             confidence=conf,
