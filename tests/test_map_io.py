@@ -209,3 +209,15 @@ def test_a_byte_order_mark_is_read_past(tmp_path):
     lm = tmp_path / "lm.txt"
     lm.write_bytes(b"\xef\xbb\xbf0 5\n17 3\n")
     np.testing.assert_array_equal(read_landmarks(lm), [[0, 5], [17, 3]])
+
+
+def test_the_swap_hint_names_a_map_as_long_as_b_only(tmp_path):
+    """A map of B's length was probably given the other way round; a cut one was not."""
+    path = tmp_path / "m.txt"
+    path.write_text("0\n1\n2\n3\n")  # B's 4 vertices, A has 5
+    with pytest.raises(ValueError, match=r"\(did you swap A and B\?\)"):
+        read_map(path, n=5, n_target=4)
+    path.write_text("0\n1\n")  # cut short
+    with pytest.raises(ValueError, match="has 2 entries but A has 5") as err:
+        read_map(path, n=5, n_target=4)
+    assert "did you swap" not in str(err.value)

@@ -118,8 +118,11 @@ def test_good_options_pass_the_checks(pair, no_shapes):
 
 def test_a_prebuilt_shape_with_a_smaller_k_max_is_rejected(pair):
     a = hope_rs.Shape(pair[0], k_max=3)
-    with pytest.raises(ValueError, match="built with k_max=3 < requested k_max=8"):
+    with pytest.raises(ValueError, match="built with k_max=3 < requested k_max=8") as e:
         hope_rs.match(a, pair[1])
+    # The message says both ways out.
+    assert "Shape(..., k_max=8)" in str(e.value) and "match with k_max=3" in str(e.value)
+    hope_rs.match(a, pair[1], k_max=3, max_passes=1)
 
 
 def test_prebuilt_shapes_run_the_requested_smaller_k_max():

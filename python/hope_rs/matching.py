@@ -29,7 +29,10 @@ def _as_mesh(x, k_max: int, name: str) -> Shape | Mesh:
     """``x`` as a Shape or Mesh, checked: the cheap part of :func:`_as_shape`."""
     if isinstance(x, Shape):
         if x.k_max < k_max:
-            raise ValueError(f"{name} was built with k_max={x.k_max} < requested k_max={k_max}")
+            raise ValueError(
+                f"{name} was built with k_max={x.k_max} < requested k_max={k_max}; build it "
+                f"with Shape(..., k_max={k_max}) or more, or match with k_max={x.k_max}"
+            )
         return x
     return as_mesh(x, name)
 

@@ -387,9 +387,11 @@ def read_map(
                 "or a .npy array)"
             ) from None
     if n is not None and arr.size != n:
+        # The swap is worth naming only when the length is B's vertex count.
+        swapped = " (did you swap A and B?)" if arr.size == n_target else ""
         raise ValueError(
             f"map {name!r} has {arr.size} entries but A has {n} vertices; it must list one B "
-            "vertex per vertex of A (did you swap A and B?)"
+            f"vertex per vertex of A{swapped}"
         )
     if arr.size and arr.min() < 0:
         raise ValueError(f"map {name!r} holds a negative index ({arr.min()}); indices are 0-based")
