@@ -69,6 +69,7 @@ from hope_rs.pipeline.confidence import (
     match_quality,
     vertex_confidence,
 )
+from hope_rs.pipeline.denoise import denoised
 from hope_rs.pipeline.runner import run_match
 
 HELD_OUT = ["faust_r", "tosca_r", "tosca_nonisometric_r"]
@@ -188,6 +189,8 @@ def _internal(pair: Pair, m: dict, config: MatchConfig):
     (as :func:`~hope_rs.pipeline.confidence.state_quality` reads them)."""
     a = Shape(hope_rs.load_mesh(pair.a), k_max=config.k_max, config=config.shape)
     b = Shape(hope_rs.load_mesh(pair.b), k_max=config.k_max, config=config.shape)
+    # The shapes the match ran on: a noisy one replaced by its smoothed copy (same numbering).
+    a, b = denoised(a, b, config)
     z = None if (m["zoomout"] < 0).any() else a.map_in(b, m["zoomout"])
     f = a.map_in(b, m.get("judged", m["map"]))
     flipped = flipped_share(a, b, a.map_in(b, m["map"]))

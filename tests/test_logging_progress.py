@@ -154,7 +154,7 @@ def test_hope_map_is_always_hopes_own_map(faust_pair):
     coarse = res.stage("coarse")
     assert not coarse.ran and coarse.seconds == 0 and "not on this match's path" in coarse.reason
     assert "coarse" not in [s.name for s in res.stages]
-    with pytest.raises(KeyError, match="no stage 'corse'; the stages are shapes, partial"):
+    with pytest.raises(KeyError, match="no stage 'corse'; the stages are shapes, denoise, partial"):
         res.stage("corse")
 
 

@@ -16,7 +16,13 @@ from hope_rs.evaluation.partial import cut_by_plane, plane_normal
 from hope_rs.evaluation.perturbed import add_noise
 from hope_rs.geometry.mesh import boundary_edges
 from hope_rs.pipeline import runner
-from hope_rs.pipeline.config import MatchConfig, OrientConfig, PartialConfig, RepairConfig
+from hope_rs.pipeline.config import (
+    DenoiseConfig,
+    MatchConfig,
+    OrientConfig,
+    PartialConfig,
+    RepairConfig,
+)
 from hope_rs.pipeline.options import check_config
 from hope_rs.pipeline.torn import TornRegions, replaced
 
@@ -162,22 +168,28 @@ def test_config_checks_the_torn_settings():
 @pytest.mark.slow
 def test_a_region_torn_off_under_noise_is_repaired():
     # TOSCA remeshed cat0 -> cat1 with B under Gaussian noise of 0.5% of sqrt(area), as the
-    # benchmark's noise05 set builds it (seeded by the pair's index, 0): without the "torn"
-    # trigger the match carries a region of A to the wrong place with its orientation kept
-    # and is not flagged; the tear along the region's seam shows it.
+    # benchmark's noise05 set builds it (seeded by the pair's index, 0), matched on the noisy
+    # B itself (the "denoise" stage off): without the "torn" trigger the match carries a
+    # region of A to the wrong place with its orientation kept and is not flagged; the tear
+    # along the region's seam shows it.
     ma, mb, ai, bi = shared_pair("tosca_r", "cat0->cat1")
     mb = add_noise(mb, 0.005, 0)
     a, b = hope_rs.Shape(ma), hope_rs.Shape(mb)
-    off = dataclasses.replace(MatchConfig(), orient=OrientConfig(on_torn=False))
+    noisy = dataclasses.replace(MatchConfig(), denoise=DenoiseConfig(enabled=False))
+    off = dataclasses.replace(noisy, orient=OrientConfig(on_torn=False))
     before = hope_rs.match(a, b, config=off)
     torn = TornRegions(a, b, *SETTINGS)
     assert torn.share(a.map_in(b, before.map)) > MIN_SHARE
     assert geodesic_errors(mb, before.map, a_idx=ai, b_idx=bi).mean() > 0.045
-    res = hope_rs.match(a, b)
+    res = hope_rs.match(a, b, config=noisy)
     info = res.stage("orient")
     assert info.ran and "torn off" in info.reason and "chose torn" in info.reason
     assert torn.share(a.map_in(b, res.map)) == 0.0
     assert geodesic_errors(mb, res.map, a_idx=ai, b_idx=bi).mean() < 0.035
+    # By default the pair is matched on B's smoothed copy, where nothing tears.
+    default = hope_rs.match(a, b)
+    assert default.stage("denoise").ran
+    assert geodesic_errors(mb, default.map, a_idx=ai, b_idx=bi).mean() < 0.035
 
 
 @pytest.mark.slow

@@ -281,6 +281,21 @@ class Shape:
         return self._without[1]
 
     @property
+    def roughness(self) -> float:
+        """The mesh's normal roughness (:func:`~hope_rs.geometry.roughness.normal_roughness`:
+        the median distance of a vertex from its 1-ring's centroid along its normal, in mean
+        edge lengths), computed once."""
+        if "roughness" not in self._smoothing:
+            self._smoothing["roughness"] = normal_roughness(self.internal)
+        return self._smoothing["roughness"]
+
+    @property
+    def smoothing(self) -> int:
+        """How many umbrella smoothings made this shape from its origin (:meth:`smoothed`); 0
+        for a shape of its own mesh."""
+        return 0 if self._smoothed_from is None else self._smoothed_from[1]
+
+    @property
     def smoothing_drop(self) -> float:
         """The share of the mesh's normal roughness
         (:func:`~hope_rs.geometry.roughness.normal_roughness`) that one umbrella smoothing
@@ -288,7 +303,7 @@ class Shape:
         barely move (a clean mesh loses a few percent, one with Gaussian vertex noise of a
         fifth of its mean edge length more than a third). 0 for a flat mesh."""
         if "drop" not in self._smoothing:
-            before = normal_roughness(self.internal)
+            before = self.roughness
             after = normal_roughness(umbrella_smoothed(self.internal, 1))
             self._smoothing["drop"] = max(0.0, 1.0 - after / before) if before > 0 else 0.0
         return self._smoothing["drop"]

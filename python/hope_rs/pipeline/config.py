@@ -48,6 +48,7 @@ __all__ = [
     "INIT_KINDS",
     "KEYWORDS",
     "ConfidenceConfig",
+    "DenoiseConfig",
     "FinishConfig",
     "GrowthConfig",
     "InitialConfig",
@@ -1159,6 +1160,37 @@ class DeformConfig:
     spectral_weight: float = field(default=0.03, metadata={"finite": True, "range": (0.0, None)})
 
 
+@dataclass(frozen=True)
+class DenoiseConfig:
+    """Matching a noisy shape on its smoothed copy (:mod:`hope_rs.pipeline.denoise`,
+    docs/decisions.md#denoise).
+
+    Attributes
+    ----------
+    enabled : bool
+    min_roughness : float
+        A shape is matched on its copy smoothed ``iterations`` times (same numbering, so the
+        map is the same array) when its normal roughness
+        (:func:`~hope_rs.geometry.roughness.normal_roughness`: the median distance of a
+        vertex from its 1-ring's centroid along its normal, in mean edge lengths) is above
+        this ...
+    min_drop : float
+        ... and one smoothing takes more than this share of that roughness out
+        (:meth:`~hope_rs.Shape.smoothing_drop`: vertex noise, not curvature; a clean coarse
+        mesh is rough by its curvature, which smoothing does not take out). Only between
+        shapes of like density (neither more than ``ResolutionConfig.max_ratio`` times as
+        dense as the other): a much denser scan is matched at the common resolution, with
+        that stage's own smoothing.
+    iterations : int
+        Umbrella smoothings of the copy (each vertex halfway to its 1-ring's centroid).
+    """
+
+    enabled: bool = True
+    min_roughness: float = field(default=0.16, metadata={"finite": True, "range": (0.0, None)})
+    min_drop: float = field(default=0.2, metadata={"finite": True, "range": (0.0, 1.0)})
+    iterations: int = field(default=2, metadata={"range": (1, 100)})
+
+
 #: ``match``'s keyword options → (stage field of :class:`MatchConfig`, field of that stage).
 KEYWORDS: dict[str, tuple[str | None, str]] = {
     "k_max": (None, "k_max"),
@@ -1199,6 +1231,8 @@ class MatchConfig:
         Repairing a map that turns A over.
     deform : DeformConfig
         The deformation-aware pass for non-isometric shapes.
+    denoise : DenoiseConfig
+        Matching a noisy shape on its smoothed copy.
 
     Examples
     --------
@@ -1225,6 +1259,7 @@ class MatchConfig:
     partial: PartialConfig = field(default_factory=PartialConfig)
     orient: OrientConfig = field(default_factory=OrientConfig)
     deform: DeformConfig = field(default_factory=DeformConfig)
+    denoise: DenoiseConfig = field(default_factory=DenoiseConfig)
 
     def with_options(self, **options) -> MatchConfig:
         """A copy with ``match``'s keyword options (see :data:`KEYWORDS`) set."""

@@ -25,12 +25,13 @@ __all__ = ["STAGES", "ProgressBar", "ProgressEvent", "StageInfo", "Tried", "logg
 logger = logging.getLogger("hope_rs")
 logger.addHandler(logging.NullHandler())
 
-#: Every stage name a match can report, in the order they run. "coarse" and "lift" appear
-#: only with ``multiscale=True``, "resolution" only when one shape is much denser than the
-#: other, "landmarks" only with landmarks, "deform" only between non-isometric shapes;
-#: "polish" is the refinement's last, not one-to-one step.
+#: Every stage name a match can report, in the order they run. "denoise" appears only when a
+#: shape is noisy, "coarse" and "lift" only with ``multiscale=True``, "resolution" only when
+#: one shape is much denser than the other, "landmarks" only with landmarks, "deform" only
+#: between non-isometric shapes; "polish" is the refinement's last, not one-to-one step.
 STAGES = (
     "shapes",
+    "denoise",
     "partial",
     "resolution",
     "descriptors",

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from .confidence import ConfidenceStage
 from .deform import DeformStage
+from .denoise import DenoiseStage
 from .initial import DescriptorStage, InitialStage
 from .landmarks import LandmarkStage
 from .multiscale import MultiscaleStage
@@ -26,6 +27,7 @@ def default_stages() -> list[Stage]:
     """Fresh instances of the stages (a stage keeps the state of one match, such as the
     spectral pass's background threads)."""
     return [
+        DenoiseStage(),  # "denoise": only when a shape is noisy
         PartialStage(),  # "partial": only when one shape is a part of the other
         ResolutionStage(),  # "resolution": only when one shape is much denser than the other
         MultiscaleStage(),  # "coarse", "lift": multiscale=True only

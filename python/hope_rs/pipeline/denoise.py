@@ -1,0 +1,78 @@
+"""The "denoise" stage: a noisy shape is matched on its smoothed copy.
+
+Vertex noise that is large against a mesh's edges (a scan's, or Gaussian noise of half a
+percent of sqrt(area) on a 5k mesh) corrupts what every later stage reads: SHOT's normals and
+histograms, the zigzag edge paths the geodesic distances follow, and the triangles a right map
+turns over. When a shape's normal roughness is above ``DenoiseConfig.min_roughness`` mean edge
+lengths and one umbrella smoothing takes more than ``min_drop`` of it out (noise, not
+curvature: a clean mesh loses a few percent), the stage replaces it by its copy smoothed
+``iterations`` times (:meth:`~hope_rs.Shape.smoothed`: the same numbering, faces and k-hop
+neighbourhoods), so the map found is a map of the shape itself.
+
+Only between shapes of like density: a much denser shape goes through the resolution stage,
+which smooths the copy of a noisy dense scan its own way (docs/decisions.md#smooth-rougher).
+A copy made by this stage is never smoothed again (the nested matches of later stages).
+"""
+
+from __future__ import annotations
+
+import time
+
+from ..shape import Shape
+from .config import MatchConfig
+from .resolution import denser_side
+from .state import QUIET, MatchState, Stage
+
+__all__ = ["DenoiseStage", "denoised", "noisy", "noisy_sides"]
+
+
+def noisy(s: Shape, min_roughness: float, min_drop: float) -> bool:
+    """Whether ``s`` is rougher along its normals than ``min_roughness`` mean edge lengths
+    and one smoothing takes more than ``min_drop`` of that out (the cheap test first)."""
+    return s.smoothing == 0 and s.roughness > min_roughness and s.smoothing_drop > min_drop
+
+
+def noisy_sides(a: Shape, b: Shape, config: MatchConfig) -> list[str]:
+    """Which of the two shapes ("A", "B") the stage replaces by a smoothed copy."""
+    cfg = config.denoise
+    if not cfg.enabled or denser_side(a, b, config.resolution.max_ratio) is not None:
+        return []
+    return [side for side, s in (("A", a), ("B", b)) if noisy(s, cfg.min_roughness, cfg.min_drop)]
+
+
+def denoised(a: Shape, b: Shape, config: MatchConfig) -> tuple[Shape, Shape]:
+    """The shapes a match of ``a`` to ``b`` runs on after the stage (for a tool that judges
+    a map as the pipeline does)."""
+    sides, n = noisy_sides(a, b, config), config.denoise.iterations
+    return (a.smoothed(n) if "A" in sides else a), (b.smoothed(n) if "B" in sides else b)
+
+
+class DenoiseStage(Stage):
+    """The "denoise" stage (see the module notes): runs only when a shape is noisy."""
+
+    name = "denoise"
+    runs_on_final_map = False
+
+    def __init__(self):
+        self.sides: list[str] = []
+
+    def skip_reason(self, state: MatchState):
+        self.sides = noisy_sides(state.a, state.b, state.config)
+        return None if self.sides else QUIET
+
+    def run(self, state: MatchState) -> None:
+        t = state.log.start("denoise")
+        cfg = state.config.denoise
+        said = []
+        for side in self.sides:
+            s = state.a if side == "A" else state.b
+            said.append(
+                f"{side} smoothed {cfg.iterations} times (roughness {s.roughness:.2f} mean "
+                f"edges, {s.smoothing_drop:.0%} of it out in one smoothing)"
+            )
+            if side == "A":
+                state.a = s.smoothed(cfg.iterations)
+            else:
+                state.b = s.smoothed(cfg.iterations)
+        state.timings["denoise"] = time.perf_counter() - t
+        state.log.ran("denoise", state.timings["denoise"], "; ".join(said))
