@@ -27,6 +27,7 @@ from hope_rs.batch.cache import ShapeCache
 from hope_rs.batch.driver import imatch_many, read_pairs
 from hope_rs.batch.manifest import MANIFEST, Manifest
 from hope_rs.batch.naming import map_names
+from hope_rs.batch.scheduler import _quality
 from hope_rs.cli import main
 from hope_rs.features.descriptors import DescriptorConfig
 from hope_rs.pipeline.config import InitialConfig
@@ -536,3 +537,19 @@ def test_13_a_pair_whose_map_likely_failed_is_marked_and_a_rerun_keeps_the_mark(
     assert "tri -> s0: ok, likely failed" in captured.err
     assert "hope-rs: warning: tri -> s0: likely failed (mean confidence 0.00" in captured.err
     assert ", 1 likely failed in " in captured.out
+
+
+def test_13b_a_manifest_quality_of_another_form_is_read_as_unknown():
+    good = {"mean_confidence": 0.4, "share_confident": 0.3, "likely_failed": True,
+            "flipped_share": 0.1}  # fmt: skip
+    assert _quality(good) == hope_rs.MatchQuality(0.4, 0.3, True, 0.1)
+    for bad in (
+        None,
+        "x",
+        {k: v for k, v in good.items() if k != "flipped_share"},  # an older form
+        {**good, "extra": 1},
+        {**good, "likely_failed": "no"},  # hand-edited
+        {**good, "mean_confidence": None},
+        {**good, "share_confident": True},
+    ):
+        assert _quality(bad) is None, bad

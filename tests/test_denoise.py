@@ -11,7 +11,9 @@ from meshes import bumpy_sphere
 import hope_rs
 from hope_rs import MatchConfig, Mesh, Shape
 from hope_rs.evaluation.evaluate import load_vts
+from hope_rs.evaluation.partial import cut_by_plane
 from hope_rs.evaluation.perturbed import add_noise
+from hope_rs.pipeline import runner
 from hope_rs.pipeline.denoise import noisy
 from hope_rs.pipeline.runner import run_match
 
@@ -75,6 +77,35 @@ def test_a_smoothed_copy_is_never_smoothed_again(spheres):
     assert once.smoothing == 2 and s.smoothing == 0
     assert not noisy(once, 0.0, 0.0)  # whatever the thresholds
     assert not noisy(once.at_scale(0.5 * once.scale), 0.0, 0.0)  # nor its views
+
+
+def test_smoothings_add_up():
+    s = Shape(Mesh(*bumpy_sphere(200, 3)))
+    assert s.smoothed(2).smoothed(1).smoothing == 3
+
+
+def test_a_noisy_part_and_its_whole_are_smoothed_and_no_nested_match_smooths_again(
+    spheres, monkeypatch
+):
+    """A part (40% of a noisy sphere: fewer than half its vertices, for its smaller area)
+    against its noisy whole: like density at the whole's scale, so both are smoothed by the
+    outer match; the nested matches (the partial stage's trials) run with the stage off."""
+    whole = _edge_noise(spheres[1], 0.4, 6)
+    part = cut_by_plane(whole, np.array([0.3, 1.0, 0.2]), 0.6).mesh
+    assert part.n_vertices < whole.n_vertices / 2
+    nested = []
+    real = runner.run_match
+
+    def spy(a, b, init, config, **kwargs):
+        nested.append(config.denoise.enabled)
+        return real(a, b, init, config, **kwargs)
+
+    monkeypatch.setattr(runner, "run_match", spy)
+    res = hope_rs.match(part, whole, **FAST)
+    assert res.stage("partial").ran
+    reason = res.stage("denoise").reason
+    assert "A smoothed 2 times" in reason and "B smoothed 2 times" in reason
+    assert nested and not any(nested)
 
 
 def test_a_much_denser_noisy_shape_is_left_to_the_resolution_stage(spheres):

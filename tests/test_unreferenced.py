@@ -252,7 +252,8 @@ def test_a_landmark_on_a_welded_copy_of_b_is_mapped_to_that_copy(pair):
     last = [int(np.flatnonzero(corners == v)[-1]) for v in (3, 7, 11)]
     lm = np.array([[0, last[0]], [1, last[1]], [2, last[2]]])
     res = hope_rs.match((va, fa), (soup_v, soup_f), landmarks=lm, max_passes=1)
-    np.testing.assert_array_equal(res.map[lm[:, 0]], lm[:, 1])
+    for m in (res.map, res.init_map, res.hope_map):
+        np.testing.assert_array_equal(m[lm[:, 0]], lm[:, 1])
     first = np.full(len(vb), len(corners))
     np.minimum.at(first, corners, np.arange(len(corners)))
     rest = np.setdiff1d(np.arange(len(va)), lm[:, 0])

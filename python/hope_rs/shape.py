@@ -291,9 +291,12 @@ class Shape:
 
     @property
     def smoothing(self) -> int:
-        """How many umbrella smoothings made this shape from its origin (:meth:`smoothed`); 0
-        for a shape of its own mesh."""
-        return 0 if self._smoothed_from is None else self._smoothed_from[1]
+        """How many umbrella smoothings made this shape from the mesh it was built from
+        (:meth:`smoothed`, repeated); 0 for a shape of its own mesh."""
+        if self._smoothed_from is None:
+            return 0
+        origin, iterations = self._smoothed_from
+        return origin.smoothing + iterations
 
     @property
     def smoothing_drop(self) -> float:

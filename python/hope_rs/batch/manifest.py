@@ -3,9 +3,10 @@
 ``OUT/hope-rs-manifest.jsonl`` records, per map file, the two shapes' names and content
 digests, the landmarks' digest, the settings key (:meth:`~hope_rs.MatchConfig.key` and both
 shapes' :class:`~hope_rs.ShapeConfig`), the code version and the digest of the map written
-(a map file edited or replaced afterwards is computed again). A rerun skips a pair only when its
-map file is whole and its entry matches the pair in every field; :meth:`Manifest.why_redo`
-says what differs.
+(a map file edited or replaced afterwards is computed again), and the match's
+:class:`~hope_rs.MatchQuality` (``quality``, not compared: a skipped pair reports it). A rerun
+skips a pair only when its map file is whole and its entry matches the pair in every field;
+:meth:`Manifest.why_redo` says what differs.
 
 The file is a journal, one JSON object a line, appended to and flushed to disk as each pair
 finishes (after its map is written): an entry costs one short write however many pairs the

@@ -10,6 +10,7 @@ that cannot be written) fails that shape's or pair's results only.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import warnings
 from collections.abc import Callable, Iterator
@@ -113,13 +114,17 @@ def _checked_landmarks(landmarks, n_a: int, n_b: int, file: str | None) -> tuple
 
 
 def _quality(fields: dict | None) -> MatchQuality | None:
-    """A :class:`MatchQuality` from its fields as a pair task or the manifest gives them."""
-    if not isinstance(fields, dict):
+    """A :class:`MatchQuality` from its fields as a pair task or the manifest gives them;
+    ``None`` for anything else (an entry another version wrote, or one edited by hand)."""
+    names = [f.name for f in dataclasses.fields(MatchQuality)]
+    if not isinstance(fields, dict) or sorted(fields) != sorted(names):
         return None
-    try:
-        return MatchQuality(**fields)
-    except TypeError:  # an entry another version of hope_rs wrote
+    numbers = [fields[n] for n in names if n != "likely_failed"]
+    if not isinstance(fields["likely_failed"], bool) or not all(
+        isinstance(x, (int, float)) and not isinstance(x, bool) for x in numbers
+    ):
         return None
+    return MatchQuality(**fields)
 
 
 def run(plan: Plan, ex: Backend, report: Callable) -> Iterator[PairResult]:

@@ -1179,8 +1179,9 @@ class DenoiseConfig:
         (:meth:`~hope_rs.Shape.smoothing_drop`: vertex noise, not curvature; a clean coarse
         mesh is rough by its curvature, which smoothing does not take out). Only between
         shapes of like density (neither more than ``ResolutionConfig.max_ratio`` times as
-        dense as the other): a much denser scan is matched at the common resolution, with
-        that stage's own smoothing.
+        dense as the other; a part measured at its whole's scale): a much denser whole goes
+        through the resolution stage, with its own smoothing of a noisy scan's copy. The
+        outer match decides; nested matches do not smooth again.
     iterations : int
         Umbrella smoothings of the copy (each vertex halfway to its 1-ring's centroid).
     """

@@ -9,9 +9,11 @@ curvature: a clean mesh loses a few percent), the stage replaces it by its copy 
 ``iterations`` times (:meth:`~hope_rs.Shape.smoothed`: the same numbering, faces and k-hop
 neighbourhoods), so the map found is a map of the shape itself.
 
-Only between shapes of like density: a much denser shape goes through the resolution stage,
-which smooths the copy of a noisy dense scan its own way (docs/decisions.md#smooth-rougher).
-A copy made by this stage is never smoothed again (the nested matches of later stages).
+Only between shapes of like density (a part measured at its whole's scale): a much denser
+whole goes through the resolution stage, which smooths the copy of a noisy dense scan its own
+way (docs/decisions.md#smooth-rougher). The decision is the outer match's: the runner turns
+the stage off in every nested match (the partial stage's trials, the orient stage's
+hypotheses and mirror image, the coarse copies), which match these shapes or copies of them.
 """
 
 from __future__ import annotations
@@ -20,10 +22,11 @@ import time
 
 from ..shape import Shape
 from .config import MatchConfig
+from .partial import detect_part
 from .resolution import denser_side
 from .state import QUIET, MatchState, Stage
 
-__all__ = ["DenoiseStage", "denoised", "noisy", "noisy_sides"]
+__all__ = ["DenoiseStage", "denoised", "like_density", "noisy", "noisy_sides"]
 
 
 def noisy(s: Shape, min_roughness: float, min_drop: float) -> bool:
@@ -32,10 +35,25 @@ def noisy(s: Shape, min_roughness: float, min_drop: float) -> bool:
     return s.smoothing == 0 and s.roughness > min_roughness and s.smoothing_drop > min_drop
 
 
+def like_density(a: Shape, b: Shape, config: MatchConfig) -> bool:
+    """Whether neither shape is more than ``ResolutionConfig.max_ratio`` times as dense as
+    the other: as vertices per unit area at their own scales, or, for a part and its whole
+    (:func:`~hope_rs.pipeline.partial.detect_part`, the same units), with the part measured
+    at the whole's scale (a part has fewer vertices for its smaller area)."""
+    ratio = config.resolution.max_ratio
+    if denser_side(a, b, ratio) is None:
+        return True
+    info = detect_part(a, b, config.partial) if config.partial.enabled else None
+    if info is None:
+        return False
+    part, whole = (a, b) if info.part == "a" else (b, a)
+    return denser_side(part.at_scale(info.scale), whole, ratio) is None
+
+
 def noisy_sides(a: Shape, b: Shape, config: MatchConfig) -> list[str]:
     """Which of the two shapes ("A", "B") the stage replaces by a smoothed copy."""
     cfg = config.denoise
-    if not cfg.enabled or denser_side(a, b, config.resolution.max_ratio) is not None:
+    if not cfg.enabled or not like_density(a, b, config):
         return []
     return [side for side, s in (("A", a), ("B", b)) if noisy(s, cfg.min_roughness, cfg.min_drop)]
 

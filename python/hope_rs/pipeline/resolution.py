@@ -296,8 +296,6 @@ class ResolutionStage(Stage):
             cfg,
             resolution=dataclasses.replace(cfg.resolution, enabled=False),
             multiscale=dataclasses.replace(cfg.multiscale, enabled=False),
-            # The copy of a noisy dense scan is smoothed here (B) or kept (A), as decided.
-            denoise=dataclasses.replace(cfg.denoise, enabled=False),
         )
         res, f, lift = self.lifted(state, coarse, cs, nested)
         counts = f"{cs.n_vertices} vertices" + (

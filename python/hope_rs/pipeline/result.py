@@ -32,8 +32,9 @@ class MatchQuality:
         confidence``) before using it.
     flipped_share : float
         The share of A's area whose triangles the map turns over
-        (:func:`~hope_rs.pipeline.confidence.flipped_share`; for a noisy dense A matched at a
-        common resolution, measured on its copy: ``ResolutionConfig.judge_rougher``).
+        (:func:`~hope_rs.pipeline.confidence.flipped_share`), measured on the shapes the match
+        ran on: a noisy shape's smoothed copy (``MatchConfig.denoise``); for a noisy dense A
+        matched at a common resolution, its copy (``ResolutionConfig.judge_rougher``).
     """
 
     mean_confidence: float

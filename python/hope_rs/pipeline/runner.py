@@ -15,6 +15,7 @@ outlives the match.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from contextlib import ExitStack
 from typing import Callable, cast
@@ -140,6 +141,11 @@ def _nested_run(stages: list[Stage] | None) -> Callable:
         on_stage=None,
     ):
         fresh = None if stages is None else [type(s)() for s in stages]
+        # The outer match decided which shapes to denoise: the nested match's shapes are
+        # those, or copies of them (a mirror image, a coarse copy), not smoothed again.
+        config = dataclasses.replace(
+            config, denoise=dataclasses.replace(config.denoise, enabled=False)
+        )
         return run_match(
             a,
             b,

@@ -238,16 +238,20 @@ class Referenced:
             full = np.zeros(self.n_a)
             full[self.keep_a] = conf
             conf = full if self.weld_a is None else full[self.weld_a]
-        f = self._map_out(res.map)
-        if landmarks is not None and len(landmarks) and self.weld_b is not None:
-            la, lb = landmarks[:, 0], landmarks[:, 1]
-            same = self.weld_b[f[la]] == self.weld_b[lb]
-            f[la[same]] = lb[same]
+
+        def out(g: np.ndarray) -> np.ndarray:
+            f = self._map_out(g)
+            if landmarks is not None and len(landmarks) and self.weld_b is not None:
+                la, lb = landmarks[:, 0], landmarks[:, 1]
+                same = self.weld_b[f[la]] == self.weld_b[lb]
+                f[la[same]] = lb[same]
+            return f
+
         return dataclasses.replace(
             res,
-            map=f,
-            init_map=self._map_out(res.init_map),
-            hope_map=None if res.hope_map is None else self._map_out(res.hope_map),
+            map=out(res.map),
+            init_map=out(res.init_map),
+            hope_map=None if res.hope_map is None else out(res.hope_map),
             confidence=conf,
         )
 
