@@ -111,6 +111,21 @@ def test_methods_are_checked_and_timed(identity_set):
     assert e.mean() <= hope_rs.geodesic_errors(ctx.b, init.map).mean()
 
 
+def test_hope_on_a_noisy_pair_is_the_default_match_not_the_shared_start():
+    """A noisy B is matched on its smoothed copy, whose descriptors are HOPE's start: the
+    bench's "hope" is then the default match, not a match from the raw meshes' shared
+    start (as for a part or a much denser shape)."""
+    v, f = bumpy_sphere(400, 0)
+    a = hope_rs.Mesh(v, f)
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]]])
+    edge = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1).mean()
+    rng = np.random.default_rng(0)
+    b = hope_rs.Mesh(v + rng.normal(0.0, 0.4 * edge, v.shape), f)
+    res = run_method("hope", PairContext(a, b))
+    assert res.start is None  # not the shared start
+    np.testing.assert_array_equal(res.map, hope_rs.match(a, b).map)
+
+
 def test_zoomout_maps_a_to_b():
     pytest.importorskip("pyFM")
     v, f = bumpy_sphere(400, 0)

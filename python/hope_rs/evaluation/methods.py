@@ -35,6 +35,7 @@ from ..features.descriptors import descriptors
 from ..geometry.mesh import Mesh
 from ..matching import match
 from ..pipeline.confidence import MatchQuality
+from ..pipeline.denoise import noisy_sides
 from ..pipeline.config import MatchConfig
 from ..pipeline.initial import initial_map
 from ..pipeline.partial import detect_part
@@ -116,12 +117,15 @@ def _hope(*, kind: str = "shot", k_max: int = 8, degrade: float = 0.0, **kw):
             (f0, t_init), key = ctx.initial(kind), kind
         sa, sb, t_shapes = ctx.shapes(k_max)
         t = time.perf_counter()
-        resolution = kw.get("config", MatchConfig()).resolution
+        config = kw.get("config") or MatchConfig()
+        resolution = config.resolution
         mixed = resolution.enabled and denser_side(sa, sb, resolution.max_ratio) is not None
-        if not degrade and (mixed or detect_part(sa, sb) is not None):
-            # A part is described at the whole's scale (hope_rs.pipeline.partial), and a much
-            # denser shape at the other's resolution (hope_rs.pipeline.resolution): the
-            # shared start, described at each shape's own, is not HOPE's start there.
+        own = mixed or detect_part(sa, sb) is not None or bool(noisy_sides(sa, sb, config))
+        if not degrade and own:
+            # A part is described at the whole's scale (hope_rs.pipeline.partial), a much
+            # denser shape at the other's resolution (hope_rs.pipeline.resolution) and a
+            # noisy one on its smoothed copy (hope_rs.pipeline.denoise): the shared start,
+            # described at each shape's own, is not HOPE's start there.
             res = match(sa, sb, init=kind, k_max=k_max, **kw)
             t_init, key = 0.0, None
         else:
