@@ -35,8 +35,8 @@ from ..features.descriptors import descriptors
 from ..geometry.mesh import Mesh
 from ..matching import match
 from ..pipeline.confidence import MatchQuality
-from ..pipeline.denoise import noisy_sides
 from ..pipeline.config import MatchConfig
+from ..pipeline.denoise import noisy_sides
 from ..pipeline.initial import initial_map
 from ..pipeline.partial import detect_part
 from ..pipeline.resolution import denser_side
