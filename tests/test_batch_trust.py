@@ -535,6 +535,7 @@ def test_13_a_pair_whose_map_likely_failed_is_marked_and_a_rerun_keeps_the_mark(
     assert main(args) == 0
     captured = capsys.readouterr()
     assert "tri -> s0: ok, likely failed" in captured.err
+    assert "(0 failed, 0 skipped, 1 likely failed)" in captured.err
     assert "hope-rs: warning: tri -> s0: likely failed (mean confidence 0.00" in captured.err
     assert ", 1 likely failed in " in captured.out
 

@@ -19,7 +19,7 @@ class BatchProgress:
 
     def __init__(self, total: int, *, stream=None, enabled: bool = True):
         self.total, self.stream, self.enabled = total, stream or sys.stderr, enabled
-        self.done = self.failed = self.skipped = 0
+        self.done = self.failed = self.skipped = self.doubtful = 0
         self.t0 = time.perf_counter()
         self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
 
@@ -28,6 +28,8 @@ class BatchProgress:
         self.done += 1
         self.failed += not r.ok
         self.skipped += r.skipped
+        doubtful = r.quality is not None and r.quality.likely_failed
+        self.doubtful += doubtful
         if not self.enabled:
             return
         elapsed = time.perf_counter() - self.t0
@@ -39,13 +41,15 @@ class BatchProgress:
         fill = int(width * self.done / max(self.total, 1))
         line = (
             f"[{'#' * fill}{'.' * (width - fill)}] {self.done}/{self.total} pairs"
-            f" ({self.failed} failed, {self.skipped} skipped) {60 * rate:.1f}/min ETA {eta}"
+            f" ({self.failed} failed, {self.skipped} skipped"
+            + (f", {self.doubtful} likely failed" if self.doubtful else "")
+            + f") {60 * rate:.1f}/min ETA {eta}"
         )
         if self.tty:
             self.stream.write("\r" + line + ("\n" if self.done == self.total else ""))
         else:
             status = "skipped" if r.skipped else ("ok" if r.ok else f"FAILED: {r.error}")
-            if r.quality is not None and r.quality.likely_failed:
+            if doubtful:
                 status += ", likely failed"
             self.stream.write(f"{line} | {r.a} -> {r.b}: {status}\n")
         self.stream.flush()
