@@ -28,8 +28,7 @@ class BatchProgress:
         self.done += 1
         self.failed += not r.ok
         self.skipped += r.skipped
-        doubtful = r.quality is not None and r.quality.likely_failed
-        self.doubtful += doubtful
+        self.doubtful += r.likely_failed
         if not self.enabled:
             return
         elapsed = time.perf_counter() - self.t0
@@ -49,7 +48,7 @@ class BatchProgress:
             self.stream.write("\r" + line + ("\n" if self.done == self.total else ""))
         else:
             status = "skipped" if r.skipped else ("ok" if r.ok else f"FAILED: {r.error}")
-            if doubtful:
+            if r.likely_failed:
                 status += ", likely failed"
             self.stream.write(f"{line} | {r.a} -> {r.b}: {status}\n")
         self.stream.flush()

@@ -73,6 +73,11 @@ class PairResult:
     def ok(self) -> bool:
         return self.error is None
 
+    @property
+    def likely_failed(self) -> bool:
+        """Whether the pair's map likely failed (its :attr:`quality` says so)."""
+        return self.quality is not None and self.quality.likely_failed
+
 
 @dataclass
 class Plan:

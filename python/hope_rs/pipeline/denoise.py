@@ -58,11 +58,15 @@ def noisy_sides(a: Shape, b: Shape, config: MatchConfig) -> list[str]:
     return [side for side, s in (("A", a), ("B", b)) if noisy(s, cfg.min_roughness, cfg.min_drop)]
 
 
+def _smoothed(a: Shape, b: Shape, sides: list[str], n: int) -> tuple[Shape, Shape]:
+    """``a`` and ``b``, each of ``sides`` replaced by its copy smoothed ``n`` times."""
+    return (a.smoothed(n) if "A" in sides else a), (b.smoothed(n) if "B" in sides else b)
+
+
 def denoised(a: Shape, b: Shape, config: MatchConfig) -> tuple[Shape, Shape]:
     """The shapes a match of ``a`` to ``b`` runs on after the stage (for a tool that judges
     a map as the pipeline does)."""
-    sides, n = noisy_sides(a, b, config), config.denoise.iterations
-    return (a.smoothed(n) if "A" in sides else a), (b.smoothed(n) if "B" in sides else b)
+    return _smoothed(a, b, noisy_sides(a, b, config), config.denoise.iterations)
 
 
 class DenoiseStage(Stage):
@@ -80,17 +84,13 @@ class DenoiseStage(Stage):
 
     def run(self, state: MatchState) -> None:
         t = state.log.start("denoise")
-        cfg = state.config.denoise
-        said = []
-        for side in self.sides:
-            s = state.a if side == "A" else state.b
-            said.append(
-                f"{side} smoothed {cfg.iterations} times (roughness {s.roughness:.2f} mean "
-                f"edges, {s.smoothing_drop:.0%} of it out in one smoothing)"
-            )
-            if side == "A":
-                state.a = s.smoothed(cfg.iterations)
-            else:
-                state.b = s.smoothed(cfg.iterations)
+        n = state.config.denoise.iterations
+        said = [
+            f"{side} smoothed {n} times (roughness {s.roughness:.2f} mean edges, "
+            f"{s.smoothing_drop:.0%} of it out in one smoothing)"
+            for side, s in (("A", state.a), ("B", state.b))
+            if side in self.sides
+        ]
+        state.a, state.b = _smoothed(state.a, state.b, self.sides, n)
         state.timings["denoise"] = time.perf_counter() - t
         state.log.ran("denoise", state.timings["denoise"], "; ".join(said))
