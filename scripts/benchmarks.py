@@ -58,6 +58,7 @@ PARTIAL = {
     "cut50": "A cut by a plane removing 50% of its vertices",
     "holes": "3-5 geodesic discs punched out of A",
     "cut30_rev": "the whole A matched to B cut by a plane removing 30% (scored where A has a counterpart)",
+    "cut_both": "A and B each cut by a plane removing 30%, with opposite normals (two parts that overlap only partly; scored where both keep the point)",
 }
 PARTIAL_SOURCES = ("faust_r", "tosca_r")
 PARTIAL_PAIRS = 9

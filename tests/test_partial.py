@@ -233,6 +233,12 @@ def test_partial_stage_runs_only_on_a_part(sphere, monkeypatch):
     off = MatchConfig(partial=PartialConfig(enabled=False))
     res = match(part, sphere, config=off)
     assert "partial" not in [s.name for s in res.stages] and not res.stage("partial").ran
+    # Two cut shapes: matched as wholes, and the stage says why it left them.
+    other = cut_by_plane(sphere, -plane_normal(2), 0.3).mesh
+    both = match(part, other, max_passes=1)
+    stage = both.stage("partial")
+    assert not stage.ran and "both shapes are open" in stage.reason
+    assert stage in both.stages and "check res.quality" in str(stage)
 
 
 def test_a_dense_part_keeps_the_confidence_of_its_match_at_the_common_resolution():

@@ -191,6 +191,21 @@ def detect_part(a: Shape, b: Shape, config: PartialConfig | None = None) -> Part
     return None
 
 
+def both_open(a: Shape, b: Shape, config: PartialConfig) -> str | None:
+    """Why the stage leaves two open shapes alone, for the log, when neither could be a whole
+    (both boundaries longer than ``config.max_whole_boundary``); else ``None``. Two parts
+    (two partial scans) are matched as wholes, each at its own scale: where they cover
+    different regions of the surface, much of the map lands wrong."""
+    la, lb = boundary_length(a), boundary_length(b)
+    if min(la, lb) <= config.max_whole_boundary:
+        return None
+    return (
+        f"both shapes are open (boundaries {la:.2f} and {lb:.2f} sqrt(area)): matched as two "
+        "wholes, each at its own scale; where they cover different regions much of the map "
+        "can land wrong, so check res.quality"
+    )
+
+
 def part_match_config(cfg: MatchConfig) -> MatchConfig:
     """The settings of a part's own match at a given scale: this stage off (the part is
     already measured at the whole's scale), the deformation pass off (a part's spectrum is
@@ -228,7 +243,9 @@ class PartialStage(Stage):
         if not cfg.enabled:
             return QUIET
         self.info = detect_part(state.a, state.b, cfg)
-        return QUIET if self.info is None else None
+        if self.info is not None:
+            return None
+        return both_open(state.a, state.b, cfg) or QUIET
 
     def run(self, state: MatchState) -> Halt | None:
         info = self.info
