@@ -255,6 +255,27 @@ def test_derived_set_commands_check_their_output_folder_first(tmp_path, capsys):
         hope_rs.load_mesh("/dev/null")
 
 
+def test_derived_sets_are_named_after_the_source_and_never_written_into_it(
+    tmp_path, capsys, monkeypatch
+):
+    source = tmp_path / "spheres"
+    (source / "corres").mkdir(parents=True)
+    bumpy_sphere_files(source, 2, N)
+    for name in ("s0", "s1"):
+        (source / "corres" / f"{name}.vts").write_text("1\n2\n3\n")
+    (source / "pairs.txt").write_text("s0 s1\n")
+    before = sorted(p.relative_to(source) for p in source.rglob("*"))
+    for cmd in ("partial-set", "perturb-set", "resolution-set"):
+        for out, where in ((source, "is the source"), (source / "sets", "is inside the source")):
+            assert main([cmd, str(out), "--from", str(source)]) == 2
+            assert f"{where} data set" in one_line_error(capsys.readouterr().err)
+    assert sorted(p.relative_to(source) for p in source.rglob("*")) == before
+    # "--from ." names the sets after the folder it stands for.
+    monkeypatch.chdir(source)
+    assert main(["perturb-set", "../out", "--from", ".", "--conditions", "noise02"]) == 0
+    assert [p.name for p in (tmp_path / "out").iterdir()] == ["spheres_noise02"]
+
+
 def test_show_never_writes_over_one_of_its_inputs(tmp_path, capsys):
     # --ply OUT writes OUT_A.ply and OUT_B.ply: an input of that name is refused, unread.
     folder = tmp_path / "in"

@@ -94,6 +94,19 @@ def test_bad_config_and_unknown_options_are_rejected_before_any_work(bundled):
         hope_rs.match(a, b, config=bad)
 
 
+def test_with_options_refuses_a_bad_value_at_once():
+    cfg = MatchConfig()
+    with pytest.raises(ValueError, match=r"^MatchConfig\.refine\.top_k must be an integer in \[1,"):
+        cfg.with_options(top_k=0)
+    with pytest.raises(TypeError, match=r"^MatchConfig\.k_max must be an integer in \[2, 64\]"):
+        cfg.with_options(k_max="8")
+    with pytest.raises(TypeError, match=r"^MatchConfig\.spectral\.enabled must be True or False"):
+        cfg.with_options(spectral="no")
+    with pytest.raises(ValueError, match=r"^MatchConfig\.refine\.min_consistent must be a number"):
+        cfg.with_options(top_k=32, min_consistent=1.5)
+    assert cfg == MatchConfig() and cfg.with_options(top_k=1).refine.top_k == 1
+
+
 @pytest.mark.slow
 def test_the_polish_and_the_finish_use_the_configured_top_k(monkeypatch):
     """``top_k`` reaches every overlap cost: the polish's and the finish's HOPE steps too."""

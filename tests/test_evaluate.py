@@ -113,8 +113,37 @@ def test_vts_files_are_one_based(tmp_path):
     with pytest.raises(ValueError, match="cannot read"):
         load_vts(tmp_path / "c.vts")
     (tmp_path / "d.vts").write_text("1 5\n2 6\n")  # a landmark file, not a .vts
-    with pytest.raises(ValueError, match="has 2 numbers a line"):
+    with pytest.raises(ValueError, match="has 2 values"):
         load_vts(tmp_path / "d.vts")
+
+
+@pytest.mark.parametrize(
+    "content, message",
+    [
+        ("1\n2\nx\n", r"bad\.vts:3: cannot read 'x' as a vertex index"),
+        ("1 2\n3\n", r"bad\.vts:1: '1 2' has 2 values; a \.vts file has one"),
+        ("# c\n1\n\n0\n", r"bad\.vts:4: index 0 is below 1; \.vts files are 1-based"),
+        ("1\n1_0\n", r"bad\.vts:2: cannot read '1_0'"),
+        ("1\r\n2.0\r\n", r"bad\.vts:2: cannot read '2\.0'"),
+        ("1\n99999999999999999999\n", r"bad\.vts:2: vertex index '9+' is too large"),
+        ("", r"bad\.vts' has no vertex indices"),
+        ("# only a comment\n\n", r"bad\.vts' has no vertex indices"),
+    ],
+)
+def test_bad_vts_files_name_the_file_and_line(tmp_path, content, message):
+    path = tmp_path / "bad.vts"
+    path.write_text(content)
+    with pytest.raises(ValueError, match=message) as err:
+        load_vts(path)
+    assert str(path) in str(err.value) and "\n" not in str(err.value)
+
+
+def test_vts_comments_blank_lines_signs_and_a_bom_are_read(tmp_path):
+    path = tmp_path / "a.vts"
+    path.write_bytes(b"\xef\xbb\xbf# header\r\n+3\r\n\r\n 1 # first\r\n2\r\n")
+    got = load_vts(path)
+    assert got.dtype == np.int64
+    np.testing.assert_array_equal(got, [2, 0, 1])
 
 
 def test_vts_files_of_the_shared_data_index_vertices():

@@ -76,6 +76,24 @@ def test_files_that_load_but_cannot_be_matched(tmp_path, name):
         hope_rs.match(TET_MESH, m)
 
 
+@pytest.mark.parametrize(
+    "vertices, faces, err, fragment",
+    [
+        (np.where(np.arange(12).reshape(4, 3) == 5, np.nan, TET_V), TET_F, ValueError,
+         r"vertices contain NaN or infinite coordinates \(first at row 1\)"),
+        (TET_V, TET_F[:, :2], ValueError, r"faces must be an \(M, 3\) integer array"),
+        (TET_V, np.zeros((0, 3), int), ValueError, "the mesh has no faces"),
+        (TET_V, TET_F + 0.5, TypeError, "faces must hold integer vertex indices"),
+        (TET_V, [[0, 1], [1, 2, 3]], ValueError, "a face has 2 corners"),
+    ],
+)  # fmt: skip
+def test_bad_mesh_arrays_are_named_by_argument(vertices, faces, err, fragment):
+    for which, args in (("a", ((vertices, faces), TET_MESH)), ("b", (TET_MESH, (vertices, faces)))):
+        with pytest.raises(err, match=f"^{which}: {fragment}") as e:
+            hope_rs.match(*args)
+        assert not str(e.value).startswith(f"{which}: {which}: ") and "\n" not in str(e.value)
+
+
 @pytest.mark.parametrize("name", sorted(ODD))
 def test_odd_but_valid_files_load_and_match(tmp_path, name):
     ext, data, nv, nf = ODD[name]

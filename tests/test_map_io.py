@@ -78,6 +78,34 @@ def test_bad_text_maps_get_one_line_errors_naming_the_file(tmp_path, content, ma
     assert str(path) in str(err.value) and "\n" not in str(err.value)
 
 
+@pytest.mark.parametrize(
+    "content, message",
+    [
+        (b"1\n2\n3\nabc\n5\n", r"bad\.txt:4: 'abc' is not a vertex index"),
+        (b"1 2\n3 4\n", r"bad\.txt:1: '1 2' holds 2 values \(expected one 0-based"),
+        (b"0\n1,2\n", r"bad\.txt:2: '1,2' is not a vertex index"),
+        (b"0\r\n\r\n-2\r\n", r"bad\.txt:3: negative index -2; indices are 0-based"),
+        (b"0\n99999999999999999999\n", r"bad\.txt:2: index '9+' is too large"),
+        (b"0\n1\n\xff\n", r"bad\.txt:3: byte 0xff is not text"),
+        (b"0\n\n1\n3\n2\n", r"bad\.txt:4: the map holds index 3 but B has 3 vertices"),
+    ],
+)
+def test_a_bad_text_map_line_is_named_by_its_number(tmp_path, content, message):
+    path = tmp_path / "bad.txt"
+    path.write_bytes(content)
+    with pytest.raises(ValueError, match=message) as err:
+        read_map(path, n_target=3)
+    assert str(path) in str(err.value) and "\n" not in str(err.value)
+
+
+def test_text_maps_skip_blank_lines_and_take_signs_and_line_ends_of_any_kind(tmp_path):
+    path = tmp_path / "m.txt"
+    path.write_bytes(b"\xef\xbb\xbf3\r\n\n +0 \r2\t\n0002\n1")
+    np.testing.assert_array_equal(read_map(path, 5, 4), [3, 0, 2, 2, 1])
+    path.write_bytes(b"00000000000000000000003\n0\n2\n2\n1\n")  # leading zeros are no size
+    np.testing.assert_array_equal(read_map(path, 5, 4), MAP)
+
+
 def test_bad_npy_maps(tmp_path):
     path = tmp_path / "m.npy"
     np.save(path, MAP)

@@ -135,6 +135,21 @@ def test_the_users_mesh_keeps_its_winding_and_descriptors_ignore_it():
     np.testing.assert_array_equal(shot(mesh), shot(hope_rs.Mesh(v, f)))
 
 
+@pytest.mark.parametrize("orient", ["false", 0, None])
+def test_orient_must_be_a_bool(orient):
+    with pytest.raises(
+        TypeError, match=f"^orient must be a bool \\(True or False\\), got {orient!r}$"
+    ):
+        hope_rs.Shape(hope_rs.Mesh(*SPHERE), orient=orient)
+
+
+def test_orient_takes_a_numpy_bool():
+    v, f = SPHERE
+    kept = hope_rs.Shape(hope_rs.Mesh(v, f[:, ::-1]), orient=np.False_)
+    assert kept.orient is False
+    assert signed_volume(kept.internal.vertices, kept.internal.faces) < 0  # left as given
+
+
 @pytest.mark.parametrize("which", ["a", "b", "both"])
 def test_reversing_all_faces_leaves_the_map_bit_identical(which):
     a, b = hope_rs.Mesh(*bumpy_sphere(600, 3)), hope_rs.Mesh(*bumpy_sphere(500, 4))

@@ -7,7 +7,13 @@ from meshes import bumpy_sphere, write_off
 
 import hope_rs
 from hope_rs.cli import main
-from hope_rs.evaluation.show import detect_up, position_colours, view_frame, write_ply_pair
+from hope_rs.evaluation.show import (
+    detect_up,
+    ply_pair_paths,
+    position_colours,
+    view_frame,
+    write_ply_pair,
+)
 
 pytest.importorskip("matplotlib")
 
@@ -114,6 +120,20 @@ def test_a_confidence_file_that_is_not_a_confidence_fails_in_one_line(
     assert not out.exists()
 
 
+@pytest.mark.parametrize(
+    "content, message",
+    [("", "a.vts' has no vertex indices"), ("1\n2\nx\n", "a.vts:3: cannot read 'x'")],
+)
+def test_a_bad_truth_file_is_an_input_error(pair, capsys, content, message):
+    d, _, _ = pair
+    (d / "a.vts").write_text(content)
+    out = d / "err.png"
+    assert main([*argv(d), "--png", str(out), "--truth", str(d / "a.vts"), str(d / "a.vts")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("hope-rs: error:") and message in err and err.count("\n") == 1
+    assert not out.exists()
+
+
 def test_vertex_errors_are_zero_exactly_where_the_map_is_right(pair):
     from hope_rs.evaluation.show import vertex_errors
 
@@ -155,6 +175,14 @@ def test_ply_pair_reads_back_with_colours_through_the_map(pair):
         str(d / "again_A.ply"),
         str(d / "again_B.ply"),
     )
+
+
+def test_ply_pair_names_follow_the_help(capsys):
+    assert ply_pair_paths("out.PLY") == ply_pair_paths("out") == ("out_A.ply", "out_B.ply")
+    assert ply_pair_paths("out.txt") == ("out.txt_A.ply", "out.txt_B.ply")
+    with pytest.raises(SystemExit):
+        main(["show", "--help"])
+    assert "out.txt writes out.txt_A.ply" in " ".join(capsys.readouterr().out.split())
 
 
 def test_up_axis_and_view_frame():

@@ -34,7 +34,14 @@ def _as_mesh(x, k_max: int, name: str) -> Shape | Mesh:
                 f"with Shape(..., k_max={k_max}) or more, or match with k_max={x.k_max}"
             )
         return x
-    return as_mesh(x, name)
+    try:
+        return as_mesh(x, name)
+    except (TypeError, ValueError) as e:
+        # Named as the other input errors are ("b: ..."), unless the message names it already.
+        text = str(e)
+        if type(e) not in (TypeError, ValueError) or text.startswith((f"{name}: ", f"{name} ")):
+            raise
+        raise type(e)(f"{name}: {text}") from None
 
 
 def _mesh_of(x: Shape | Mesh) -> Mesh:

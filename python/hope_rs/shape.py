@@ -85,6 +85,8 @@ class Shape:
     def __init__(
         self, mesh, *, k_max: int = 8, orient: bool = True, config: ShapeConfig = ShapeConfig()
     ):
+        if not isinstance(orient, (bool, np.bool_)):  # bool("false") would be True
+            raise TypeError(f"orient must be a bool (True or False), got {orient!r}")
         mesh = as_mesh(mesh)
         if (
             isinstance(k_max, bool)

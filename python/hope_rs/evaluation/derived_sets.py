@@ -42,8 +42,9 @@ def set_jobs(
 ) -> list[tuple[Path, list[Pair]]]:
     """``(source folder, its first max_pairs pairs)`` per source, checked before any work:
     at least one source, each with pairs and a folder name no other source has (the sets
-    are named after it); every condition a key of ``known``; with ``vts_needed`` (the
-    reason), every pair with ``.vts`` ground truth."""
+    are named after it: the folder's own name, ``.`` included); every condition a key of
+    ``known``; with ``vts_needed`` (the reason), every pair with ``.vts`` ground truth. The
+    folders come back absolute."""
     if isinstance(sources, (str, os.PathLike)):
         sources = [sources]
     if not sources:
@@ -56,8 +57,15 @@ def set_jobs(
         raise ValueError(f"{what} {', '.join(twice)} is given twice; list each once")
     jobs: list[tuple[Path, list[Pair]]] = []
     for src in sources:
-        same = [s for s, _ in jobs if s.name == Path(src).name]
-        if same and same[0].resolve() == Path(src).resolve():
+        # Absolute, so that "." and ".." are named by the folder they stand for.
+        folder = Path(os.path.abspath(src))
+        if not folder.name:
+            raise ValueError(
+                f"{str(src)!r} is the root folder, which has no name to call the sets by; "
+                "give a data-set folder"
+            )
+        same = [s for s, _ in jobs if s.name == folder.name]
+        if same and same[0].resolve() == folder.resolve():
             raise ValueError(f"{str(src)!r} is given twice; list it once")
         if same:
             raise ValueError(
@@ -69,7 +77,7 @@ def set_jobs(
             raise ValueError(f"{str(src)!r} has no pair to derive sets from: {GIVE_PAIRS}")
         if vts_needed is not None and any(p.a_vts is None for p in pairs):
             raise ValueError(f"{str(src)!r} has identity ground truth; {vts_needed}")
-        jobs.append((Path(src), pairs[:max_pairs]))
+        jobs.append((folder, pairs[:max_pairs]))
     return jobs
 
 
@@ -84,7 +92,15 @@ def write_sets(
     folders, one per name of ``names(source, condition)``, then each moved to ``out / name``
     (replacing an older one): an error or an interrupt leaves no half-written set. ``write``
     returns False when the condition kept no pair: then nothing is written. Returns the
-    folders written."""
+    folders written. An ``out`` that is a source folder or inside one is refused first."""
+    target = Path(os.path.realpath(out))
+    for src, _ in jobs:
+        if target.is_relative_to(os.path.realpath(src)):
+            where = "is" if target == Path(os.path.realpath(src)) else "is inside"
+            raise ValueError(
+                f"output folder {os.fspath(out)!r} {where} the source data set {str(src)!r}, "
+                "and the sets would be written into it; choose a folder outside it"
+            )
     out = check_writable_folder(out, create=True)
     written = []
     for src, pairs in jobs:
@@ -123,7 +139,7 @@ def add_set_parser(
         help=help,
         description=description + "; ".join(f"{k}: {v}" for k, v in conditions.items()),
     )
-    p.add_argument("out", help="output folder (created)")
+    p.add_argument("out", help="output folder (created; not a --from folder nor inside one)")
     p.add_argument(
         "--from", dest="sources", required=True,
         help=f"comma-separated {sources_help}",

@@ -19,7 +19,9 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy.integrate import trapezoid
@@ -36,23 +38,49 @@ MAX_ERROR_SHORT = 0.10
 #: Points on each curve.
 CURVE_POINTS = 101
 GEODESIC_METHODS = ("graph", "surface")
+#: One vertex index of a ``.vts`` file.
+_INTEGER = re.compile(r"[+-]?[0-9]+")
+_INT64_MAX = int(np.iinfo(np.int64).max)
 
 
 def load_vts(path: str | os.PathLike) -> np.ndarray:
-    """Read a ``.vts`` correspondence file (one 1-based vertex index per line) as 0-based."""
+    """Read a ``.vts`` correspondence file (one 1-based vertex index per line; ``#`` starts a
+    comment, blank lines are skipped) as 0-based.
+
+    Raises
+    ------
+    ValueError
+        A one-line message naming the file (and the line, for a bad one): unreadable, empty,
+        or a line that is not one vertex index >= 1.
+    """
+    name = os.fspath(path)
     try:
-        rows = np.loadtxt(path, dtype=np.int64, ndmin=2, encoding="utf-8-sig")
-    except (OSError, ValueError) as e:
-        raise ValueError(f"cannot read {os.fspath(path)!r} as a .vts file: {e}") from None
-    if rows.size and rows.shape[1] != 1:
-        raise ValueError(
-            f"{os.fspath(path)!r} has {rows.shape[1]} numbers a line; a .vts file has one "
-            "1-based vertex index a line"
-        )
-    idx = rows[:, 0] - 1
-    if idx.size and idx.min() < 0:
-        raise ValueError(f"{os.fspath(path)!r} holds an index below 1; .vts files are 1-based")
-    return idx
+        text = Path(path).read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as e:
+        why = e.strerror if isinstance(e, OSError) and e.strerror else e
+        raise ValueError(f"cannot read {name!r} as a .vts file: {why}") from None
+    rule = "a .vts file has one 1-based vertex index a line"
+    idx = []
+    for n, line in enumerate(text.split("\n"), 1):
+        words = line.split("#", 1)[0].split()
+        if not words:
+            continue
+        shown = line.strip()[:80]
+        if len(words) != 1:
+            raise ValueError(f"{name}:{n}: {shown!r} has {len(words)} values; {rule}")
+        # ASCII digits only, as NumPy reads them: int() would take "1_0" for 10.
+        if not _INTEGER.fullmatch(words[0]):
+            raise ValueError(f"{name}:{n}: cannot read {shown!r} as a vertex index; {rule}")
+        # Past 19 significant digits no index fits int64 (and int() refuses 4,300 digits).
+        if len(words[0].lstrip("+-0")) > 19 or int(words[0]) > _INT64_MAX:
+            raise ValueError(f"{name}:{n}: vertex index {shown!r} is too large")
+        value = int(words[0])
+        if value < 1:
+            raise ValueError(f"{name}:{n}: index {value} is below 1; .vts files are 1-based")
+        idx.append(value - 1)
+    if not idx:
+        raise ValueError(f"{name!r} has no vertex indices; {rule}")
+    return np.array(idx, dtype=np.int64)
 
 
 def _mesh_and_shape(b) -> tuple[Mesh, Shape | None]:

@@ -242,7 +242,7 @@ def render_pair(
 
 def ply_pair_paths(path) -> tuple[str, str]:
     """The two files :func:`write_ply_pair` writes for ``path``: ``out.ply`` (or ``out``) names
-    ``out_A.ply`` and ``out_B.ply``."""
+    ``out_A.ply`` and ``out_B.ply``; another suffix is kept (``out.txt``: ``out.txt_A.ply``)."""
     stem = os.fspath(path)
     stem = stem[:-4] if stem.lower().endswith(".ply") else stem
     return f"{stem}_A.ply", f"{stem}_B.ply"
@@ -324,7 +324,11 @@ def add_parser(sub) -> None:
         "map", help="map file: one 0-based B index per line, or .npy (hope-rs match output)"
     )
     p.add_argument("--png", help="output PNG file")
-    p.add_argument("--ply", help="output PLY pair: OUT.ply writes OUT_A.ply and OUT_B.ply")
+    p.add_argument(
+        "--ply",
+        help="output PLY pair: OUT.ply (or OUT) writes OUT_A.ply and OUT_B.ply; another "
+        "suffix is kept in the names (out.txt writes out.txt_A.ply)",
+    )
     p.add_argument("--title", help="figure title")
     p.add_argument(
         "--up", default="auto", choices=["auto", "x", "y", "z"],

@@ -49,9 +49,9 @@ MAP_SUFFIXES = {".txt": "text", ".csv": "text", "": "text", ".npy": "npy"}
 TEMP_PREFIX = ".hope-rs-"
 
 _NPY_MAGIC = b"\x93NUMPY"
-#: A text map's characters: signed decimal integers in ASCII, separated by white space.
-_INTEGERS = re.compile(r"[\s0-9+-]*")
-#: One index of a landmark file.
+#: A text map of plain digits and line ends only (the common case, read at once).
+_PLAIN = re.compile(r"[0-9\r\n]*")
+#: One index of a map or landmark file.
 _INTEGER = re.compile(r"[+-]?[0-9]+")
 _INT64 = range(int(np.iinfo(np.int64).min), int(np.iinfo(np.int64).max) + 1)
 
@@ -354,7 +354,8 @@ def read_map(
     FileNotFoundError
         No such file.
     ValueError
-        A one-line message naming the file: unreadable, not integers, wrong length or range.
+        A one-line message naming the file (and, in a text map, the line): unreadable, not
+        one integer a line, wrong length or range.
     """
     name = os.fspath(path)
     try:
@@ -375,17 +376,9 @@ def read_map(
         if arr.size and arr.dtype.kind == "u" and arr.max() > np.uint64(np.iinfo(np.int64).max):
             raise ValueError(f"map {name!r} holds index {arr.max()}, too large for a vertex index")
         arr = arr.astype(np.int64)
+        text = None
     else:
-        try:
-            text = without_bom(data).decode("ascii")
-            if not _INTEGERS.fullmatch(text):  # int() would take "1_0" for 10
-                raise ValueError
-            arr = np.array([int(t) for t in text.split()], dtype=np.int64)
-        except (UnicodeDecodeError, ValueError, OverflowError):
-            raise ValueError(
-                f"map {name!r} is not a map file (expected one 0-based integer index per line, "
-                "or a .npy array)"
-            ) from None
+        arr, text = _text_map(name, without_bom(data))
     if n is not None and arr.size != n:
         # The swap is worth naming only when the length is B's vertex count.
         swapped = " (did you swap A and B?)" if arr.size == n_target else ""
@@ -393,14 +386,71 @@ def read_map(
             f"map {name!r} has {arr.size} entries but A has {n} vertices; it must list one B "
             f"vertex per vertex of A{swapped}"
         )
-    if arr.size and arr.min() < 0:
+    if arr.size and arr.min() < 0:  # a NumPy file's (a text map's is refused with its line)
         raise ValueError(f"map {name!r} holds a negative index ({arr.min()}); indices are 0-based")
     if arr.size and n_target is not None and arr.max() >= n_target:
+        # A text map's first index out of range, named by its line; a NumPy file's largest.
+        i = int(np.argmax(arr >= n_target)) if text is not None else int(np.argmax(arr))
+        where = f"map {name!r}" if text is None else f"{name}:{_entry_line(text, i)}: the map"
         raise ValueError(
-            f"map {name!r} holds index {arr.max()} but B has {n_target} vertices (0-based "
-            "indices must be below the vertex count)"
+            f"{where} holds index {arr[i]} but B has {n_target} vertices (0-based indices "
+            "must be below the vertex count)"
         )
     return arr
+
+
+def _lines(text: str) -> list[str]:
+    """``text``'s lines, each ended by LF, CR LF or CR."""
+    return text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
+
+
+def _entry_line(text: str, i: int) -> int:
+    """The line number (from 1) of entry ``i`` (from 0) of a text map: its ``i``-th line that
+    is not blank."""
+    for n, line in enumerate(_lines(text), 1):
+        if line.strip():
+            if i == 0:
+                return n
+            i -= 1
+    raise IndexError("no such entry")
+
+
+def _text_map(name: str, data: bytes) -> tuple[np.ndarray, str]:
+    """The entries of a text map file ``name`` (its bytes, without a BOM) and its text: one
+    0-based index per line, blank lines skipped; a bad line is refused naming its number."""
+    rule = "expected one 0-based integer index per line, or a .npy array"
+    try:
+        text = data.decode("ascii")
+    except UnicodeDecodeError as e:
+        at = data[: e.start].count(b"\n") + 1
+        raise ValueError(
+            f"{name}:{at}: byte 0x{data[e.start]:02x} is not text; this is not a map file ({rule})"
+        ) from None
+    if _PLAIN.fullmatch(text):  # as write_map writes it: parsed at once
+        words = text.split()
+        if not words or max(map(len, words)) <= 18:  # below 10**18: fits int64
+            return np.array(words, dtype=np.int64), text
+    values = []
+    for n, line in enumerate(_lines(text), 1):
+        words = line.split()
+        if not words:
+            continue
+        shown = line.strip()[:80]
+        if len(words) > 1:
+            raise ValueError(f"{name}:{n}: {shown!r} holds {len(words)} values ({rule})")
+        # ASCII digits only: int() would take "1_0" for 10 and other scripts' digits.
+        if not _INTEGER.fullmatch(words[0]):
+            raise ValueError(
+                f"{name}:{n}: {shown!r} is not a vertex index; this is not a map file ({rule})"
+            )
+        # Past 19 significant digits no index fits int64 (and int() refuses 4,300 digits).
+        if len(words[0].lstrip("+-0")) > 19 or int(words[0]) not in _INT64:
+            raise ValueError(f"{name}:{n}: index {shown!r} is too large for a vertex index")
+        value = int(words[0])
+        if value < 0:
+            raise ValueError(f"{name}:{n}: negative index {value}; indices are 0-based")
+        values.append(value)
+    return np.array(values, dtype=np.int64), text
 
 
 def read_landmarks(

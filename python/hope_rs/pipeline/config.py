@@ -29,6 +29,7 @@ import numpy as np
 
 from ..kernels.search import SearchConfig
 from ..shape import ShapeConfig
+from .config_checks import check_config
 
 # Imported by name: mypy's target (3.10) has no tomllib, and tomli may or may not be there.
 tomllib: ModuleType | None
@@ -1263,7 +1264,10 @@ class MatchConfig:
     denoise: DenoiseConfig = field(default_factory=DenoiseConfig)
 
     def with_options(self, **options) -> MatchConfig:
-        """A copy with ``match``'s keyword options (see :data:`KEYWORDS`) set."""
+        """A copy with ``match``'s keyword options (see :data:`KEYWORDS`) set, its settings
+        checked at once as :func:`hope_rs.match` checks a config: a value of the wrong kind
+        or out of its field's range is a one-line TypeError or ValueError naming the field.
+        """
         cfg = self
         for name, value in options.items():
             if name not in KEYWORDS:
@@ -1276,6 +1280,7 @@ class MatchConfig:
             else:
                 part = dataclasses.replace(getattr(cfg, stage), **{attr: value})
                 cfg = dataclasses.replace(cfg, **{stage: part})
+        check_config(cfg)
         return cfg
 
     def options(self) -> dict:
