@@ -217,7 +217,10 @@ def render_pair(
     ca = position_colours(a, frame)
     cb = pull_back_colours(ca, mapping, b)
     panels = 2 if values is None else 3
-    fig, axes = plt.subplots(1, panels, figsize=(width / dpi, height / dpi), dpi=dpi)
+    # Constrained layout keeps the titles inside the figure beside equal-aspect panels.
+    fig, axes = plt.subplots(
+        1, panels, figsize=(width / dpi, height / dpi), dpi=dpi, layout="constrained"
+    )
     half = _half_size((a, b), frame)
     _draw(axes[0], a, ca, frame, "A (source), coloured by position", half)
     _draw(axes[1], b, cb, frame, "B, coloured through the map", half)
@@ -235,7 +238,6 @@ def render_pair(
         bar.set_label(values_label, fontsize=11)
     if title:
         fig.suptitle(title, fontsize=15)
-    fig.tight_layout()
     atomic_write(path, lambda fh: fig.savefig(fh, format="png"))
     plt.close(fig)
 
