@@ -67,6 +67,14 @@ def test_png_has_the_requested_size(pair):
         (["--png", "x.jpg"], "must end in .png"),
         (["--ply", "x.ply", "--truth", "a", "b", "c"], "--truth colour the --png picture only"),
         (["--ply", "x.ply", "--confidence", "c.npy"], "--confidence colour the --png picture"),
+        (
+            ["--png", "x.png", "--truth", "identity", "--color-by", "position"],
+            "--truth is read only with --color-by error, not position",
+        ),
+        (
+            ["--png", "x.png", "--confidence", "c.npy", "--truth", "identity"],
+            "--confidence is read only with --color-by confidence, not error",
+        ),
     ],
 )
 def test_bad_options_fail_in_one_line(pair, capsys, extra, message):

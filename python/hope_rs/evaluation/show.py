@@ -407,6 +407,15 @@ def cmd_show(args) -> int:
     color_by = args.color_by or (
         "error" if args.truth else "confidence" if args.confidence else "position"
     )
+    unused = [o for o, x, by in [("--truth", args.truth, "error"),
+                                 ("--confidence", args.confidence, "confidence")]
+              if x and color_by != by]  # fmt: skip
+    if unused:
+        raise ValueError(
+            f"{unused[0]} is read only with --color-by "
+            f"{'error' if unused[0] == '--truth' else 'confidence'}, not {color_by}: "
+            "leave it out or colour by it"
+        )
     if color_by == "error" and not args.truth:
         raise ValueError("--color-by error needs --truth ('identity' or A.vts B.vts)")
     if color_by == "confidence" and not args.confidence:
