@@ -87,6 +87,8 @@ def test_bad_text_maps_get_one_line_errors_naming_the_file(tmp_path, content, ma
         (b"0\r\n\r\n-2\r\n", r"bad\.txt:3: negative index -2; indices are 0-based"),
         (b"0\n99999999999999999999\n", r"bad\.txt:2: index '9+' is too large"),
         (b"0\n1\n\xff\n", r"bad\.txt:3: byte 0xff is not text"),
+        (b"0\r1\r\xff\r", r"bad\.txt:3: byte 0xff is not text"),  # CR line ends
+        (b"# header\n0\n", r"bad\.txt:1: '# header' is not a vertex index"),
         (b"0\n\n1\n3\n2\n", r"bad\.txt:4: the map holds index 3 but B has 3 vertices"),
     ],
 )

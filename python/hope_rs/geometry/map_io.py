@@ -422,7 +422,7 @@ def _text_map(name: str, data: bytes) -> tuple[np.ndarray, str]:
     try:
         text = data.decode("ascii")
     except UnicodeDecodeError as e:
-        at = data[: e.start].count(b"\n") + 1
+        at = len(_lines(data[: e.start].decode("ascii")))  # LF, CR LF or CR, as below
         raise ValueError(
             f"{name}:{at}: byte 0x{data[e.start]:02x} is not text; this is not a map file ({rule})"
         ) from None
@@ -436,7 +436,7 @@ def _text_map(name: str, data: bytes) -> tuple[np.ndarray, str]:
         if not words:
             continue
         shown = line.strip()[:80]
-        if len(words) > 1:
+        if len(words) > 1 and not words[0].startswith("#"):
             raise ValueError(f"{name}:{n}: {shown!r} holds {len(words)} values ({rule})")
         # ASCII digits only: int() would take "1_0" for 10 and other scripts' digits.
         if not _INTEGER.fullmatch(words[0]):

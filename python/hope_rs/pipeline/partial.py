@@ -176,11 +176,18 @@ def part_scale(part: Shape, config: PartialConfig) -> float:
     return part.scale * shrink if shrink < 1.0 - config.inflated else part.scale
 
 
-def detect_part(a: Shape, b: Shape, config: PartialConfig | None = None) -> PartialInfo | None:
+def detect_part(
+    a: Shape,
+    b: Shape,
+    config: PartialConfig | None = None,
+    *,
+    lengths: tuple[float, float] | None = None,
+) -> PartialInfo | None:
     """:class:`PartialInfo` when A or B is a part of the other (see the module notes), else
-    ``None``; ``config`` defaults to ``PartialConfig()``."""
+    ``None``; ``config`` defaults to ``PartialConfig()``, ``lengths`` (A's and B's
+    :func:`boundary_length`, when the caller has them) are measured when not given."""
     config = PartialConfig() if config is None else config
-    la, lb = boundary_length(a), boundary_length(b)
+    la, lb = (boundary_length(a), boundary_length(b)) if lengths is None else lengths
     # A part is never larger than its whole: when it is larger than the other shape already
     # (a smaller body), its own sqrt(area) is the better guess and it keeps it.
     # Two parts of one shape (both cut) are not a part and its whole: the whole-shape path.
@@ -191,12 +198,11 @@ def detect_part(a: Shape, b: Shape, config: PartialConfig | None = None) -> Part
     return None
 
 
-def both_open(a: Shape, b: Shape, config: PartialConfig) -> str | None:
+def both_open(la: float, lb: float, config: PartialConfig) -> str | None:
     """Why the stage leaves two open shapes alone, for the log, when neither could be a whole
-    (both boundaries longer than ``config.max_whole_boundary``); else ``None``. Two parts
-    (two partial scans) are matched as wholes, each at its own scale: where they cover
-    different regions of the surface, much of the map lands wrong."""
-    la, lb = boundary_length(a), boundary_length(b)
+    (both :func:`boundary_length` ``la``, ``lb`` above ``config.max_whole_boundary``); else
+    ``None``. Two parts (two partial scans) are matched as wholes, each at its own scale:
+    where they cover different regions of the surface, much of the map lands wrong."""
     if min(la, lb) <= config.max_whole_boundary:
         return None
     return (
@@ -242,10 +248,11 @@ class PartialStage(Stage):
         cfg = state.config.partial
         if not cfg.enabled:
             return QUIET
-        self.info = detect_part(state.a, state.b, cfg)
+        lengths = boundary_length(state.a), boundary_length(state.b)
+        self.info = detect_part(state.a, state.b, cfg, lengths=lengths)
         if self.info is not None:
             return None
-        return both_open(state.a, state.b, cfg) or QUIET
+        return both_open(*lengths, cfg) or QUIET
 
     def run(self, state: MatchState) -> Halt | None:
         info = self.info
