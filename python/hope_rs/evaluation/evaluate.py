@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import math
 import os
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -28,6 +27,7 @@ from scipy.integrate import trapezoid
 
 from .. import _core
 from .._validate import as_index_map
+from ..geometry.map_io import parse_index
 from ..geometry.mesh import Mesh, as_mesh, unique_edges
 from ..shape import Shape
 
@@ -38,9 +38,6 @@ MAX_ERROR_SHORT = 0.10
 #: Points on each curve.
 CURVE_POINTS = 101
 GEODESIC_METHODS = ("graph", "surface")
-#: One vertex index of a ``.vts`` file.
-_INTEGER = re.compile(r"[+-]?[0-9]+")
-_INT64_MAX = int(np.iinfo(np.int64).max)
 
 
 def load_vts(path: str | os.PathLike) -> np.ndarray:
@@ -68,13 +65,12 @@ def load_vts(path: str | os.PathLike) -> np.ndarray:
         shown = line.strip()[:80]
         if len(words) != 1:
             raise ValueError(f"{name}:{n}: {shown!r} has {len(words)} values; {rule}")
-        # ASCII digits only, as NumPy reads them: int() would take "1_0" for 10.
-        if not _INTEGER.fullmatch(words[0]):
+        try:
+            value = parse_index(words[0])
+        except OverflowError:
+            raise ValueError(f"{name}:{n}: vertex index {shown!r} is too large") from None
+        if value is None:
             raise ValueError(f"{name}:{n}: cannot read {shown!r} as a vertex index; {rule}")
-        # Past 19 significant digits no index fits int64 (and int() refuses 4,300 digits).
-        if len(words[0].lstrip("+-0")) > 19 or int(words[0]) > _INT64_MAX:
-            raise ValueError(f"{name}:{n}: vertex index {shown!r} is too large")
-        value = int(words[0])
         if value < 1:
             raise ValueError(f"{name}:{n}: index {value} is below 1; .vts files are 1-based")
         idx.append(value - 1)

@@ -38,6 +38,7 @@ __all__ = [
     "read_landmarks",
     "read_map",
     "map_writer",
+    "parse_index",
     "same_file",
     "write_map",
 ]
@@ -399,6 +400,17 @@ def read_map(
     return arr
 
 
+def parse_index(word: str) -> int | None:
+    """``word`` as an int when it is a signed integer in ASCII digits (``int`` would also take
+    "1_0" for 10 and other scripts' digits), else ``None``; OverflowError when it does not fit
+    int64 (told from its digits first: ``int`` refuses 4,300 of them)."""
+    if not _INTEGER.fullmatch(word):
+        return None
+    if len(word.lstrip("+-0")) > 19 or int(word) not in _INT64:
+        raise OverflowError(word)
+    return int(word)
+
+
 def _lines(text: str) -> list[str]:
     """``text``'s lines, each ended by LF, CR LF or CR."""
     return text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
@@ -438,15 +450,16 @@ def _text_map(name: str, data: bytes) -> tuple[np.ndarray, str]:
         shown = line.strip()[:80]
         if len(words) > 1 and not words[0].startswith("#"):
             raise ValueError(f"{name}:{n}: {shown!r} holds {len(words)} values ({rule})")
-        # ASCII digits only: int() would take "1_0" for 10 and other scripts' digits.
-        if not _INTEGER.fullmatch(words[0]):
+        try:
+            value = parse_index(words[0])
+        except OverflowError:
+            raise ValueError(
+                f"{name}:{n}: index {shown!r} is too large for a vertex index"
+            ) from None
+        if value is None:
             raise ValueError(
                 f"{name}:{n}: {shown!r} is not a vertex index; this is not a map file ({rule})"
             )
-        # Past 19 significant digits no index fits int64 (and int() refuses 4,300 digits).
-        if len(words[0].lstrip("+-0")) > 19 or int(words[0]) not in _INT64:
-            raise ValueError(f"{name}:{n}: index {shown!r} is too large for a vertex index")
-        value = int(words[0])
         if value < 0:
             raise ValueError(f"{name}:{n}: negative index {value}; indices are 0-based")
         values.append(value)
