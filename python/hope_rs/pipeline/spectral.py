@@ -245,7 +245,7 @@ class BasisPrefetch:
         self.k = k
         self.solved: list[tuple[Shape, tuple[np.ndarray, np.ndarray]]] = []
         self.stop = threading.Event()
-        self.thread = threading.Thread(target=self._run, name="hope_rs-eigenbases", daemon=True)
+        self.thread = _Background(self._run, "hope_rs-eigenbases")
 
     def start(self) -> BasisPrefetch:
         if self.shapes:
@@ -272,9 +272,26 @@ class BasisPrefetch:
             s.set_spectral_basis(evecs, mass)
 
 
-def _join(thread: threading.Thread | None) -> None:
+class _Background(threading.Thread):
+    """A daemon thread that sets :attr:`ended` when it returns. Waiting on that event, not on
+    ``Thread.join`` alone: in Python < 3.13 a join interrupted by Ctrl-C marks the running
+    thread as ended, and every later join then returns while it still runs."""
+
+    def __init__(self, target, name: str, args: tuple = ()):
+        super().__init__(target=target, name=name, args=args, daemon=True)
+        self.ended = threading.Event()
+
+    def run(self) -> None:
+        try:
+            super().run()
+        finally:
+            self.ended.set()
+
+
+def _join(thread: _Background | None) -> None:
     """Waits for ``thread`` if it was started."""
     if thread is not None and thread.ident is not None:
+        thread.ended.wait()
         thread.join()
 
 
@@ -299,16 +316,14 @@ class EarlyZoomOut:
     ):
         self.a, self.b, self.prefetch, self.config = a, b, prefetch, config
         self.extra = extra
-        self.thread: threading.Thread | None = None
+        self.thread: _Background | None = None
         self.result: np.ndarray | None = None
         self.stop = threading.Event()
 
     def start(self, f: np.ndarray, n_pass: int) -> None:
         if n_pass < self.config.early_from_pass or self.thread is not None:
             return
-        self.thread = threading.Thread(
-            target=self._run, args=(np.array(f),), name="hope_rs-zoomout", daemon=True
-        )
+        self.thread = _Background(self._run, "hope_rs-zoomout", (np.array(f),))
         self.thread.start()
 
     def _run(self, f: np.ndarray) -> None:
@@ -471,8 +486,17 @@ class SpectralBackground(Background):
                 # still leaves the threads stopping.
                 early.stop.set()
                 prefetch.stop.set()
-            early.join(cancel=not keep)
-            prefetch.finish()
+            try:
+                early.join(cancel=not keep)
+                prefetch.finish()
+            except BaseException:
+                # Interrupted (Ctrl-C, SIGTERM) while waiting for the results: stop the
+                # threads and wait for them, so none outlives the call.
+                early.stop.set()
+                prefetch.stop.set()
+                early.join(cancel=True)
+                prefetch.finish()
+                raise
             self.zoomout = early.result
         finally:
             self.blas.close()
