@@ -179,6 +179,8 @@ def test_cli_batch_exit_codes(folder, tmp_path, capsys):
     err = capsys.readouterr().err
     assert "mesh file(s) of the pairs file do not exist" in err and "need --ext" in err
     assert f"no such mesh file: {str(folder / 'm' / 's0')!r}" in err
+    assert main(noext[:-1] + [str(tmp_path / "o5")] + cache) == 1
+    assert "mesh file(s) of the pairs file do not exist" in capsys.readouterr().err  # -q too
     assert main(args + ["--no-cache", "--cache", str(tmp_path)]) == 2
     (tmp_path / "file").write_text("")
     assert main(["batch", str(folder / "m" / "pairs.txt"), "--out", str(tmp_path / "file")]) == 2

@@ -126,6 +126,14 @@ def test_1b_pairs_of_a_dict_with_int_keys_name_its_keys_not_positions(meshes, tm
             hope_rs.match_many(keyed, [bad], jobs=1, cache=False)
 
 
+@pytest.mark.parametrize("pairs", [[0, 1], ["s0"], [(0,)], [(0, 1, 2)]])
+def test_1d_a_pair_that_is_not_two_entries_is_refused_in_one_line(files, pairs, configs):
+    shapes = [files / "s0.off", files / "s1.off"]
+    with pytest.raises(ValueError, match="each pair must have two entries"):
+        hope_rs.match_many(shapes, pairs, **FAST)
+    assert configs == []
+
+
 def test_2_map_files_stay_inside_out_dir(meshes, tmp_path):
     work = tmp_path / "work"
     work.mkdir()
@@ -308,6 +316,54 @@ def test_7b_a_rerun_redoes_a_map_file_changed_after_the_batch_wrote_it(files, tm
     np.testing.assert_array_equal(hope_rs.read_map(path), first.map)
     (again,) = hope_rs.match_many(shapes, [(0, 1)], **run, **FAST)
     assert again.skipped
+
+
+def test_7e_a_mesh_that_changed_its_vertex_count_is_named_as_changed(files, tmp_path):
+    src = tmp_path / "m"
+    shutil.copytree(files, src)
+    shapes, out = [src / "s0.off", src / "s1.off"], tmp_path / "out"
+    run = {"out_dir": out, "jobs": 1, "cache": tmp_path / "c"}
+    hope_rs.match_many(shapes, [(0, 1)], **run, **FAST)
+    m = hope_rs.load_mesh(shapes[0])
+    write_off(shapes[0], np.vstack([m.vertices, [[9.0, 9.0, 9.0]]]), m.faces)  # one vertex more
+    with pytest.warns(RuntimeWarning, match="s0__s1.txt: mesh s0 changed; computing it again"):
+        (r,) = hope_rs.match_many(shapes, [(0, 1)], **run, **FAST)
+    assert r.ok and r.map.shape == (N + 1,)
+
+
+def test_7c_a_redo_that_fails_leaves_no_outdated_map(files, tmp_path):
+    src = tmp_path / "m"
+    shutil.copytree(files, src)
+    shapes, out = [src / "s0.off", src / "s1.off"], tmp_path / "out"
+    run = {"out_dir": out, "jobs": 1, "cache": tmp_path / "c"}
+    (first,) = hope_rs.match_many(shapes, [(0, 1)], **run, **FAST)
+    assert first.ok and (out / "s0__s1.txt").is_file()
+    # B edited in place into a mesh that cannot be matched (no surface area).
+    f = hope_rs.load_mesh(shapes[1]).faces
+    write_off(shapes[1], np.zeros((N, 3)), f)
+    with pytest.warns(RuntimeWarning, match="mesh s1 changed; computing it again"):
+        (r,) = hope_rs.match_many(shapes, [(0, 1)], **run, **FAST)
+    assert not r.ok and "area" in r.error
+    assert not (out / "s0__s1.txt").exists()  # the map of the old B is gone
+    assert "s0__s1.txt" not in Manifest(out).entries
+
+
+def test_7d_a_map_file_that_is_an_input_is_refused_before_any_work(files, tmp_path, configs):
+    shapes = [files / "s0.off", files / "s1.off"]
+    # The pair's landmark file sits in the output folder under the map's own name.
+    marks = tmp_path / "s0__s1.txt"
+    marks.write_text("0 5\n10 20\n")
+    with pytest.raises(ValueError, match=r"s0 -> s1 would be written over .*s0__s1\.txt'"):
+        hope_rs.match_many(shapes, [(0, 1)], out_dir=tmp_path, landmarks=[marks], **FAST)
+    assert marks.read_text() == "0 5\n10 20\n" and configs == []
+    # A mesh in the output folder named as a map file is refused alike.
+    mesh = tmp_path / "s0__b.txt"
+    shutil.copy(files / "s1.off", mesh)
+    mesh_off = tmp_path / "b.off"
+    os.symlink(mesh, mesh_off)  # the batch names the mesh after the link: "b"
+    with pytest.raises(ValueError, match="one of the inputs; choose another output folder"):
+        hope_rs.match_many([files / "s0.off", mesh_off], [(0, 1)], out_dir=tmp_path, **FAST)
+    assert configs == []
 
 
 # -- 8-11: one failure stays local -------------------------------------------------------------

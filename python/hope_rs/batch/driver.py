@@ -149,8 +149,10 @@ def _resolve_pairs(pairs, names: list[str], keys: list | None = None) -> list[tu
     twice = {n for n in names if names.count(n) > 1}
     out = []
     for p in pairs:
-        if len(p) != 2:
-            raise ValueError(f"each pair must have two entries, got {p!r}")
+        if isinstance(p, (str, bytes)) or not hasattr(p, "__len__") or len(p) != 2:
+            raise ValueError(
+                f"each pair must have two entries (e.g. (0, 1) or ('a', 'b')), got {p!r}"
+            )
         ij = []
         for x in p:
             if keys is not None:
@@ -187,6 +189,29 @@ _LANDMARKS_FORM = (
     "landmarks must be a list with one entry per pair: None, an (m, 2) array or the path of a "
     "landmark file"
 )
+
+
+def _check_not_inputs(paths: list, ij: list, names: list[str], inputs: list) -> None:
+    """Refuse, before any work, a map file that is one of the batch's input files (a mesh or
+    a landmark file, links followed): writing the map would overwrite it."""
+    seen = {}
+    for x in inputs:
+        try:
+            st = os.stat(x)
+        except OSError:  # a missing input fails its own pair
+            continue
+        seen[(st.st_dev, st.st_ino)] = os.fspath(x)
+    for path, (i, j) in zip(paths, ij):
+        try:
+            st = os.stat(path)
+        except OSError:  # not written yet: no input can be it
+            continue
+        if (st.st_dev, st.st_ino) in seen:
+            raise ValueError(
+                f"the map of {names[i]} -> {names[j]} would be written over "
+                f"{seen[(st.st_dev, st.st_ino)]!r}, one of the inputs; choose another output "
+                "folder"
+            )
 
 
 def _pair_landmarks(landmarks, pairs, n_pairs: int) -> tuple[list, list]:
@@ -333,6 +358,8 @@ def imatch_many(
         # one map (at most 21 bytes a line) and the manifest
         out = check_writable_folder(out_dir, create=True, need_bytes=21 * largest + 2**16)
         paths = [out / f for f in files]
+        inputs = [s for s in shapes if isinstance(s, (str, os.PathLike))]
+        _check_not_inputs(paths, ij, names, inputs + [f for f in mark_files if f is not None])
         manifest = Manifest(out)
     basis = cfg.spectral.k_end if cfg.spectral.enabled else 0
     key = cfg.key()
@@ -401,8 +428,9 @@ def match_many(
         digest suffix when that changed them or two pairs would share a file
         (:mod:`hope_rs.batch.naming`); no file is written outside ``out_dir``. A rerun skips
         a pair only when its map file is whole and its manifest entry matches; others are
-        redone, with a warning saying why. The folder is created, and checked to be writable
-        with room for a map, before any work.
+        redone, with a warning saying why, their outdated maps removed first. The folder is
+        created, and checked to be writable with room for a map, before any work; a map file
+        that is one of the inputs (a mesh or landmark file) is refused then too.
     map_format : {"txt", "npy"}
         Format of the map files (:func:`hope_rs.write_map`).
     jobs : int, optional

@@ -184,14 +184,20 @@ def run(plan: Plan, ex: Backend, report: Callable) -> Iterator[PairResult]:
     failed: dict[int, str] = {}
 
     def forget(n: int) -> str | None:
-        """The pair's map is about to be redone: its old entry goes first. The error, if the
-        manifest cannot be updated (the map is then left as it is)."""
+        """The pair's map is about to be redone: its old entry goes first, then the outdated
+        map itself (so that a failed or interrupted redo leaves no map of the old meshes or
+        settings behind). The error, if either cannot be removed."""
         path = plan.paths[n]
         if manifest is not None and path is not None:
             try:
                 manifest.forget(path.name)
             except OSError as e:
                 return f"cannot update the batch manifest {str(manifest.path)!r}: {e.strerror or e}"
+        if path is not None:
+            try:
+                path.unlink(missing_ok=True)
+            except OSError as e:
+                return f"cannot remove the outdated map {str(path)!r}: {e.strerror or e}"
         return None
 
     def finish(n: int, value: dict) -> PairResult:
@@ -274,6 +280,14 @@ def run(plan: Plan, ex: Backend, report: Callable) -> Iterator[PairResult]:
                         if why is None and manifest is not None:
                             why = manifest.why_redo(
                                 path.name, entry(n) | {"map_digest": map_digest(m)}
+                            )
+                        elif manifest is not None and path.name in manifest.entries:
+                            # A map that no longer fits its meshes: say what changed (a mesh,
+                            # the settings) when the manifest knows, not only the map's length.
+                            recorded = manifest.entries[path.name].get("map_digest")
+                            why = (
+                                manifest.why_redo(path.name, entry(n) | {"map_digest": recorded})
+                                or why
                             )
                         if why is None:
                             old = {} if manifest is None else manifest.entries.get(path.name, {})

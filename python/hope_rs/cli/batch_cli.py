@@ -161,7 +161,9 @@ def add_batch_parser(sub) -> None:
         action="store_true",
         help="match(..., shared_faces=False) for every pair",
     )
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress output")
+    p.add_argument(
+        "-q", "--quiet", action="store_true", help="no progress output (warnings still print)"
+    )
     p.set_defaults(func=cmd_batch)
 
 
@@ -177,7 +179,7 @@ def cmd_batch(args) -> int:
     pairs, landmarks = read_pairs(args.pairs, ext=args.ext, with_landmarks=True)
     shapes = list(dict.fromkeys(p for pair in pairs for p in pair))
     missing = [p for p in shapes if not os.path.isfile(p)]
-    if missing and not args.quiet:
+    if missing:  # a warning, not progress: -q keeps it
         # Their pairs fail, the others run; a name without a suffix hints at the cause.
         hint = (
             "; names without a suffix need --ext (e.g. --ext .off)"
