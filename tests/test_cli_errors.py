@@ -189,10 +189,14 @@ def test_usage_errors_exit_2(meshes, tmp_path, capsys):
     assert "--jobs must be a positive integer" in one_line_error(capsys.readouterr().err)
 
 
-def _cli(*args: str, stdout=subprocess.PIPE) -> subprocess.CompletedProcess:
+def _cli(*args: str, stdout=subprocess.PIPE, cwd=None) -> subprocess.CompletedProcess:
     code = "import sys; from hope_rs.cli.commands import main; sys.exit(main(sys.argv[1:]))"
     return subprocess.run(
-        [sys.executable, "-c", code, *args], check=False, stdout=stdout, stderr=subprocess.PIPE
+        [sys.executable, "-c", code, *map(str, args)],
+        check=False,
+        stdout=stdout,
+        stderr=subprocess.PIPE,
+        cwd=cwd,
     )
 
 
@@ -309,6 +313,15 @@ def test_no_output_file_is_the_standard_output_that_carries_the_json_or_the_map(
     # The map alone on standard output is fine (test above); so is the JSON with -o a file.
     res = _cli("match", a, b, "-q", "--json", "-o", str(tmp_path / "m.txt"))
     assert res.returncode == 0 and "map" not in json.loads(res.stdout)
+
+
+def test_dash_as_the_output_is_the_standard_output(meshes, tmp_path):
+    a, b = meshes
+    plain = _cli("match", a, b, "-q", cwd=tmp_path)
+    dash = _cli("match", a, b, "-q", "-o", "-", cwd=tmp_path)
+    assert dash.returncode == 0 and plain.returncode == 0, dash.stderr
+    assert dash.stdout == plain.stdout and len(dash.stdout.split()) == N
+    assert not (tmp_path / "-").exists()
 
 
 def test_dev_stdout_redirected_to_a_file_is_written_through_not_replaced(meshes, tmp_path):

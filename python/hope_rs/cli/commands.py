@@ -80,6 +80,8 @@ def _is_standard_output(path: str) -> bool:
 
 def cmd_match(args) -> int:
     config = config_from_args(args)  # before any work, like the outputs below
+    if args.output == "-":  # the usual name of standard output
+        args.output = None
     if sys.stdout is None and (args.json or not args.output):
         raise ValueError(
             "standard output is closed, and the "
@@ -233,7 +235,7 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument(
         "-o", "--output",
         help="map file: .txt or .csv (one B index per line) or .npy (NumPy int64); written "
-        "atomically (default: standard output)",
+        "atomically (default, or '-': standard output)",
     )  # fmt: skip
     add_setting_arguments(m)
     m.add_argument(

@@ -291,8 +291,10 @@ def add_parser(sub) -> None:
 
 
 def cmd_perturb_set(args) -> int:
-    return run_set_command(
-        args, write_perturbed_sets,
-        note=" (a shortcuts set is scored on the clean B by "
-        "hope_rs.evaluation.perturbed.clean_errors)",
-    )  # fmt: skip
+    shortcuts = "shortcuts" in (c.strip() for c in args.conditions.split(","))
+    note = (
+        " (a shortcuts set is scored on the clean B by hope_rs.evaluation.perturbed.clean_errors)"
+        if shortcuts
+        else ""
+    )
+    return run_set_command(args, write_perturbed_sets, note=note)

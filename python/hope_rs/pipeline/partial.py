@@ -206,7 +206,7 @@ def both_open(la: float, lb: float, config: PartialConfig) -> str | None:
     if min(la, lb) <= config.max_whole_boundary:
         return None
     return (
-        f"both shapes are open (boundaries {la:.2f} and {lb:.2f} sqrt(area)): matched as two "
+        f"both shapes are open (boundaries A {la:.2f}, B {lb:.2f} sqrt(area)): matched as two "
         "wholes, each at its own scale; where they cover different regions much of the map "
         "can land wrong, so check res.quality"
     )
@@ -259,7 +259,7 @@ class PartialStage(Stage):
         assert info is not None
         cfg = state.config.partial
         la, lb = info.boundary
-        detail = f"{info.part.upper()} is a part (boundary {la:.2f} vs {lb:.2f} sqrt(area))"
+        detail = f"{info.part.upper()} is a part (boundaries A {la:.2f}, B {lb:.2f} sqrt(area))"
         reverse = info.part == "b" and cfg.whole_to_part == "reverse"
         detail += ": matched B -> A and inverted" if reverse else ": matched at the whole's scale"
         t = state.log.start("partial", detail=detail)

@@ -193,9 +193,9 @@ class Referenced:
             if (mapped < 0).any():
                 v = int(landmarks[np.argmax(mapped < 0), col])
                 raise ValueError(
-                    f"landmark vertex {v} of {name} is in no face or in a small loose piece "
-                    "left out of the match; give a vertex of the surface (or keep every piece "
-                    "with MatchConfig(min_piece=0))"
+                    f"landmark vertex {v} of {name} is in no face (give a vertex of the "
+                    "surface) or in a small loose piece left out of the match (give a vertex "
+                    "of the surface, or keep every piece with MatchConfig(min_piece=0))"
                 )
             out[:, col] = mapped
         if self.weld_a is not None or self.weld_b is not None:
