@@ -4,6 +4,7 @@ from pathlib import Path
 import pytest
 from hypothesis import settings
 
+import hope_rs
 from hope_rs.evaluation.datasets import pairs_of
 from hope_rs.evaluation.demo import demo_pair
 from hope_rs.geometry.map_io import check_writable_folder
@@ -33,6 +34,20 @@ def shared_pair(data_set: str, name: str) -> tuple:
     pair = next(p for p in pairs_of(data_path(data_set)) if p.name == name)
     a, b = load_mesh(pair.a), load_mesh(pair.b)
     return (a, b, *pair.ground_truth(a.n_vertices, b.n_vertices))
+
+
+_DEFAULT_MATCHES: dict = {}
+
+
+def default_match(a_path: Path, b_path: Path) -> tuple:
+    """``(a, b, hope_rs.match(a, b))`` of two mesh files, with the default settings, made once
+    per test process: for a pair that tests of several modules check (golden maps, growth);
+    the tests only read it."""
+    key = (str(a_path), str(b_path))
+    if key not in _DEFAULT_MATCHES:
+        a, b = load_mesh(a_path), load_mesh(b_path)
+        _DEFAULT_MATCHES[key] = (a, b, hope_rs.match(a, b))
+    return _DEFAULT_MATCHES[key]
 
 
 @pytest.fixture(scope="session")

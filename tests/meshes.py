@@ -148,7 +148,7 @@ def bumpy_sphere_files(folder, count: int, n: int) -> list[Path]:
 def cli_maps(folder, pa, pb, *flags: str) -> tuple[np.ndarray, np.ndarray]:
     """The maps that ``hope-rs match`` and ``hope-rs batch`` (one job, no cache) write for the
     pair of mesh files (pa, pb) given the extra command-line ``flags``; files go in ``folder``."""
-    tag = "".join(flags) or "default"
+    tag = "".join(f.replace("/", "_") for f in flags) or "default"  # a path among them too
     out = Path(folder) / f"match{tag}.txt"
     assert main(["match", str(pa), str(pb), "-o", str(out), "-q", *flags]) == 0
     pairs = Path(folder) / f"pairs{tag}.txt"

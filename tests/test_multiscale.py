@@ -5,8 +5,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import data_path
-from meshes import bumpy_sphere, renumbered, signed_volume, subdivided, write_off
+from meshes import bumpy_sphere, renumbered, signed_volume, write_off
 
 import hope_rs
 from hope_rs import MatchConfig
@@ -68,11 +67,18 @@ def test_lift_carries_a_similarity_to_the_exact_vertices(faust_pair):
     assert np.mean(shifted == truth) < 0.1
 
 
-@pytest.mark.slow
-def test_multiscale_match_refines_a_lifted_coarse_match(faust_pair):
+@pytest.fixture(scope="module")
+def coarser_match(faust_pair):
+    """The FAUST pair's Shapes (coarsened at the wider spacing) and their multiscale match:
+    ``(sa, sb, res)``."""
     a, b = faust_pair
     sa, sb = hope_rs.Shape(a, config=COARSER_SHAPES), hope_rs.Shape(b, config=COARSER_SHAPES)
-    res = hope_rs.match(sa, sb, config=COARSER)
+    return sa, sb, hope_rs.match(sa, sb, config=COARSER)
+
+
+@pytest.mark.slow
+def test_multiscale_match_refines_a_lifted_coarse_match(coarser_match):
+    sa, sb, res = coarser_match
     ca, cb = sa.coarse_level()[0], sb.coarse_level()[0]
     assert res.coarse is not None and res.coarse.map.shape == (ca.sites.size,)
     assert res.coarse.map.max() < cb.sites.size
@@ -89,12 +95,12 @@ def test_multiscale_match_refines_a_lifted_coarse_match(faust_pair):
 
 
 @pytest.mark.slow
-def test_multiscale_match_does_not_depend_on_the_numbering(faust_pair):
+def test_multiscale_match_does_not_depend_on_the_numbering(faust_pair, coarser_match):
     a, b = faust_pair
     rng = np.random.default_rng(2)
     a2, pa = renumbered(a, rng)
     b2, pb = renumbered(b, rng)
-    base = hope_rs.match(a, b, config=COARSER)
+    base = coarser_match[2]  # match(a, b, config=COARSER), on Shapes made with its settings
     other = hope_rs.match(a2, b2, config=COARSER)
     # a2's vertex i is a's vertex pa[i]; the map must follow both relabellings.
     np.testing.assert_array_equal(other.map, np.argsort(pb)[base.map[pa]])
@@ -134,36 +140,35 @@ def test_unless_both_shapes_coarsen_match_takes_the_default_path(faust_pair):
         M.coarse_level(hope_rs.Shape(sparse), "shot")
 
 
-@pytest.fixture(scope="module")
-def dense_pair_files(tmp_path_factory):
-    """A FAUST pair subdivided once (27k vertices, dense enough to coarsen by default), as OFF
-    files, with the map ``match(..., multiscale=True)`` gives."""
-    folder = tmp_path_factory.mktemp("dense")
-    paths, meshes = [], []
-    for name in ("tr_reg_012", "tr_reg_018"):
-        m = hope_rs.load_mesh(data_path("faust_reg", f"{name}.off"))
-        dense = hope_rs.Mesh(*subdivided(m.vertices, m.faces))
-        write_off(folder / f"{name}.off", dense.vertices, dense.faces)
-        paths.append(folder / f"{name}.off")
-        meshes.append(dense)
-    res = hope_rs.match(*meshes, multiscale=True)
-    assert res.coarse is not None
-    return paths, res.map
+@pytest.fixture
+def coarser_files(tmp_path, faust_pair):
+    """The FAUST pair as OFF files and a settings file coarsening at the wider spacing (so that
+    these 6890-vertex bodies take the multiscale path, as larger meshes do by default)."""
+    paths = [tmp_path / "a.off", tmp_path / "b.off", tmp_path / "coarser.toml"]
+    for path, m in zip(paths, faust_pair):
+        write_off(path, m.vertices, m.faces)
+    paths[2].write_text(f"[shape.coarsen]\nspacing = {COARSER_SHAPES.coarsen.spacing}\n")
+    return paths
 
 
 @pytest.mark.slow
-def test_cli_multiscale_flag(tmp_path, capsys, dense_pair_files, monkeypatch):
+def test_cli_multiscale_flag(tmp_path, capsys, coarser_files, coarser_match, monkeypatch):
     import hope_rs.cli.commands
 
-    (a, b), want = dense_pair_files
+    a, b, settings = coarser_files
+    want = coarser_match[2].map  # match(..., config=COARSER): multiscale=True
     out = tmp_path / "map.txt"
-    assert main(["match", str(a), str(b), "-o", str(out), "--multiscale", "--json", "-q"]) == 0
+    args = ["match", str(a), str(b), "-o", str(out), "--config", str(settings), "--json", "-q"]
+    assert main([*args, "--multiscale"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert "coarse" in summary["timings"]
     np.testing.assert_array_equal(np.loadtxt(out, dtype=np.int64), want)
-    # Without the flag, large meshes get a hint on stderr (unless --quiet).
-    a, b = data_path("faust_reg", "tr_reg_012.off"), data_path("faust_reg", "tr_reg_018.off")
-    monkeypatch.setattr(hope_rs.cli.commands, "HINT_VERTICES", 6890)
+    # Without the flag, large meshes get a hint on stderr (unless --quiet); "large" lowered
+    # to two small spheres' size, so that the hint's runs are quick.
+    a, b = tmp_path / "s1.off", tmp_path / "s2.off"
+    write_off(a, *bumpy_sphere(300, seed=1))
+    write_off(b, *bumpy_sphere(300, seed=2))
+    monkeypatch.setattr(hope_rs.cli.commands, "HINT_VERTICES", 300)
     assert main(["match", str(a), str(b), "-o", str(tmp_path / "plain.txt")]) == 0
     assert "--multiscale is about 3x faster" in capsys.readouterr().err
     assert main(["match", str(a), str(b), "-o", str(tmp_path / "plain.txt"), "-q"]) == 0
@@ -171,13 +176,16 @@ def test_cli_multiscale_flag(tmp_path, capsys, dense_pair_files, monkeypatch):
 
 
 @pytest.mark.slow
-def test_batch_multiscale_flag_gives_the_maps_of_match(tmp_path, capsys, dense_pair_files):
-    (a, b), want = dense_pair_files
+def test_batch_multiscale_flag_gives_the_maps_of_match(
+    tmp_path, capsys, coarser_files, coarser_match
+):
+    a, b, settings = coarser_files
+    want = coarser_match[2].map  # match(..., config=COARSER): multiscale=True
     pairs = tmp_path / "pairs.txt"
     pairs.write_text(f"{a} {b}\n")
     out = tmp_path / "out"
-    args = ["batch", str(pairs), "--out", str(out), "--multiscale", "-q", "-j", "1"]
-    assert main(args + ["--cache", str(tmp_path / "c")]) == 0
+    args = ["batch", str(pairs), "--out", str(out), "--config", str(settings), "--multiscale"]
+    assert main([*args, "-q", "-j", "1", "--cache", str(tmp_path / "c")]) == 0
     assert "1 matched" in capsys.readouterr().out
     (got,) = [p for p in out.iterdir() if p.name != MANIFEST]  # the map, beside the manifest
     np.testing.assert_array_equal(np.loadtxt(got, dtype=np.int64), want)

@@ -167,14 +167,21 @@ def test_finish_leaves_differently_triangulated_shapes_alone():
     np.testing.assert_array_equal(res.map, f)
 
 
-def test_a_partial_shape_of_the_same_triangulation_becomes_exact(faust_pair):
-    # A = FAUST 012 without its legs, B = the whole 018.
+@pytest.fixture(scope="module")
+def legless_whole_path(faust_pair):
+    """FAUST 012 without its legs (A) and the whole 018 (B), matched on the whole-shape path
+    (the partial stage off; its own test is in test_partial.py) with and without the
+    shared-face finish: ``(part, b, idx, config, res, without)``, ``idx`` A's vertices in 012."""
     part, idx = legless(faust_pair[0])
     sa, sb = hope_rs.Shape(part), hope_rs.Shape(faust_pair[1])
-    # On the whole-shape path (the partial stage's own test is in test_partial.py).
     cfg = hope_rs.MatchConfig(partial=PartialConfig(enabled=False))
     without = hope_rs.match(sa, sb, shared_faces=False, config=cfg)
     res = hope_rs.match(sa, sb, config=cfg)
+    return part, faust_pair[1], idx, cfg, res, without
+
+
+def test_a_partial_shape_of_the_same_triangulation_becomes_exact(legless_whole_path):
+    _, _, idx, _, res, without = legless_whole_path
     assert "faces" in res.timings and "faces" not in without.timings
     # The finish's HOPE steps are profiled like the refinement's.
     assert 0 < res.timings["faces.cost"] + res.timings["faces.assign"] < res.timings["faces"]
@@ -184,17 +191,18 @@ def test_a_partial_shape_of_the_same_triangulation_becomes_exact(faust_pair):
 
 
 @pytest.mark.slow
-def test_cli_and_batch_no_shared_faces_flags(faust_pair, tmp_path, capsys):
-
-    part, _ = legless(faust_pair[0])
-    pa, pb = tmp_path / "a.off", tmp_path / "b.off"
+def test_cli_and_batch_no_shared_faces_flags(legless_whole_path, tmp_path, capsys):
+    # The pair above, whose map the finish changes, with the partial stage off by a --config
+    # file: --no-shared-faces gives match(..., shared_faces=False)'s map in both commands.
+    # (Without the flag both give match's map: test_spectral.py's flag test checks that.)
+    part, b, _, _, res, without = legless_whole_path
+    assert not np.array_equal(res.map, without.map)  # the flag must make a difference here
+    pa, pb, cfg = tmp_path / "a.off", tmp_path / "b.off", tmp_path / "whole.toml"
     write_off(pa, part.vertices, part.faces)
-    write_off(pb, faust_pair[1].vertices, faust_pair[1].faces)
-    a, b = hope_rs.load_mesh(pa), hope_rs.load_mesh(pb)
-    for flag, kw in [([], {}), (["--no-shared-faces"], {"shared_faces": False})]:
-        want = hope_rs.match(a, b, **kw).map
-        for got in cli_maps(tmp_path, pa, pb, *flag):
-            np.testing.assert_array_equal(got, want)
+    write_off(pb, b.vertices, b.faces)
+    cfg.write_text("[partial]\nenabled = false\n")
+    for got in cli_maps(tmp_path, pa, pb, "--config", str(cfg), "--no-shared-faces"):
+        np.testing.assert_array_equal(got, without.map)
     capsys.readouterr()
 
 
