@@ -129,8 +129,8 @@ def test_1b_pairs_of_a_dict_with_int_keys_name_its_keys_not_positions(meshes, tm
 @pytest.mark.parametrize("pairs", [[0, 1], ["s0"], [(0,)], [(0, 1, 2)]])
 def test_1d_a_pair_that_is_not_two_entries_is_refused_in_one_line(files, pairs, configs):
     shapes = [files / "s0.off", files / "s1.off"]
-    with pytest.raises(ValueError, match="each pair must have two entries"):
-        hope_rs.match_many(shapes, pairs, **FAST)
+    with pytest.raises(ValueError, match="each pair must be a tuple or list of two entries"):
+        hope_rs.match_many(shapes, pairs, jobs=1, **FAST)
     assert configs == []
 
 
@@ -354,7 +354,7 @@ def test_7d_a_map_file_that_is_an_input_is_refused_before_any_work(files, tmp_pa
     marks = tmp_path / "s0__s1.txt"
     marks.write_text("0 5\n10 20\n")
     with pytest.raises(ValueError, match=r"s0 -> s1 would be written over .*s0__s1\.txt'"):
-        hope_rs.match_many(shapes, [(0, 1)], out_dir=tmp_path, landmarks=[marks], **FAST)
+        hope_rs.match_many(shapes, [(0, 1)], out_dir=tmp_path, landmarks=[marks], jobs=1, **FAST)
     assert marks.read_text() == "0 5\n10 20\n" and configs == []
     # A mesh in the output folder named as a map file is refused alike.
     mesh = tmp_path / "s0__b.txt"
@@ -362,7 +362,7 @@ def test_7d_a_map_file_that_is_an_input_is_refused_before_any_work(files, tmp_pa
     mesh_off = tmp_path / "b.off"
     os.symlink(mesh, mesh_off)  # the batch names the mesh after the link: "b"
     with pytest.raises(ValueError, match="one of the inputs; choose another output folder"):
-        hope_rs.match_many([files / "s0.off", mesh_off], [(0, 1)], out_dir=tmp_path, **FAST)
+        hope_rs.match_many([files / "s0.off", mesh_off], [(0, 1)], out_dir=tmp_path, jobs=1, **FAST)
     assert configs == []
 
 

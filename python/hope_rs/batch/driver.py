@@ -151,7 +151,8 @@ def _resolve_pairs(pairs, names: list[str], keys: list | None = None) -> list[tu
     for p in pairs:
         if isinstance(p, (str, bytes)) or not hasattr(p, "__len__") or len(p) != 2:
             raise ValueError(
-                f"each pair must have two entries (e.g. (0, 1) or ('a', 'b')), got {p!r}"
+                f"each pair must be a tuple or list of two entries (e.g. (0, 1) or ('a', 'b')), "
+                f"got {p!r}"
             )
         ij = []
         for x in p:
@@ -193,24 +194,19 @@ _LANDMARKS_FORM = (
 
 def _check_not_inputs(paths: list, ij: list, names: list[str], inputs: list) -> None:
     """Refuse, before any work, a map file that is one of the batch's input files (a mesh or
-    a landmark file, links followed): writing the map would overwrite it."""
-    seen = {}
-    for x in inputs:
-        try:
-            st = os.stat(x)
-        except OSError:  # a missing input fails its own pair
-            continue
-        seen[(st.st_dev, st.st_ino)] = os.fspath(x)
+    a landmark file, symbolic links followed): writing the map would replace it. (A hard link
+    is another name: the map's atomic write replaces the name, not the input.)"""
+
+    def real(p) -> str:
+        return os.path.normcase(os.path.realpath(p))
+
+    seen = {real(x): os.fspath(x) for x in inputs}
     for path, (i, j) in zip(paths, ij):
-        try:
-            st = os.stat(path)
-        except OSError:  # not written yet: no input can be it
-            continue
-        if (st.st_dev, st.st_ino) in seen:
+        x = seen.get(real(path))
+        if x is not None:
             raise ValueError(
-                f"the map of {names[i]} -> {names[j]} would be written over "
-                f"{seen[(st.st_dev, st.st_ino)]!r}, one of the inputs; choose another output "
-                "folder"
+                f"the map of {names[i]} -> {names[j]} would be written over {x!r}, one of the "
+                "inputs; choose another output folder"
             )
 
 

@@ -46,6 +46,8 @@ FIELDS = {
     "code": "it was computed by another version of hope_rs",
     "map_digest": "the map file is not the one the batch wrote",
 }
+#: The fields of FIELDS that name a pair's inputs: a map recorded for others is wrong for it.
+INPUT_FIELDS = ("a_digest", "b_digest", "landmarks")
 
 
 def settings_key(match_key: str, config_a, config_b) -> str:
@@ -161,6 +163,12 @@ class Manifest:
             if old.get(key) != entry.get(key):
                 return why.format(a=entry.get("a"), b=entry.get("b"))
         return None
+
+    def inputs_changed(self, name: str, entry: dict) -> bool:
+        """Whether map file ``name`` was recorded for other meshes or landmarks than
+        ``entry``'s (its map is then wrong for them, not merely made another way)."""
+        old = self.entries.get(name)
+        return old is not None and any(old.get(k) != entry.get(k) for k in INPUT_FIELDS)
 
     def forget(self, name: str) -> None:
         """Drop the entry of map file ``name`` (before its map is rewritten: a run cut short

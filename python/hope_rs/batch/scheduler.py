@@ -183,17 +183,19 @@ def run(plan: Plan, ex: Backend, report: Callable) -> Iterator[PairResult]:
     ready: dict[int, dict] = {}
     failed: dict[int, str] = {}
 
-    def forget(n: int) -> str | None:
-        """The pair's map is about to be redone: its old entry goes first, then the outdated
-        map itself (so that a failed or interrupted redo leaves no map of the old meshes or
-        settings behind). The error, if either cannot be removed."""
+    def forget(n: int, stale: bool) -> str | None:
+        """The pair's map is about to be redone: its old entry goes first; with ``stale`` (the
+        map is unusable, or was made from other meshes or landmarks) the map file too, so that
+        a failed or interrupted redo leaves no map that is wrong for today's inputs. A map of
+        the same inputs made with other settings stays until the new one replaces it. The
+        error, if either cannot be removed."""
         path = plan.paths[n]
         if manifest is not None and path is not None:
             try:
                 manifest.forget(path.name)
             except OSError as e:
                 return f"cannot update the batch manifest {str(manifest.path)!r}: {e.strerror or e}"
-        if path is not None:
+        if stale and path is not None:
             try:
                 path.unlink(missing_ok=True)
             except OSError as e:
@@ -277,16 +279,24 @@ def run(plan: Plan, ex: Backend, report: Callable) -> Iterator[PairResult]:
                             )
                             continue
                         m, why = existing_map(path, sizes[i], sizes[j])
+                        stale = why is not None or (
+                            manifest is not None and manifest.inputs_changed(path.name, entry(n))
+                        )
+                        old_entry = (
+                            None if manifest is None else manifest.entries.get(path.name, {})
+                        )
                         if why is None and manifest is not None:
                             why = manifest.why_redo(
                                 path.name, entry(n) | {"map_digest": map_digest(m)}
                             )
-                        elif manifest is not None and path.name in manifest.entries:
+                        elif old_entry and "map_digest" in old_entry:
                             # A map that no longer fits its meshes: say what changed (a mesh,
                             # the settings) when the manifest knows, not only the map's length.
-                            recorded = manifest.entries[path.name].get("map_digest")
+                            assert manifest is not None
                             why = (
-                                manifest.why_redo(path.name, entry(n) | {"map_digest": recorded})
+                                manifest.why_redo(
+                                    path.name, entry(n) | {"map_digest": old_entry["map_digest"]}
+                                )
                                 or why
                             )
                         if why is None:
@@ -300,7 +310,7 @@ def run(plan: Plan, ex: Backend, report: Callable) -> Iterator[PairResult]:
                             stacklevel=2,
                         )
                         check = False
-                        bad = forget(n)
+                        bad = forget(n, stale)
                         if bad is not None:
                             yield result(n, error=bad)
                             continue
