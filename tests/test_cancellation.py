@@ -196,10 +196,12 @@ def test_ctrl_c_in_the_cli_exits_130_at_once(tmp_path):
     assert elapsed < 20, elapsed
 
 
-def test_ctrl_c_while_match_waits_for_its_eigenbases_stops_them(monkeypatch):
-    """Ctrl-C while ``match`` waits for the background eigensolve (the refinement done first)
-    stops the solve and waits for its thread: none is left running. (In Python < 3.13 an
-    interrupted ``Thread.join`` marks the thread as ended, so a second join returned at once.)"""
+@pytest.mark.parametrize("where", ["wait", "callback"])
+def test_ctrl_c_while_match_waits_for_its_eigenbases_stops_them(monkeypatch, where):
+    """Ctrl-C while ``match`` waits for the background eigensolve (the refinement done first),
+    or raised by the progress callback told of that wait, stops the solve and waits for its
+    thread: none is left running. (In Python < 3.13 an interrupted ``Thread.join`` marks the
+    thread as ended, so a second join returned at once.)"""
     # A remeshed pair: its map is not settled after the refinement, so the spectral pass waits.
     a, b = (hope_rs.Shape(m) for m in demo_pair("faust_r_000_001"))
     ended = []
@@ -207,11 +209,14 @@ def test_ctrl_c_while_match_waits_for_its_eigenbases_stops_them(monkeypatch):
     def slow_solve(self, k, *, stop=None):
         # A solve that outlasts the refinement and stops only when told to.
         assert stop is not None and stop.wait(60), "the solve was never told to stop"
+        time.sleep(0.2)  # still running a moment after the flag: a join must wait for it
         ended.append(threading.current_thread().name)
         raise Cancelled("stopped")
 
     def on_progress(ev):
         if ev.stage == "spectral" and "finishing" in ev.detail:
+            if where == "callback":
+                raise KeyboardInterrupt
             # The runner now waits for the solve: a real signal interrupts that wait.
             signal.setitimer(signal.ITIMER_REAL, 0.3)
 

@@ -322,6 +322,10 @@ def test_dash_as_the_output_is_the_standard_output(meshes, tmp_path):
     assert dash.returncode == 0 and plain.returncode == 0, dash.stderr
     assert dash.stdout == plain.stdout and len(dash.stdout.split()) == N
     assert not (tmp_path / "-").exists()
+    # With --json, standard output carries the summary: '-' is refused as /dev/stdout is.
+    res = _cli("match", a, b, "-q", "--json", "-o", "-", cwd=tmp_path)
+    assert res.returncode == 2 and res.stdout == b""
+    assert "-o '-' is the standard output" in one_line_error(res.stderr.decode())
 
 
 def test_dev_stdout_redirected_to_a_file_is_written_through_not_replaced(meshes, tmp_path):

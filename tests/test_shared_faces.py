@@ -7,6 +7,7 @@ from meshes import bumpy_sphere, cli_maps, drifted, legless, moved_copy, random_
 
 import hope_rs
 from hope_rs import _core
+from hope_rs.cli import main
 from hope_rs.geometry.mesh import unique_edges
 from hope_rs.geometry.numbering import canonical_mesh
 from hope_rs.geometry.subdivide import subdivide
@@ -193,8 +194,8 @@ def test_a_partial_shape_of_the_same_triangulation_becomes_exact(legless_whole_p
 @pytest.mark.slow
 def test_cli_and_batch_no_shared_faces_flags(legless_whole_path, tmp_path, capsys):
     # The pair above, whose map the finish changes, with the partial stage off by a --config
-    # file: --no-shared-faces gives match(..., shared_faces=False)'s map in both commands.
-    # (Without the flag both give match's map: test_spectral.py's flag test checks that.)
+    # file: --no-shared-faces gives match(..., shared_faces=False)'s map in both commands,
+    # and without the flag `hope-rs match` gives match's map, the finish run.
     part, b, _, _, res, without = legless_whole_path
     assert not np.array_equal(res.map, without.map)  # the flag must make a difference here
     pa, pb, cfg = tmp_path / "a.off", tmp_path / "b.off", tmp_path / "whole.toml"
@@ -203,6 +204,9 @@ def test_cli_and_batch_no_shared_faces_flags(legless_whole_path, tmp_path, capsy
     cfg.write_text("[partial]\nenabled = false\n")
     for got in cli_maps(tmp_path, pa, pb, "--config", str(cfg), "--no-shared-faces"):
         np.testing.assert_array_equal(got, without.map)
+    out = tmp_path / "default.txt"
+    assert main(["match", str(pa), str(pb), "-o", str(out), "-q", "--config", str(cfg)]) == 0
+    np.testing.assert_array_equal(np.loadtxt(out, dtype=np.int64), res.map)
     capsys.readouterr()
 
 

@@ -81,6 +81,11 @@ def _is_standard_output(path: str) -> bool:
 def cmd_match(args) -> int:
     config = config_from_args(args)  # before any work, like the outputs below
     if args.output == "-":  # the usual name of standard output
+        if args.json:
+            raise ValueError(
+                "-o '-' is the standard output, which already carries the JSON summary; give "
+                "a file name (without -o the JSON holds the map)"
+            )
         args.output = None
     if sys.stdout is None and (args.json or not args.output):
         raise ValueError(

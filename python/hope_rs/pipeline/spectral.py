@@ -476,17 +476,18 @@ class SpectralBackground(Background):
             if prefetch is None:
                 return
             assert early is not None  # made with the prefetch, in start
-            history = self.state.history
-            if keep and history and history[-1].polish:
-                self.waited_from = self.state.log.start(
-                    "spectral", detail="finishing the eigenbases and ZoomOut"
-                )
-            if not keep:
-                # Both flags before any wait, so that a second Ctrl-C during the joins below
-                # still leaves the threads stopping.
-                early.stop.set()
-                prefetch.stop.set()
             try:
+                history = self.state.history
+                if keep and history and history[-1].polish:
+                    # The caller's progress callback runs here, so it is inside the try too.
+                    self.waited_from = self.state.log.start(
+                        "spectral", detail="finishing the eigenbases and ZoomOut"
+                    )
+                if not keep:
+                    # Both flags before any wait, so that a second Ctrl-C during the joins
+                    # below still leaves the threads stopping.
+                    early.stop.set()
+                    prefetch.stop.set()
                 early.join(cancel=not keep)
                 prefetch.finish()
             except BaseException:
