@@ -90,7 +90,8 @@ PERTURBED_SOURCES = ("faust_r", "tosca_r")
 #: Sets whose pairs are also matched the other way (``perturb-set --conditions reversed``):
 #: pairs of the same shapes that no setting was chosen on.
 REVERSED_SOURCES = ("tosca_nonisometric_r",)
-PERTURBED_METHODS = ["init", "hope"]
+#: "hope-noorient" times the orient stage's cost: each pair again without it, in the same run.
+PERTURBED_METHODS = ["init", "hope", "hope-noorient"]
 #: The landmark bench: its sets, landmarks per pair, and the swap rule (share of the scored
 #: vertices farther than SWAP_ERROR from their match, sqrt(area) units).
 LANDMARK_SETS = ("faust_r", "tosca_r", "tosca_nonisometric_r")
@@ -219,9 +220,10 @@ def perturbed() -> str:
     head = (
         "| set | what | pairs | init mean error | HOPE mean error | HOPE worst pair's mean "
         "| HOPE confidence AUROC | HOPE pairs flagged likely failed (their mean errors) "
-        "| HOPE median s / pair |"
+        "| HOPE median s / pair | without the orient stage: median s / pair "
+        "| time with / without it per pair: median (max) |"
     )
-    out = [head, "|---|---|---|---|---|---|---|---|---|"]
+    out = [head, "|---|---|---|---|---|---|---|---|---|---|---|"]
     for name in perturbed_sets() + reversed_sets():
         rows = _rows(name)
         h, i = _stats(rows, "hope"), _stats(rows, "init")
@@ -234,9 +236,16 @@ def perturbed() -> str:
         flagged = f"{len(h['flagged'])}" + (
             f" ({', '.join(f'{e:.3f}' for e in sorted(h['flagged']))})" if h["flagged"] else ""
         )
+        ratios = _time_ratios(rows, "hope", "hope-noorient")
+        off = _stats(rows, "hope-noorient")
+        cost = (
+            f"{off['seconds']:.1f} | {np.median(ratios):.2f} ({ratios.max():.2f})"
+            if off is not None and ratios.size
+            else "– | –"
+        )
         out.append(
             f"| {name} | {what} | {h['pairs']} | {im} | **{h['mean']:.4f}** | {h['worst']:.4f} "
-            f"| {auroc} | {flagged} | {h['seconds']:.1f} |"
+            f"| {auroc} | {flagged} | {h['seconds']:.1f} | {cost} |"
         )
     return "\n".join(out) + "\n" if len(out) > 2 else ""
 
@@ -417,6 +426,14 @@ def _stats(rows: list[dict], method: str) -> dict | None:
         "flagged": [float(r["mean"]) for r in rs if r.get("likely_failed") == "1"],
         "judged": any(r.get("likely_failed") not in (None, "") for r in rs),
     }  # fmt: skip
+
+
+def _time_ratios(rows: list[dict], method: str, other: str) -> np.ndarray:
+    """Per pair that both methods matched, ``method``'s seconds over ``other``'s."""
+    by = {(r["pair"], r["method"]): float(r["seconds"]) for r in rows if not r.get("failed")}
+    return np.array(
+        [t / by[(p, other)] for (p, m), t in by.items() if m == method and (p, other) in by]
+    )
 
 
 def _failures(names) -> str:
@@ -613,7 +630,20 @@ def render() -> None:
             "pairs no setting was chosen on). A shortcut weld merges two "
             "vertices closer than 0.1 sqrt(area) in space but farther than 0.3 along the "
             "surface; only poses with at least 3 such welds are kept, and a map onto the "
-            "welded B is scored on the clean B. Errors ÷ sqrt(area) of the (clean) B.\n\n"
+            "welded B is scored on the clean B. Errors ÷ sqrt(area) of the (clean) B."
+            + (
+                " Each pair is matched again with the orient stage off (`hope-noorient`, "
+                "right after `hope` in the same process, each from new shapes): the last "
+                "column is the orient stage's cost, the time with it over the time without "
+                "it, pair by pair."
+                if any(
+                    r["method"] == "hope-noorient"
+                    for n in perturbed_sets() + reversed_sets()
+                    for r in _rows(n)
+                )
+                else ""
+            )
+            + "\n\n"
             + pert_table
             if pert_table
             else ""
