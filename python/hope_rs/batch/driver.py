@@ -424,9 +424,10 @@ def match_many(
         digest suffix when that changed them or two pairs would share a file
         (:mod:`hope_rs.batch.naming`); no file is written outside ``out_dir``. A rerun skips
         a pair only when its map file is whole and its manifest entry matches; others are
-        redone, with a warning saying why, their outdated maps removed first. The folder is
-        created, and checked to be writable with room for a map, before any work; a map file
-        that is one of the inputs (a mesh or landmark file) is refused then too.
+        redone, with a warning saying why (a map of other meshes or landmarks, or not whole,
+        removed first). The folder is created, and checked to be writable with room for a
+        map, before any work; a map file that is one of the inputs (a mesh or landmark file)
+        is refused then too.
     map_format : {"txt", "npy"}
         Format of the map files (:func:`hope_rs.write_map`).
     jobs : int, optional
