@@ -1,5 +1,6 @@
 """Generated test meshes and maps, and the helpers that build, move, write or read them."""
 
+import hashlib
 from pathlib import Path
 
 import numpy as np
@@ -148,7 +149,8 @@ def bumpy_sphere_files(folder, count: int, n: int) -> list[Path]:
 def cli_maps(folder, pa, pb, *flags: str) -> tuple[np.ndarray, np.ndarray]:
     """The maps that ``hope-rs match`` and ``hope-rs batch`` (one job, no cache) write for the
     pair of mesh files (pa, pb) given the extra command-line ``flags``; files go in ``folder``."""
-    tag = "".join(f.replace("/", "_") for f in flags) or "default"  # a path among them too
+    # A short name per set of flags (a file path may be among them).
+    tag = hashlib.sha1("\0".join(flags).encode()).hexdigest()[:12] if flags else "default"
     out = Path(folder) / f"match{tag}.txt"
     assert main(["match", str(pa), str(pb), "-o", str(out), "-q", *flags]) == 0
     pairs = Path(folder) / f"pairs{tag}.txt"
