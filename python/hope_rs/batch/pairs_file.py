@@ -74,7 +74,7 @@ def read_pairs(path: str | os.PathLike, *, ext: str = "", with_landmarks: bool =
     ``"my meshes/a.off" b.off``) or by a tab (then each field is taken as it is, spaces
     included, without quotes around it). Relative paths are resolved against the file's
     folder; ``ext`` (e.g. ``".off"``) is appended to bare names, those without a mesh suffix
-    (``.off``, ``.obj``, ``.ply``, ``.stl``), so the ``pairs.txt`` of the shared benchmark sets
+    (``.off``, ``.obj``, ``.ply``, ``.stl``, ``.glb``), so the ``pairs.txt`` of the shared benchmark sets
     (``tr_reg_002 tr_reg_007``) work as they are, beside ``scan.ply``. Blank lines are ignored, and
     so is a comment: a ``#`` at the start of a line or after white space (outside quotes) and
     the rest of the line; a ``#`` inside a name (``scan#2``) is part of the path. A malformed
