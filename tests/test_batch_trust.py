@@ -276,11 +276,20 @@ def test_6_shapes_are_cached_and_kept_under_their_own_config(meshes, tmp_path, c
         np.testing.assert_array_equal(a.descriptors("shot"), want.descriptors("shot"))
 
 
-def test_7_a_rerun_redoes_pairs_whose_settings_or_meshes_changed(files, tmp_path):
+def editable_pair(files, tmp_path) -> tuple[list, object, dict]:
+    """Copies of s0 and s1 that a test may edit, the output folder, and the batch options."""
     src = tmp_path / "m"
     shutil.copytree(files, src)
-    shapes, out = [src / "s0.off", src / "s1.off"], tmp_path / "out"
-    run = {"out_dir": out, "jobs": 1, "cache": tmp_path / "c"}
+    out = tmp_path / "out"
+    return (
+        [src / "s0.off", src / "s1.off"],
+        out,
+        {"out_dir": out, "jobs": 1, "cache": tmp_path / "c"},
+    )
+
+
+def test_7_a_rerun_redoes_pairs_whose_settings_or_meshes_changed(files, tmp_path):
+    shapes, out, run = editable_pair(files, tmp_path)
     hope_rs.match_many(shapes, [(0, 1)], **run, **FAST)
     (same,) = hope_rs.match_many(shapes, [(0, 1)], **run, **FAST)
     assert same.skipped
@@ -319,10 +328,7 @@ def test_7b_a_rerun_redoes_a_map_file_changed_after_the_batch_wrote_it(files, tm
 
 
 def test_7e_a_mesh_that_changed_its_vertex_count_is_named_as_changed(files, tmp_path):
-    src = tmp_path / "m"
-    shutil.copytree(files, src)
-    shapes, out = [src / "s0.off", src / "s1.off"], tmp_path / "out"
-    run = {"out_dir": out, "jobs": 1, "cache": tmp_path / "c"}
+    shapes, out, run = editable_pair(files, tmp_path)
     hope_rs.match_many(shapes, [(0, 1)], **run, **FAST)
     m = hope_rs.load_mesh(shapes[0])
     write_off(shapes[0], np.vstack([m.vertices, [[9.0, 9.0, 9.0]]]), m.faces)  # one vertex more
@@ -332,10 +338,7 @@ def test_7e_a_mesh_that_changed_its_vertex_count_is_named_as_changed(files, tmp_
 
 
 def test_7c_a_redo_that_fails_leaves_no_outdated_map(files, tmp_path):
-    src = tmp_path / "m"
-    shutil.copytree(files, src)
-    shapes, out = [src / "s0.off", src / "s1.off"], tmp_path / "out"
-    run = {"out_dir": out, "jobs": 1, "cache": tmp_path / "c"}
+    shapes, out, run = editable_pair(files, tmp_path)
     (first,) = hope_rs.match_many(shapes, [(0, 1)], **run, **FAST)
     assert first.ok and (out / "s0__s1.txt").is_file()
     # B edited in place into a mesh that cannot be matched (no surface area).

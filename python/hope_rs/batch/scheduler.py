@@ -279,30 +279,23 @@ def run(plan: Plan, ex: Backend, report: Callable) -> Iterator[PairResult]:
                             )
                             continue
                         m, why = existing_map(path, sizes[i], sizes[j])
+                        old = {} if manifest is None else manifest.entries.get(path.name, {})
                         stale = why is not None or (
                             manifest is not None and manifest.inputs_changed(path.name, entry(n))
                         )
-                        old_entry = (
-                            None if manifest is None else manifest.entries.get(path.name, {})
-                        )
-                        if why is None and manifest is not None:
-                            why = manifest.why_redo(
-                                path.name, entry(n) | {"map_digest": map_digest(m)}
-                            )
-                        elif old_entry and "map_digest" in old_entry:
-                            # A map that no longer fits its meshes: say what changed (a mesh,
-                            # the settings) when the manifest knows, not only the map's length.
-                            assert manifest is not None
+                        if manifest is not None and (why is None or "map_digest" in old):
+                            # A whole map is checked against its entry, digest included; for
+                            # one that no longer fits its meshes the entry says what changed (a
+                            # mesh, the settings), not only the map's length.
+                            digest = map_digest(m) if why is None else old["map_digest"]
                             why = (
-                                manifest.why_redo(
-                                    path.name, entry(n) | {"map_digest": old_entry["map_digest"]}
-                                )
+                                manifest.why_redo(path.name, entry(n) | {"map_digest": digest})
                                 or why
                             )
                         if why is None:
-                            old = {} if manifest is None else manifest.entries.get(path.name, {})
-                            recorded = old.get("quality")
-                            yield result(n, map=m, skipped=True, quality=_quality(recorded))
+                            yield result(
+                                n, map=m, skipped=True, quality=_quality(old.get("quality"))
+                            )
                             continue
                         warnings.warn(
                             f"{path.name}: {why}; computing it again",

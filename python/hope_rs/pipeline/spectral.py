@@ -476,6 +476,11 @@ class SpectralBackground(Background):
             if prefetch is None:
                 return
             assert early is not None  # made with the prefetch, in start
+
+            def halt() -> None:
+                early.stop.set()
+                prefetch.stop.set()
+
             try:
                 history = self.state.history
                 if keep and history and history[-1].polish:
@@ -486,15 +491,13 @@ class SpectralBackground(Background):
                 if not keep:
                     # Both flags before any wait, so that a second Ctrl-C during the joins
                     # below still leaves the threads stopping.
-                    early.stop.set()
-                    prefetch.stop.set()
+                    halt()
                 early.join(cancel=not keep)
                 prefetch.finish()
             except BaseException:
                 # Interrupted (Ctrl-C, SIGTERM) while waiting for the results: stop the
                 # threads and wait for them, so none outlives the call.
-                early.stop.set()
-                prefetch.stop.set()
+                halt()
                 early.join(cancel=True)
                 prefetch.finish()
                 raise
