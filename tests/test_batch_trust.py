@@ -288,7 +288,7 @@ def editable_pair(files, tmp_path) -> tuple[list, object, dict]:
     )
 
 
-def test_7_a_rerun_redoes_pairs_whose_settings_or_meshes_changed(files, tmp_path):
+def test_7_a_rerun_redoes_pairs_whose_settings_or_meshes_changed(files, tmp_path, monkeypatch):
     shapes, out, run = editable_pair(files, tmp_path)
     hope_rs.match_many(shapes, [(0, 1)], **run, **FAST)
     (same,) = hope_rs.match_many(shapes, [(0, 1)], **run, **FAST)
@@ -301,8 +301,18 @@ def test_7_a_rerun_redoes_pairs_whose_settings_or_meshes_changed(files, tmp_path
         with pytest.warns(RuntimeWarning, match=f"s0__s1.txt: {why}; computing it again"):
             (r,) = hope_rs.match_many(shapes, [(0, 1)], **run, **{**FAST, **change})
         assert r.ok and not r.skipped
+    # Another build of hope_rs (the manifest's code version differs).
+    with pytest.warns(RuntimeWarning, match="the settings changed"):  # back to FAST's
+        hope_rs.match_many(shapes, [(0, 1)], **run, **FAST)
+    monkeypatch.setattr(hope_rs.batch.driver, "code_fingerprint", lambda: "another-build")
+    why = "it was computed by another version of hope_rs"
+    with pytest.warns(RuntimeWarning, match=f"s0__s1.txt: {why}; computing it again"):
+        (r,) = hope_rs.match_many(shapes, [(0, 1)], **run, **FAST)
+    assert r.ok and not r.skipped
+    monkeypatch.undo()
+    with pytest.warns(RuntimeWarning, match=why):  # and back to this build
+        hope_rs.match_many(shapes, [(0, 1)], **run, **FAST)
     # An edited mesh with the same vertex count.
-    hope_rs.match_many(shapes, [(0, 1)], **run, **FAST)
     v, f = hope_rs.load_mesh(shapes[1]).vertices, hope_rs.load_mesh(shapes[1]).faces
     write_off(shapes[1], v * 1.01 + 0.002 * np.sin(7 * v), f)
     with pytest.warns(RuntimeWarning, match="mesh s1 changed; computing it again"):

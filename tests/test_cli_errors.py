@@ -364,12 +364,19 @@ def test_outputs_are_not_inputs_end_in_no_slash_and_come_whole_or_not_at_all(
     a, b = meshes
     clicks = tmp_path / "clicks.txt"
     clicks.write_text("0 0\n5 5\n")
-    for option, target in [("-o", clicks), ("-o", a), ("--confidence-out", clicks)]:
+    start = tmp_path / "start.npy"
+    np.save(start, np.arange(N))
+    inputs = ["--landmarks", str(clicks), "--init-map", str(start)]
+    for option, target, message in [
+        ("-o", clicks, "one of the inputs"),
+        ("-o", a, "one of the inputs"),
+        ("--confidence-out", start, "one of the inputs"),
+        ("--confidence-out", clicks, "must end in .npy"),
+    ]:
         before = Path(target).read_bytes()
-        status = main(["match", a, b, "-q", "--landmarks", str(clicks), option, str(target)])
+        status = main(["match", a, b, "-q", *inputs, option, str(target)])
         assert status == 2 and Path(target).read_bytes() == before
-        line = one_line_error(capsys.readouterr().err)
-        assert "one of the inputs" in line or "must end in .npy" in line
+        assert message in one_line_error(capsys.readouterr().err)
     assert main(["match", a, b, "-q", "-o", str(tmp_path / "m.txt") + "/"]) == 2
     assert "so it names a folder" in one_line_error(capsys.readouterr().err)
     assert not (tmp_path / "m.txt").exists()
