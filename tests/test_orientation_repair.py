@@ -10,12 +10,13 @@ from meshes import bumpy_sphere
 import hope_rs
 from hope_rs.evaluation.datasets import pairs_of
 from hope_rs.evaluation.evaluate import geodesic_errors
+from hope_rs.evaluation.partial import cut_by_plane, plane_normal
 from hope_rs.evaluation.perturbed import Welded, clean_errors, weld_shortcuts
 from hope_rs.geometry.mesh import load_mesh
 from hope_rs.pipeline.confidence import turned_factor
 from hope_rs.pipeline.config import ConfidenceConfig, InitialConfig, MatchConfig, OrientConfig
 from hope_rs.pipeline.orientation_repair import mirror_image, turned_regions
-from hope_rs.pipeline.turned import TurnedFaces
+from hope_rs.pipeline.turned import OPEN_BOUNDARY, TurnedFaces, is_open
 
 OFF = dataclasses.replace(MatchConfig(), orient=OrientConfig(enabled=False))
 
@@ -30,6 +31,21 @@ def test_mirror_image_keeps_the_numbering_and_turns_every_triangle_over():
     same = m.map_in(s, np.arange(s.n_vertices))
     assert TurnedFaces(m, s).share(same) > 0.99
     assert TurnedFaces(s, s).share(s.map_in(s, np.arange(s.n_vertices))) < 0.01
+
+
+def test_a_pinhole_keeps_the_outward_side_and_a_cut_does_not():
+    # One missing triangle leaves a boundary far shorter than OPEN_BOUNDARY: the outward side
+    # is as sure as on the closed surface, so a mirror image still reads as turned over. A
+    # surface cut open by a plane is open, its outward side a guess.
+    v, f = bumpy_sphere(400, 1)
+    pin = hope_rs.Shape(hope_rs.Mesh(v, f[1:]))
+    m = mirror_image(pin)
+    assert not is_open(pin) and not is_open(m)
+    assert TurnedFaces(m, pin).share(m.map_in(pin, np.arange(pin.n_vertices))) > 0.99
+    cut = hope_rs.Shape(cut_by_plane(hope_rs.Mesh(v, f), plane_normal(2), 0.3).mesh)
+    assert is_open(cut)
+    assert not is_open(hope_rs.Shape(hope_rs.Mesh(v, f)))
+    assert 0 < OPEN_BOUNDARY < 1
 
 
 def test_turned_regions_grow_by_rings():
@@ -96,6 +112,19 @@ def test_a_mirrored_start_is_repaired(mirrored_start):
     assert res.quality.flipped_share < 0.05
     assert geodesic_errors(b, res.map).mean() < 0.01
     assert np.mean(res.map == truth) > 0.9
+
+
+@pytest.mark.slow
+def test_a_pinhole_leaves_the_repair_on(mirrored_start):
+    # A triangle missing from each shape (a scan's pinhole): the mirror image is still seen
+    # turned over, and repaired as on the closed shapes.
+    a, b, start = mirrored_start
+    a, b = (hope_rs.Mesh(m.vertices, np.delete(m.faces, i, axis=0)) for m, i in ((a, 0), (b, 99)))
+    assert hope_rs.match(a, b, init=start, config=OFF).quality.flipped_share > 0.5
+    res = hope_rs.match(a, b, init=start)
+    assert res.stage("orient").ran
+    assert res.quality.flipped_share < 0.05
+    assert np.mean(res.map == np.arange(a.n_vertices)) > 0.9
 
 
 @pytest.mark.slow

@@ -23,11 +23,11 @@ import numpy as np
 
 from .._blas import single_threaded_blas
 from ..features.descriptors import rayleigh_quotients
-from ..geometry.mesh import boundary_edges
 from ..shape import Shape
 from .config import DeformConfig
 from .spectral import functional_map, nearest_rows
 from .state import QUIET, MatchState, Stage
+from .turned import is_open
 
 
 def _non_null(q: np.ndarray) -> np.ndarray:
@@ -103,7 +103,7 @@ class DeformStage(Stage):
             # basis to read, and solving one here would cost more than the pass. A basis an
             # earlier match left on the shapes does not count: the map would depend on it.
             return QUIET
-        if any(boundary_edges(s.internal.faces).size for s in (a, b)):
+        if any(is_open(s) for s in (a, b)):
             return QUIET  # an open surface's spectrum differs from a closed one's for that alone
         t = time.perf_counter()
         try:

@@ -69,7 +69,7 @@ from collections.abc import Callable
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..geometry.mesh import Mesh, boundary_edges
+from ..geometry.mesh import Mesh
 from ..shape import Shape
 from .anchors import anchor_step, firm_regions
 from .confidence import map_quality, match_quality
@@ -88,7 +88,7 @@ from .trials import (
     run_trial,
     run_trials,
 )
-from .turned import TurnedFaces
+from .turned import OPEN_BOUNDARY, TurnedFaces, is_open
 
 __all__ = [
     "PART_HYPOTHESES",
@@ -426,10 +426,10 @@ class OrientStage(Stage):
             return "a part: its orientation is the partial stage's"
         if state.f is None or state.run is None:
             return "no map"
-        if not part and any(boundary_edges(s.internal.faces).size for s in (state.a, state.b)):
+        if not part and any(is_open(s) for s in (state.a, state.b)):
             # Which side of an open surface is outward is a guess (see turned.py), and the
             # partial stage's nested matches of a part are open.
-            return "an open surface"
+            return f"an open surface (a boundary longer than {OPEN_BOUNDARY:g} sqrt(area))"
         if part and state.confidence is not None:
             # Lifted from a common resolution: the cost would be measured on the dense
             # part's many-to-one map, which misjudges right maps.

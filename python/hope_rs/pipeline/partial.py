@@ -165,8 +165,9 @@ def covering_rings(a: Shape, b: Shape) -> int:
 
 
 def part_scale(part: Shape, config: PartialConfig) -> float:
-    """The part's sqrt(area) for the guessed scale, in its units: its own, or, when its copy
-    smoothed ``config.rough_smoothing`` times has a sqrt(area) smaller by a share more than
+    """A shape's sqrt(area) for the guessed scale (the part's, and the whole's it is never
+    larger than), in its units: its own, or, when its copy smoothed
+    ``config.rough_smoothing`` times has a sqrt(area) smaller by a share more than
     ``config.inflated`` (vertex noise of about its edge length inflates a dense scan's
     area), the smoothed copy's."""
     if config.rough_smoothing == 0:
@@ -189,12 +190,14 @@ def detect_part(
     config = PartialConfig() if config is None else config
     la, lb = (boundary_length(a), boundary_length(b)) if lengths is None else lengths
     # A part is never larger than its whole: when it is larger than the other shape already
-    # (a smaller body), its own sqrt(area) is the better guess and it keeps it.
+    # (a smaller body), its own sqrt(area) is the better guess and it keeps it. Either one's
+    # area may be a noisy scan's, inflated by its noise: both are measured without it. (The
+    # whole keeps its own units: its noisy edge paths are as much longer as its sqrt(area).)
     # Two parts of one shape (both cut) are not a part and its whole: the whole-shape path.
     if la - lb >= config.min_boundary_excess and lb <= config.max_whole_boundary:
-        return PartialInfo("a", (la, lb), max(part_scale(a, config), b.scale))
+        return PartialInfo("a", (la, lb), max(part_scale(a, config), part_scale(b, config)))
     if lb - la >= config.min_boundary_excess and la <= config.max_whole_boundary:
-        return PartialInfo("b", (la, lb), max(a.scale, part_scale(b, config)))
+        return PartialInfo("b", (la, lb), max(part_scale(a, config), part_scale(b, config)))
     return None
 
 

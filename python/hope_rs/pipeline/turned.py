@@ -10,7 +10,9 @@ Which side of an open surface is outward is a guess (:mod:`hope_rs.geometry.orie
 a concave part can come out inward, and a right map onto it would then turn everything over.
 So the triangles are grouped by their component of A and the component of B their first
 corner lands in, and in a group with either component open the smaller of the turned and the
-kept sides counts as turned.
+kept sides counts as turned. A component counts as open when its boundary is longer than
+:data:`OPEN_BOUNDARY` (:func:`open_components`): a pinhole or a few missing triangles leave
+its enclosed volume, and so its outward side, as sure as on a closed surface.
 
 Used by the pair-level quality (:func:`hope_rs.pipeline.confidence.flipped_share`) and by the
 refinement's witnesses when ``RefineConfig.max_turned`` is set (a part's matches).
@@ -23,8 +25,22 @@ import numpy as np
 from ..geometry.mesh import boundary_edges, vertex_components
 from ..geometry.normals import face_normals, vertex_normal_sums
 from ..shape import Shape
+from .config import PartialConfig
 
-__all__ = ["TurnedFaces", "face_normals", "vertex_normals"]
+__all__ = [
+    "OPEN_BOUNDARY",
+    "TurnedFaces",
+    "face_normals",
+    "is_open",
+    "open_components",
+    "vertex_normals",
+]
+
+#: A surface is open when its boundary (edges of one face) is longer than this, in units of
+#: its own sqrt(area): the partial stage's longest boundary of a whole
+#: (``PartialConfig.max_whole_boundary``). A shorter one (a pinhole, a few missing triangles)
+#: leaves the outward side as sure as on a closed surface, and the spectrum nearly unchanged.
+OPEN_BOUNDARY = PartialConfig.max_whole_boundary
 
 
 def vertex_normals(s: Shape) -> np.ndarray:
@@ -32,13 +48,24 @@ def vertex_normals(s: Shape) -> np.ndarray:
     return vertex_normal_sums(s.internal.vertices, s.internal.faces)
 
 
-def _components(s: Shape) -> tuple[np.ndarray, np.ndarray]:
-    """(component of each vertex, int64; whether each component has an edge of one face only)
+def open_components(s: Shape) -> tuple[np.ndarray, np.ndarray]:
+    """(component of each vertex, int64; whether each component is open: its edges of one
+    face longer than :data:`OPEN_BOUNDARY` in all, in units of the shape's own sqrt(area))
     of the internal mesh, components linked through its edges."""
     comp = vertex_components(s.n_vertices, s.edges)
-    is_open = np.zeros(int(comp.max()) + 1, dtype=bool)
-    is_open[comp[boundary_edges(s.internal.faces)[:, 0]]] = True
-    return comp, is_open
+    b = boundary_edges(s.internal.faces)
+    p = s.internal.vertices
+    length = np.bincount(
+        comp[b[:, 0]],
+        weights=np.linalg.norm(p[b[:, 0]] - p[b[:, 1]], axis=1),
+        minlength=int(comp.max()) + 1,
+    )
+    return comp, length > OPEN_BOUNDARY * s.internal.scale
+
+
+def is_open(s: Shape) -> bool:
+    """Whether a component of ``s`` is open (:func:`open_components`)."""
+    return bool(open_components(s)[1].any())
 
 
 class TurnedFaces:
@@ -65,8 +92,8 @@ class TurnedFaces:
         self.area = area
         self._points_b = b.internal.vertices
         self._normals_b = vertex_normals(b)
-        self._comp_a, self._open_a = _components(a)
-        self._comp_b, self._open_b = _components(b)
+        self._comp_a, self._open_a = open_components(a)
+        self._comp_b, self._open_b = open_components(b)
 
     def __call__(self, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(turned, counted)``, bool per triangle of :attr:`faces`, under the map ``f``
