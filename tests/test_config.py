@@ -28,6 +28,8 @@ from hope_rs.pipeline.config import (
     RepairConfig,
     ResolutionConfig,
     SpectralConfig,
+    check_config,
+    read_config,
 )
 from hope_rs.pipeline.runner import run_match
 from hope_rs.pipeline.stages import default_stages
@@ -332,3 +334,18 @@ def test_growth_step_orders_are_checked_when_made(fields, message):
     with pytest.raises(ValueError, match=message):
         GrowthConfig(**fields)
     assert GrowthConfig(faces_first=["faces", 2]).faces_first == ("faces", 2)
+
+
+def test_a_settings_file_sets_a_setting_to_none_by_the_string_none(tmp_path):
+    # TOML has no null: "none", in any case, stands for None where a setting may be None.
+    f = tmp_path / "s.toml"
+    f.write_text(
+        '[refine]\npolish_k = "none"\npass_k_max = [8, "None"]\n[finish]\nmax_vertices = "NONE"\n'
+    )
+    cfg = read_config(f)
+    assert cfg.refine.polish_k is None and cfg.refine.pass_k_max == (8, None)
+    assert cfg.finish.max_vertices is None
+    check_config(cfg)
+    f.write_text('[refine]\nmax_passes = "none"\n')  # a setting that cannot be None
+    with pytest.raises(TypeError, match="refine.max_passes must be an integer"):
+        check_config(read_config(f))

@@ -13,7 +13,8 @@ units, with a colour bar); per-vertex confidence values can be shown the same wa
 Rendering is an orthographic projection with matplotlib's Agg backend (no display needed):
 faces are painted back to front with Lambert shading. Both shapes are seen in one frame made
 from A (:func:`view_frame`): benchmark data sets store their shapes upright along a coordinate
-axis (FAUST: y up, TOSCA: z up), which ``up="auto"`` finds from where the shape stands.
+axis (FAUST: y up, TOSCA: z up); ``up="auto"`` takes the axis of largest extent, right for
+standing figures (give ``"z"`` for TOSCA's four-legged animals).
 """
 
 from __future__ import annotations
@@ -334,7 +335,8 @@ def add_parser(sub) -> None:
     p.add_argument("--title", help="figure title")
     p.add_argument(
         "--up", default="auto", choices=["auto", "x", "y", "z"],
-        help="axis drawn upwards (default: found from where the shape stands)",
+        help="axis drawn upwards (default: the axis of largest extent, right for standing "
+        "figures; give z for TOSCA's animals)",
     )  # fmt: skip
     p.add_argument("--size", default="1600x900", help="PNG size in pixels (default 1600x900)")
     p.add_argument(

@@ -662,14 +662,25 @@ def _from_dict(cls, data, path: str):
             f"{path} has no setting {unknown[0]!r}; its settings are {', '.join(fields)}"
         )
     default = cls()
+    optional = {f.name for f in dataclasses.fields(cls) if "None" in str(f.type)}
     values = {}
     for name, value in data.items():
         ref = getattr(default, name)
         if dataclasses.is_dataclass(ref):
             values[name] = _from_dict(type(ref), value, f"{path}.{name}")
         else:
-            values[name] = _tuples(value)
+            values[name] = _tuples(_nones(value) if name in optional else value)
     return cls(**values)
+
+
+def _nones(value):
+    """A setting that may be ``None`` read from TOML, which has no null: the string "none"
+    (any case) is ``None``, also as an entry of a list (``pass_k_max = [8, "none"]``)."""
+    if isinstance(value, str) and value.lower() == "none":
+        return None
+    if isinstance(value, list):
+        return [_nones(v) for v in value]
+    return value
 
 
 def read_config(path) -> MatchConfig:
