@@ -4,8 +4,10 @@ import dataclasses
 
 import numpy as np
 import pytest
+import trimesh
 from conftest import data_path, shared_pair
 from meshes import bumpy_sphere
+from scipy.spatial import cKDTree
 
 import hope_rs
 from hope_rs.evaluation.datasets import pairs_of
@@ -46,6 +48,30 @@ def test_a_pinhole_keeps_the_outward_side_and_a_cut_does_not():
     assert is_open(cut)
     assert not is_open(hope_rs.Shape(hope_rs.Mesh(v, f)))
     assert 0 < OPEN_BOUNDARY < 1
+
+
+def test_a_mirrored_start_on_a_shape_with_a_mirror_symmetry_is_repaired():
+    # An icosphere with bumps symmetric under x -> -x alone, started from the map sending each
+    # vertex to its mirror partner: every distance kept, every triangle turned over. The
+    # refinement keeps that map; the stage's kept hypothesis must become the result.
+    ico = trimesh.creation.icosphere(subdivisions=3)
+    v, f = np.array(ico.vertices), np.array(ico.faces)
+    x, y, z = np.abs(v[:, 0]), v[:, 1], v[:, 2]
+    bumps = (
+        0.25 * np.exp(-((y - 0.6) ** 2 + (z - 0.3) ** 2 + (x - 0.5) ** 2) / 0.05)
+        + 0.15 * np.exp(-((y + 0.5) ** 2 + (z - 0.6) ** 2) / 0.08)
+        + 0.2 * np.exp(-((z + 0.8) ** 2 + y**2) / 0.05)
+    )
+    v *= (1.0 + bumps)[:, None]
+    mirrored = cKDTree(v).query(v * [-1.0, 1.0, 1.0])[1]
+    truth = np.arange(len(v))
+    assert np.mean(mirrored == truth) < 0.1
+    off = hope_rs.match((v, f), (v, f), init=mirrored, config=OFF)
+    assert off.quality.flipped_share > 0.9 and np.mean(off.map == truth) < 0.1
+    res = hope_rs.match((v, f), (v, f), init=mirrored)
+    (kept,) = [t for t in res.stage("orient").trials if t.kept]
+    assert kept.label != "kept"
+    assert res.quality.flipped_share < 0.05 and np.mean(res.map == truth) > 0.9
 
 
 def test_turned_regions_grow_by_rings():
