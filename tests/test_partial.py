@@ -515,6 +515,62 @@ def test_wide_trials_run_only_when_no_nearby_map_is_confident(sphere, monkeypatc
     assert m == n + len(PartialConfig().wide_trials)
 
 
+def test_placement_trials_run_only_on_a_flagged_part_without_landmarks(sphere):
+    """The part's match is started from regions of the whole only when the kept map is
+    flagged and no landmarks place it; a region's map replaces it only when ahead by the
+    margin."""
+    part = cut_by_plane(sphere, plane_normal(2), 0.3)
+
+    def run(failed_mean=ConfidenceConfig().failed_mean, landmarks=None, **kw):
+        cfg = MatchConfig(
+            partial=PartialConfig(wide_trials=(), **kw),
+            confidence=ConfidenceConfig(failed_mean=failed_mean),
+        )
+        res = match(part.mesh, sphere, config=cfg, landmarks=landmarks)
+        labels = [t.label for t in res.stage("partial").trials]
+        return res, [x for x in labels if x.startswith("region")]
+
+    res, regions = run()
+    assert not res.quality.likely_failed and regions == []
+    flagged, regions = run(failed_mean=1.0)  # every map flagged
+    assert regions == [f"region {i}" for i in range(PartialConfig().placement_trials)]
+    assert run(failed_mean=1.0, placement_trials=0)[1] == []
+    truth = np.stack([[0, int(part.origin[0])], [5, int(part.origin[5])]])
+    assert run(failed_mean=1.0, landmarks=truth)[1] == []
+    unmoved, regions = run(failed_mean=1.0, placement_trials=3, placement_margin=1.0)
+    assert regions == ["region 0", "region 1", "region 2"]
+    np.testing.assert_array_equal(unmoved.map, run(failed_mean=1.0, placement_trials=0)[0].map)
+
+
+@pytest.mark.slow
+def test_placement_trials_move_a_cat_part_to_its_own_half_of_the_whole(tmp_path):
+    """TOSCA cat2 cut by a plane (30%), matched to cat1: at every scale the part settles on
+    the cat's other half, turned end to end (a front and a hind half look alike and keep
+    orientation), and the map is flagged. Started from regions of the whole, the region
+    holding its counterpart gives the most confident map, and the right one."""
+    src = tmp_path / "cats"
+    (src / "corres").mkdir(parents=True)
+    for name in ("cat0", "cat1", "cat2"):
+        (src / f"{name}.off").symlink_to(data_path("tosca_r", f"{name}.off"))
+        (src / "corres" / f"{name}.vts").symlink_to(data_path("tosca_r", "corres", f"{name}.vts"))
+    # The pair's plane is chosen by its index: cat2 → cat1 is the third pair.
+    (src / "pairs.txt").write_text("cat1 cat0\ncat2 cat0\ncat2 cat1\n")
+    (out,) = write_partial_sets(
+        src, tmp_path / "out", conditions=["cut30"], max_pairs=3, reverse=False
+    )
+    pair = pairs_of(out)[2]
+    assert (pair.a.stem, pair.b.stem) == ("02_cat2_cut30", "02_cat1")
+    a, b = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
+    ai, bi = pair.ground_truth(a.n_vertices, b.n_vertices)
+    res = match(a, b)
+    without = match(a, b, config=MatchConfig(partial=PartialConfig(placement_trials=0)))
+    e, e_without = (geodesic_errors(b, r.map, a_idx=ai, b_idx=bi).mean() for r in (res, without))
+    assert e < 0.1 and e_without > 0.3
+    assert without.quality.likely_failed and not res.quality.likely_failed
+    kept = [t.label for t in res.stage("partial").trials if t.kept]
+    assert len(kept) == 1 and kept[0].startswith("region")
+
+
 @pytest.mark.slow
 def test_wide_trials_rescue_a_posed_faust_part(tmp_path):
     """FAUST tr_reg_007 (standing on one leg, hands up) cut at 30%, matched to tr_reg_008: at

@@ -826,6 +826,16 @@ class PartialConfig:
         A map of ``wide_trials`` is kept only when its mean confidence exceeds the best of the
         other maps by at least this: the confidence of maps of one part varies by about this
         much between scales whether or not they are right.
+    placement_trials : int
+        With ``scale_trials``, when the map kept so far is flagged
+        (``MatchQuality.likely_failed``) and no landmarks are given, the part is also matched
+        from this many starts, each confined to one region of the whole holding the part's
+        share of its area, around centres spread over it
+        (:mod:`hope_rs.pipeline.placement`): a part can settle, at any scale, on a region that
+        looks like its counterpart (the front half of a quadruped on the hind half). 0: none.
+    placement_margin : float
+        A map of ``placement_trials`` is kept only when its mean confidence exceeds the kept
+        map's by at least this.
     max_turned : float or None
         The part's matches run with ``RefineConfig.max_turned`` at this value: a vertex whose
         triangles the map mostly turns over does not vote. With nothing on the part to fill
@@ -857,6 +867,8 @@ class PartialConfig:
     wide_trials: tuple[float, ...] = (0.85, 0.9, 1.1)
     wide_below: float = 0.85
     wide_margin: float = 0.15
+    placement_trials: int = field(default=8, metadata={"range": (0, 1000)})
+    placement_margin: float = 0.05
     max_turned: float | None = 0.5
     rough_smoothing: int = field(default=5, metadata={"range": (0, 100)})
     inflated: float = field(default=0.15, metadata={"range": (0.0, 1.0)})
@@ -865,7 +877,7 @@ class PartialConfig:
         _check_share("PartialConfig.max_turned", self.max_turned)
         for name in ("scale_trials", "wide_trials"):
             object.__setattr__(self, name, _positive_numbers(name, getattr(self, name)))
-        for name in ("wide_below", "wide_margin"):
+        for name in ("wide_below", "wide_margin", "placement_margin"):
             x = getattr(self, name)
             if not (_is_number(x) and 0.0 <= x <= 1.0):
                 raise ValueError(f"PartialConfig.{name} must be a number in [0, 1], got {x!r}")

@@ -49,6 +49,7 @@ from .anchors import masked_components
 from .config import MatchConfig, PartialConfig
 from .landmarks import input_landmarks
 from .part_info import PartialInfo
+from .placement import placement_regions, region_start
 from .resolution import density
 from .state import QUIET, Halt, MatchState, Stage
 from .trials import (
@@ -402,6 +403,36 @@ class PartialStage(Stage):
                     mean_confidence,
                     against=kept,
                     margin=margin,
+                    progress=relay,
+                    callback=callback,
+                ).kept
+            quality = kept.result.quality
+            flagged = quality is not None and quality.likely_failed
+            if cfg.partial.placement_trials and flagged and landmarks is None:
+                # Another region of the whole, not another scale, may be the part's
+                # counterpart: start the kept scale's match from each of several regions.
+                view = kept.candidate.a
+                share = (a.internal.scale / view.scale) ** 2
+                kind = state.init if isinstance(state.init, str) else cfg.initial.descriptor
+                placed = [
+                    dataclasses.replace(
+                        kept.candidate,
+                        label=f"region {i}",
+                        init=view.map_out(
+                            b, region_start(view, b, region, kind, cfg.initial.search)
+                        ),
+                    )
+                    for i, region in enumerate(
+                        placement_regions(b, share, cfg.partial.placement_trials)
+                    )
+                ]
+                kept = run_trials(
+                    state,
+                    "partial",
+                    placed,
+                    mean_confidence,
+                    against=kept,
+                    margin=cfg.partial.placement_margin,
                     progress=relay,
                     callback=callback,
                 ).kept

@@ -1,0 +1,63 @@
+"""Placement starts: a part matched again from each of several regions of the whole.
+
+A part's descriptor start can put it on a region of the whole that looks alike but is not its
+counterpart: the front half of a quadruped's body on the hind half (two legs on a trunk),
+turned end to end. Such a map keeps its orientation, so nothing that measures turned-over
+triangles sees it, and no change of the part's scale moves it off there. The partial stage
+then also starts the part's match from each of several regions of the whole
+(:func:`placement_regions`): each vertex of the part takes its nearest descriptor among the
+region's vertices only (:func:`region_start`), and the refinement goes on from there over
+the whole shape. The region holding the part's counterpart gives the map of highest
+confidence.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import dijkstra
+
+from ..kernels.search import SearchConfig
+from ..shape import Shape
+from .initial import initial_map
+
+__all__ = ["placement_regions", "region_start"]
+
+
+def placement_regions(b: Shape, share: float, n: int) -> list[np.ndarray]:
+    """``n`` regions of ``b`` (internal numbering), each the vertices nearest (along edges)
+    one of ``n`` centres spread over the surface (each centre the vertex farthest from
+    those before it, the first the farthest from vertex 0): the fewest such vertices holding
+    ``share`` of its area."""
+    p, e = b.points, b.edges
+    length = np.linalg.norm(p[e[:, 0]] - p[e[:, 1]], axis=1)
+    graph = sp.coo_matrix((length, (e[:, 0], e[:, 1])), shape=(b.n_vertices,) * 2).tocsr()
+    area = b.internal.vertex_areas
+    cumulative_limit = min(max(share, 0.0), 1.0) * area.sum()
+    regions: list[np.ndarray] = []
+    nearest = dijkstra(graph, directed=False, indices=0)
+    centre = _farthest(nearest)
+    nearest = np.full(b.n_vertices, np.inf)
+    for _ in range(n):
+        d = dijkstra(graph, directed=False, indices=centre)
+        order = np.argsort(d, kind="stable")
+        held = np.cumsum(area[order])
+        regions.append(np.sort(order[: int(np.searchsorted(held, cumulative_limit)) + 1]))
+        nearest = np.minimum(nearest, d)
+        centre = _farthest(nearest)
+    return regions
+
+
+def region_start(
+    a: Shape, b: Shape, region: np.ndarray, kind: str, search: SearchConfig = SearchConfig()
+) -> np.ndarray:
+    """The map A → B (internal numbering) sending each vertex of ``a`` to the vertex of
+    ``region`` (vertices of ``b``) whose ``kind`` descriptor is nearest its own."""
+    da, db = a.internal_descriptors(kind), b.internal_descriptors(kind)
+    return region[initial_map(da, db[region], search=search)]
+
+
+def _farthest(d: np.ndarray) -> int:
+    """The vertex of largest finite distance (another component's vertices are not reached;
+    ties: the lowest vertex)."""
+    return int(np.argmax(np.where(np.isfinite(d), d, -1.0)))
