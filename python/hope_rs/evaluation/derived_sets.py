@@ -4,7 +4,6 @@ and moved into place once complete, OFF and ``.vts`` writers, and the command li
 
 from __future__ import annotations
 
-import contextlib
 import os
 import shutil
 from collections.abc import Callable, Mapping, Sequence
@@ -12,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry.map_io import check_writable_folder
+from ..geometry.map_io import check_writable_folder, naming_errors
 from ..geometry.mesh import Mesh
 from .datasets import GIVE_PAIRS, Pair, pairs_of
 
@@ -21,7 +20,7 @@ __all__ = ["add_set_parser", "run_set_command", "set_jobs", "write_off", "write_
 
 def write_off(path: Path, mesh: Mesh) -> None:
     """``mesh`` as an OFF file at ``path``; an OSError names the file."""
-    with _named(path), open(path, "w") as fh:
+    with naming_errors(path), open(path, "w") as fh:
         fh.write(f"OFF\n{mesh.n_vertices} {mesh.n_faces} 0\n")
         np.savetxt(fh, mesh.vertices, fmt="%.9g")
         np.savetxt(fh, np.column_stack([np.full(mesh.n_faces, 3), mesh.faces]), fmt="%d")
@@ -30,19 +29,8 @@ def write_off(path: Path, mesh: Mesh) -> None:
 def write_vts(path: Path, idx: np.ndarray) -> None:
     """0-based vertex indices as a ``.vts`` file (1-based, one a line); an OSError names the
     file."""
-    with _named(path):
+    with naming_errors(path):
         path.write_text("".join(f"{int(i) + 1}\n" for i in idx))
-
-
-@contextlib.contextmanager
-def _named(path: Path):
-    """An OSError raised inside, as one naming ``path`` ("File too large" says not which)."""
-    try:
-        yield
-    except OSError as e:
-        if e.filename is not None:
-            raise
-        raise type(e)(e.errno, f"cannot write {str(path)!r}: {e.strerror}") from None
 
 
 def set_jobs(

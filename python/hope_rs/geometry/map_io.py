@@ -14,6 +14,7 @@ crash) sees a whole file or none; they get the usual permissions (0666 minus the
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import io
 import os
@@ -38,6 +39,7 @@ __all__ = [
     "read_landmarks",
     "read_map",
     "map_writer",
+    "naming_errors",
     "parse_index",
     "same_file",
     "write_map",
@@ -193,6 +195,16 @@ def atomic_writes(items) -> None:
         for tmp, _, _ in staged:
             if os.path.exists(tmp):
                 os.unlink(tmp)
+
+
+@contextlib.contextmanager
+def naming_errors(path: str | os.PathLike):
+    """An OSError raised inside, made to name ``path`` when it names no file (a full disk
+    or a file-size limit says "File too large", not which)."""
+    try:
+        yield
+    except OSError as err:
+        raise _naming(err, os.fspath(path)) from None
 
 
 def _naming(err: OSError, path: str) -> OSError:
