@@ -23,6 +23,7 @@ from hope_rs.evaluation.partial import (
     submesh,
     write_partial_sets,
 )
+from hope_rs.evaluation.perturbed import write_perturbed_sets
 from hope_rs.geometry.subdivide import subdivide
 from hope_rs.pipeline import refine as refine_module
 from hope_rs.pipeline import runner
@@ -532,8 +533,11 @@ def test_placement_trials_run_only_on_a_flagged_part_without_landmarks(sphere):
 
     res, regions = run()
     assert not res.quality.likely_failed and regions == []
+    assert res.stage("partial").trials[0].score >= PartialConfig().placement_below
     flagged, regions = run(failed_mean=1.0)  # every map flagged
     assert regions == [f"region {i}" for i in range(PartialConfig().placement_trials)]
+    # Not flagged, but less confident than placement_below.
+    assert len(run(placement_below=1.0)[1]) == PartialConfig().placement_trials
     assert run(failed_mean=1.0, placement_trials=0)[1] == []
     truth = np.stack([[0, int(part.origin[0])], [5, int(part.origin[5])]])
     assert run(failed_mean=1.0, landmarks=truth)[1] == []
@@ -569,6 +573,31 @@ def test_placement_trials_move_a_cat_part_to_its_own_half_of_the_whole(tmp_path)
     assert without.quality.likely_failed and not res.quality.likely_failed
     kept = [t.label for t in res.stage("partial").trials if t.kept]
     assert len(kept) == 1 and kept[0].startswith("region")
+
+
+@pytest.mark.slow
+def test_placement_trials_turn_a_noisy_faust_part_the_right_way_up(tmp_path):
+    """FAUST tr_reg_007 (on one leg, hands up) cut by a plane (30%), matched to tr_reg_008
+    with vertex noise of 0.5% sqrt(area): at every scale the part settles upside down (arms
+    on legs), which keeps distances well enough for a mean confidence above the flag's bar.
+    Below ``placement_below`` the part is started from regions of the whole, and the most
+    confident map is the right one."""
+    (noisy,) = write_perturbed_sets(
+        data_path("faust_r"), tmp_path / "noisy", conditions=["noise05"], max_pairs=8
+    )
+    (out,) = write_partial_sets(
+        noisy, tmp_path / "out", conditions=["cut30"], max_pairs=8, reverse=False
+    )
+    pair = pairs_of(out)[7]
+    assert (pair.a.stem, pair.b.stem) == ("07_07_tr_reg_007_cut30", "07_07_tr_reg_008_noise05")
+    a, b = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
+    ai, bi = pair.ground_truth(a.n_vertices, b.n_vertices)
+    res = match(a, b)
+    without = match(a, b, config=MatchConfig(partial=PartialConfig(placement_trials=0)))
+    e, e_without = (geodesic_errors(b, r.map, a_idx=ai, b_idx=bi).mean() for r in (res, without))
+    assert e < 0.1 and e_without > 0.3
+    assert not without.quality.likely_failed  # the wrong map is not flagged
+    assert res.quality.mean_confidence > without.quality.mean_confidence
 
 
 @pytest.mark.slow

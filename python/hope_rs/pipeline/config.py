@@ -828,11 +828,19 @@ class PartialConfig:
         much between scales whether or not they are right.
     placement_trials : int
         With ``scale_trials``, when the map kept so far is flagged
-        (``MatchQuality.likely_failed``) and no landmarks are given, the part is also matched
-        from this many starts, each confined to one region of the whole holding the part's
-        share of its area, around centres spread over it
-        (:mod:`hope_rs.pipeline.placement`): a part can settle, at any scale, on a region that
-        looks like its counterpart (the front half of a quadruped on the hind half). 0: none.
+        (``MatchQuality.likely_failed``) or its mean confidence is below ``placement_below``,
+        and no landmarks are given, the part is also matched
+        from this many starts, each confined to one region of the whole around one of as many
+        centres spread over it (:mod:`hope_rs.pipeline.placement`): a part can settle, at any
+        scale, on a region that looks like its counterpart (the front half of a quadruped on
+        the hind half, a person upside down). 0: none.
+    placement_share : float
+        Each region holds this multiple of the part's share of the whole's area (a smaller
+        region than the part's counterpart: the start is then one distinctive piece of it, and
+        the refinement grows the map from there).
+    placement_below : float
+        See ``placement_trials`` (a mean confidence in [0, 1]; a part's map that is wrong over
+        most of its area can keep distances well enough to read above the flag's bar).
     placement_margin : float
         A map of ``placement_trials`` is kept only when its mean confidence exceeds the kept
         map's by at least this.
@@ -868,6 +876,8 @@ class PartialConfig:
     wide_below: float = 0.85
     wide_margin: float = 0.15
     placement_trials: int = field(default=8, metadata={"range": (0, 1000)})
+    placement_share: float = field(default=0.5, metadata={"range": (0.0, None), "exclusive": True})
+    placement_below: float = 0.6
     placement_margin: float = 0.05
     max_turned: float | None = 0.5
     rough_smoothing: int = field(default=5, metadata={"range": (0, 100)})
@@ -877,7 +887,7 @@ class PartialConfig:
         _check_share("PartialConfig.max_turned", self.max_turned)
         for name in ("scale_trials", "wide_trials"):
             object.__setattr__(self, name, _positive_numbers(name, getattr(self, name)))
-        for name in ("wide_below", "wide_margin", "placement_margin"):
+        for name in ("wide_below", "wide_margin", "placement_below", "placement_margin"):
             x = getattr(self, name)
             if not (_is_number(x) and 0.0 <= x <= 1.0):
                 raise ValueError(f"PartialConfig.{name} must be a number in [0, 1], got {x!r}")

@@ -407,12 +407,14 @@ class PartialStage(Stage):
                     callback=callback,
                 ).kept
             quality = kept.result.quality
-            flagged = quality is not None and quality.likely_failed
-            if cfg.partial.placement_trials and flagged and landmarks is None:
+            doubtful = (quality is not None and quality.likely_failed) or (
+                kept.score is not None and kept.score < cfg.partial.placement_below
+            )
+            if cfg.partial.placement_trials and doubtful and landmarks is None:
                 # Another region of the whole, not another scale, may be the part's
                 # counterpart: start the kept scale's match from each of several regions.
                 view = kept.candidate.a
-                share = (a.internal.scale / view.scale) ** 2
+                share = cfg.partial.placement_share * (a.internal.scale / view.scale) ** 2
                 kind = state.init if isinstance(state.init, str) else cfg.initial.descriptor
                 placed = [
                     dataclasses.replace(

@@ -5,10 +5,10 @@ counterpart: the front half of a quadruped's body on the hind half (two legs on 
 turned end to end. Such a map keeps its orientation, so nothing that measures turned-over
 triangles sees it, and no change of the part's scale moves it off there. The partial stage
 then also starts the part's match from each of several regions of the whole
-(:func:`placement_regions`): each vertex of the part takes its nearest descriptor among the
-region's vertices only (:func:`region_start`), and the refinement goes on from there over
-the whole shape. The region holding the part's counterpart gives the map of highest
-confidence.
+(:func:`placement_regions`, each smaller than the part's counterpart): each vertex of the
+part takes its nearest descriptor among the region's vertices only (:func:`region_start`),
+and the refinement grows the map from there over the whole shape. A region within the part's
+counterpart gives the map of highest confidence.
 """
 
 from __future__ import annotations
