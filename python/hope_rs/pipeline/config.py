@@ -829,7 +829,7 @@ class PartialConfig:
     placement_trials : int
         With ``scale_trials``, when the map kept so far is flagged
         (``MatchQuality.likely_failed``) or its mean confidence is below ``placement_below``,
-        and no landmarks are given, the part is also matched
+        and neither landmarks nor an initial map are given, the part is also matched
         from this many starts, each confined to one region of the whole around one of as many
         centres spread over it (:mod:`hope_rs.pipeline.placement`): a part can settle, at any
         scale, on a region that looks like its counterpart (the front half of a quadruped on

@@ -410,12 +410,14 @@ class PartialStage(Stage):
             doubtful = (quality is not None and quality.likely_failed) or (
                 kept.score is not None and kept.score < cfg.partial.placement_below
             )
-            if cfg.partial.placement_trials and doubtful and landmarks is None:
+            # A given start or landmarks place the part: only a descriptor start is moved.
+            placed_by_descriptors = isinstance(state.init, str) and landmarks is None
+            if cfg.partial.placement_trials and doubtful and placed_by_descriptors:
                 # Another region of the whole, not another scale, may be the part's
                 # counterpart: start the kept scale's match from each of several regions.
                 view = kept.candidate.a
                 share = cfg.partial.placement_share * (a.internal.scale / view.scale) ** 2
-                kind = state.init if isinstance(state.init, str) else cfg.initial.descriptor
+                kind = str(state.init)
                 placed = [
                     dataclasses.replace(
                         kept.candidate,
