@@ -14,8 +14,6 @@ counterpart gives the map of highest confidence.
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import dijkstra
 
 from ..kernels.search import SearchConfig
 from ..shape import Shape
@@ -29,22 +27,16 @@ def placement_regions(b: Shape, share: float, n: int) -> list[np.ndarray]:
     one of ``n`` centres spread over the surface (each centre the vertex farthest from
     those before it, the first the farthest from vertex 0): the fewest such vertices holding
     ``share`` of its area."""
-    p, e = b.points, b.edges
-    length = np.linalg.norm(p[e[:, 0]] - p[e[:, 1]], axis=1)
-    graph = sp.coo_matrix((length, (e[:, 0], e[:, 1])), shape=(b.n_vertices,) * 2).tocsr()
+    everything = np.arange(b.n_vertices, dtype=np.int64)
+    first = _farthest(b.graph.distance_fields(np.zeros(1, dtype=np.int64))[0])
+    _, fields = b.graph.farthest_fields(everything, first, n, b.scale)
     area = b.internal.vertex_areas
-    cumulative_limit = min(max(share, 0.0), 1.0) * area.sum()
-    regions: list[np.ndarray] = []
-    nearest = dijkstra(graph, directed=False, indices=0)
-    centre = _farthest(nearest)
-    nearest = np.full(b.n_vertices, np.inf)
-    for _ in range(n):
-        d = dijkstra(graph, directed=False, indices=centre)
+    limit = min(max(share, 0.0), 1.0) * area.sum()
+    regions = []
+    for d in fields:
         order = np.argsort(d, kind="stable")
         held = np.cumsum(area[order])
-        regions.append(np.sort(order[: int(np.searchsorted(held, cumulative_limit)) + 1]))
-        nearest = np.minimum(nearest, d)
-        centre = _farthest(nearest)
+        regions.append(np.sort(order[: int(np.searchsorted(held, limit)) + 1]))
     return regions
 
 
