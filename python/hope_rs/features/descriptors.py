@@ -9,7 +9,7 @@ import numpy as np
 import scipy.sparse.linalg as sla
 
 from .. import _core
-from .._blas import single_threaded_blas
+from .._blas import single_threaded_blas, with_single_threaded_blas
 from .._cancel import check
 from ..geometry.coarsen import CoarsenConfig, coarse_mesh
 from ..geometry.mesh import Mesh
@@ -144,13 +144,16 @@ def _unit_area_laplacian(mesh: Mesh):
     return robust_laplacian.mesh_laplacian(mesh.vertices / mesh.scale, mesh.faces)
 
 
+# ARPACK's small dense steps on a BLAS thread pool run several times slower than on one
+# thread, and one thread keeps the bits whatever the caller's thread count.
+@with_single_threaded_blas
 def laplacian_basis_as_numbered(
     mesh: Mesh, k: int, *, stop: threading.Event | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`laplacian_eigenpairs` in ``mesh``'s own numbering, plus the lumped mass of each
     vertex ``(n,)`` (of the mesh scaled to unit area), the weights of the inner product in
-    which the eigenvectors are orthonormal. ``stop``: when set, the solve raises
-    :class:`~hope_rs._cancel.Cancelled` at its next step."""
+    which the eigenvectors are orthonormal; solved on one BLAS thread. ``stop``: when set,
+    the solve raises :class:`~hope_rs._cancel.Cancelled` at its next step."""
     k = int(min(k, mesh.n_vertices - 2))
     if k < 1:
         raise ValueError("the mesh is too small for a Laplacian spectrum")
@@ -331,7 +334,8 @@ def descriptors_as_numbered(
     if kind == "shot":
         return shot_as_numbered(mesh)
     evals, evecs = _eigenpairs_as_numbered(mesh, n_eigen)
-    return (wks if kind == "wks" else hks)(evals, evecs)
+    with single_threaded_blas():  # the product's bits whatever the thread count
+        return (wks if kind == "wks" else hks)(evals, evecs)
 
 
 def check_kind(kind: str) -> None:
@@ -347,4 +351,6 @@ def spectral_descriptors(kind: str, evals: np.ndarray, evecs: np.ndarray, mesh: 
     position, so this is what makes relabelling the mesh relabel the result bit for bit.
     """
     order = canonical_order(mesh.vertices)
-    return (wks if kind == "wks" else hks)(evals, evecs[order])[inverse_permutation(order)]
+    with single_threaded_blas():  # as descriptors_as_numbered, the same bits
+        out = (wks if kind == "wks" else hks)(evals, evecs[order])
+    return out[inverse_permutation(order)]
