@@ -62,7 +62,8 @@ __all__ = [
 PERTURBATIONS = {
     "noise02": "B with Gaussian vertex noise of 0.2% of sqrt(area)",
     "noise05": "B with Gaussian vertex noise of 0.5% of sqrt(area)",
-    "shortcuts": "B with 3-10 topological shortcuts (welds)",
+    "shortcuts": "B with 3-10 topological shortcuts (welds; a pair whose B takes fewer than 3 "
+    "is left out)",
     "reversed": "the pair matched the other way (B as A, A as B)",
 }
 
