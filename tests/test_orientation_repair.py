@@ -315,6 +315,46 @@ def test_a_start_the_match_itself_used_is_not_tried_again():
     assert [t.label for t in wks.trials] == ["kept", "B to A", "reverse"]
 
 
+def test_shapes_far_from_isometric_try_the_other_starts_before_the_derived_maps():
+    # The welded sphere as above, with B's symmetry and the reverse match as the topology's
+    # hypotheses, none of which can pass the stop rule (``min_gain = 1``). With
+    # ``starts_first_mismatch = 0`` any spectra count as far apart: the reverse match comes
+    # first, and the derived maps follow as it fails.
+    m = hope_rs.Mesh(*bumpy_sphere(400, 6))
+    far = int(np.argmax(np.linalg.norm(m.vertices - m.vertices[0], axis=1)))
+    welded = Welded(m, np.array([[0, far]])).mesh
+
+    def labels(first: float, gain: float) -> tuple[list[str], str]:
+        orient = OrientConfig(
+            topology_hypotheses=("mirror", "reverse"), min_gain=gain, starts_first_mismatch=first
+        )
+        cfg = dataclasses.replace(MatchConfig(), orient=orient)
+        info = hope_rs.match(m, welded, config=cfg, max_passes=1).stage("orient")
+        return [t.label for t in info.trials], info.reason
+
+    derived_first, reason = labels(float("inf"), 1.0)
+    assert derived_first[:2] == ["kept", "B's symmetry"] and "other starts first" not in reason
+    starts_first, reason = labels(0.0, 1.0)
+    assert starts_first[:3] == ["kept", "B to A", "reverse"] and "B's symmetry" in starts_first
+    assert sorted(starts_first) == sorted(derived_first)
+    assert "other starts first" in reason
+
+
+@pytest.mark.slow
+def test_a_human_to_gorilla_map_is_repaired_by_the_reverse_match_alone():
+    # TOSCA woman -> gorilla (a pair of pairs.txt the other way): the SHOT map turns about a
+    # fifth of A over; the spectra differ (non-isometric), so the reverse match is tried
+    # first, and it passes the stop rule: no map derived from the SHOT map is tried.
+    mg, mw, gi, wi = shared_pair("tosca_nonisometric_r", "8_gorilla_01->8_woman_01")
+    res = hope_rs.match(mw, mg)
+    info = res.stage("orient")
+    assert "other starts first" in info.reason
+    assert [t.label for t in info.trials] == ["kept", "B to A", "reverse"]
+    assert [t.label for t in info.trials if t.kept] == ["reverse"]
+    assert not res.quality.likely_failed and res.quality.flipped_share < 0.2
+    assert geodesic_errors(mg, res.map, a_idx=wi, b_idx=gi).mean() < 0.15
+
+
 @pytest.mark.slow
 def test_a_map_misled_by_topological_shortcuts_is_repaired():
     # FAUST remeshed 002 -> 007 with B welded where it nearly touches itself (the shortcuts

@@ -1116,6 +1116,13 @@ class OrientConfig:
         ``min_turned`` turned over, ``min_gain`` cheaper, not flagged), derive the maps from
         the best one too (when it beats the map the stage started
         from and was not derived from yet) and refine the least turned-over.
+    starts_first_mismatch : float
+        When the shapes' Laplace–Beltrami spectra differ by more than this
+        (:func:`~hope_rs.pipeline.deform.spectral_mismatch` of their first 30 eigenvalues,
+        read off the spectral pass's bases), the first other start is tried before the maps
+        derived from the stage's own map, which it then tries only if that start does not
+        pass the stop rule: shapes that far from isometric are matched better the other way
+        more often than re-placed by their geodesic distances. ``inf``: derived maps first.
     """
 
     enabled: bool = True
@@ -1140,6 +1147,7 @@ class OrientConfig:
     distortion_weight: float = field(default=1.0, metadata={"finite": True})
     min_gain: float = field(default=0.02, metadata={"finite": True})
     again: bool = True
+    starts_first_mismatch: float = field(default=0.15, metadata={"range": (0.0, None)})
 
     def __post_init__(self):
         known = ("mirror", "mirror_turned", "reseed", "torn", "wks", "reverse", "reverse_wks")

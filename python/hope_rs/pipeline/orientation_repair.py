@@ -41,9 +41,12 @@ turning the least over is refined, and "torn" is refined when the map tears a re
 other starts follow in the order of the hypotheses tried (a start the stage's own match
 used is not tried again); after each, while no refined map passes the stop rule, the maps
 derived from that start's refined map (if it beats the stage's own) are tried too
-(``OrientConfig.again``). The stop rule: the stage stops at the first refined map that turns
-at most ``min_turned`` over, costs at least ``min_gain`` less than the stage's own and
-(``on_failed``) is not flagged by the confidence's rule.
+(``OrientConfig.again``). Between shapes far from isometric (their spectra differ by more
+than ``OrientConfig.starts_first_mismatch``) the first other start comes before the maps
+derived from the stage's own, which follow only if it fails the stop rule. The stop rule:
+the stage stops at the first refined map that turns at most ``min_turned`` over, costs at
+least ``min_gain`` less than the stage's own and (``on_failed``) is not flagged by the
+confidence's rule.
 
 After a lift from a common resolution (:mod:`hope_rs.pipeline.resolution`) every refined
 hypothesis is matched at that resolution too, from its map carried to the copy, and carries
@@ -73,6 +76,7 @@ from ..geometry.mesh import Mesh
 from ..shape import Shape
 from .anchors import anchor_step, firm_regions
 from .confidence import map_quality, match_quality
+from .deform import spectral_mismatch
 from .lmd import local_map_distortion
 from .partial import part_match_config
 from .progress import ProgressEvent
@@ -98,6 +102,10 @@ __all__ = [
     "turned_regions",
 ]
 
+
+#: How many of the shapes' first non-zero eigenvalues ``OrientConfig.starts_first_mismatch``
+#: compares (the deform stage's default).
+MISMATCH_EIGENVALUES = 30
 
 #: The hypotheses tried on a part A (of ``OrientConfig.torn_hypotheses``): B's symmetry and
 #: the reverse match are whole-shape matches, which the part's settings do not make.
@@ -503,6 +511,29 @@ class OrientStage(Stage):
         self._names = names
         return None
 
+    def _starts_first(self, state: MatchState) -> bool:
+        """Whether the shapes' spectra differ by more than
+        ``OrientConfig.starts_first_mismatch`` (whole shapes whose spectral pass ran only: a
+        part's spectrum is not the whole's, and solving bases here costs more than the order
+        saves)."""
+        limit = state.config.orient.starts_first_mismatch
+        a, b = state.a, state.b
+        k = MISMATCH_EIGENVALUES + 1
+        if state.partial is not None or not np.isfinite(limit):
+            return False
+        if state.zoomout is None or not (a.has_spectral_basis(k) and b.has_spectral_basis(k)):
+            # As the deform stage: only the bases this match's spectral pass made (a basis an
+            # earlier match left on the shapes would make the order depend on it).
+            return False
+        try:
+            mismatch = spectral_mismatch(a, b, MISMATCH_EIGENVALUES)
+        except RuntimeError:  # an eigenbasis the spectral pass could not read either
+            return False
+        if mismatch <= limit:
+            return False
+        self._why += f"; spectra differ by {mismatch:.3f}, other starts first"
+        return True
+
     def run(self, state: MatchState) -> None:
         cfg = state.config.orient
         t = time.perf_counter()
@@ -520,12 +551,16 @@ class OrientStage(Stage):
 
         # The maps derived from the stage's own first; then other starts (a swapped pair of
         # limbs comes back neither mirrored nor re-seeded), in the order of the hypotheses.
-        tried = hyp.from_derived(f, share)
+        # Between shapes far from isometric the derived maps come after the first start.
         starts = [h for h in self._names if h in ("wks", "reverse", "reverse_wks")]
         if hyp.start == "wks":
             # "wks" is the stage's own match again, "reverse_wks" the same as "reverse".
             starts = [h for h in starts if h not in ("wks", "reverse_wks")]
-        for start in starts:
+        later = bool(starts) and self._starts_first(state)
+        tried = [] if later else hyp.from_derived(f, share)
+        for n, start in enumerate(starts):
+            if later and n == 1 and not good_enough(tried):
+                tried += hyp.from_derived(f, share)
             if good_enough(tried):
                 break
             if start == "wks":
@@ -559,6 +594,8 @@ class OrientStage(Stage):
                 # The best refined map can still turn a region over that the derived maps
                 # set right (a start that came back nearer, with a limb swapped).
                 tried += hyp.from_derived(hyp.internal(best), hyp.turned[label], label)
+        if later and len(starts) == 1 and not good_enough(tried):
+            tried += hyp.from_derived(f, share)
         kept = choose(state, "orient", tried, against=own, margin=cfg.min_gain)
         if kept is not own:
             # The refinement the caller's callback saw stays the state's history.
