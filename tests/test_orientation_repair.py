@@ -316,28 +316,37 @@ def test_a_start_the_match_itself_used_is_not_tried_again():
 
 
 def test_shapes_far_from_isometric_try_the_other_starts_before_the_derived_maps():
-    # The welded sphere as above, with B's symmetry and the reverse match as the topology's
-    # hypotheses, none of which can pass the stop rule (``min_gain = 1``). With
+    # Two unrelated bumpy spheres: the map turns most of A over, and no hypothesis (B's
+    # symmetry, the reverse match) can pass the stop rule (``min_gain = 1``). With
     # ``starts_first_mismatch = 0`` any spectra count as far apart: the reverse match comes
-    # first, and the derived maps follow as it fails.
-    m = hope_rs.Mesh(*bumpy_sphere(400, 6))
-    far = int(np.argmax(np.linalg.norm(m.vertices - m.vertices[0], axis=1)))
-    welded = Welded(m, np.array([[0, far]])).mesh
+    # first, and the derived maps follow as it fails. The topology's trigger keeps its order.
+    a, b = bumpy_sphere(400, 6), bumpy_sphere(500, 7)
 
-    def labels(first: float, gain: float) -> tuple[list[str], str]:
+    def labels(first: float) -> tuple[list[str], str]:
         orient = OrientConfig(
-            topology_hypotheses=("mirror", "reverse"), min_gain=gain, starts_first_mismatch=first
+            hypotheses=("mirror", "reverse"), min_gain=1.0, starts_first_mismatch=first
         )
         cfg = dataclasses.replace(MatchConfig(), orient=orient)
-        info = hope_rs.match(m, welded, config=cfg, max_passes=1).stage("orient")
+        info = hope_rs.match(a, b, config=cfg, max_passes=1).stage("orient")
+        assert "% of A turned over" in info.reason.split(";")[0]
         return [t.label for t in info.trials], info.reason
 
-    derived_first, reason = labels(float("inf"), 1.0)
+    derived_first, reason = labels(float("inf"))
     assert derived_first[:2] == ["kept", "B's symmetry"] and "other starts first" not in reason
-    starts_first, reason = labels(0.0, 1.0)
+    starts_first, reason = labels(0.0)
     assert starts_first[:3] == ["kept", "B to A", "reverse"] and "B's symmetry" in starts_first
     assert sorted(starts_first) == sorted(derived_first)
     assert "other starts first" in reason
+    m = hope_rs.Mesh(*a)
+    far = int(np.argmax(np.linalg.norm(m.vertices - m.vertices[0], axis=1)))
+    welded = Welded(m, np.array([[0, far]])).mesh
+    orient = OrientConfig(
+        topology_hypotheses=("mirror", "reverse"), min_gain=1.0, starts_first_mismatch=0.0
+    )
+    cfg = dataclasses.replace(MatchConfig(), orient=orient)
+    info = hope_rs.match(m, welded, config=cfg, max_passes=1).stage("orient")
+    assert "differ in topology" in info.reason and "other starts first" not in info.reason
+    assert [t.label for t in info.trials][:2] == ["kept", "B's symmetry"]
 
 
 @pytest.mark.slow

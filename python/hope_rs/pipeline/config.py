@@ -1117,7 +1117,8 @@ class OrientConfig:
         the best one too (when it beats the map the stage started
         from and was not derived from yet) and refine the least turned-over.
     starts_first_mismatch : float
-        When the shapes' Laplace–Beltrami spectra differ by more than this
+        When the map turns more than ``min_turned`` over or is flagged, and the shapes'
+        Laplace–Beltrami spectra differ by more than this
         (:func:`~hope_rs.pipeline.deform.spectral_mismatch` of their first 30 eigenvalues,
         read off the spectral pass's bases), the first other start is tried before the maps
         derived from the stage's own map, which it then tries only if that start does not

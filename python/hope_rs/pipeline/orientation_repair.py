@@ -41,9 +41,10 @@ turning the least over is refined, and "torn" is refined when the map tears a re
 other starts follow in the order of the hypotheses tried (a start the stage's own match
 used is not tried again); after each, while no refined map passes the stop rule, the maps
 derived from that start's refined map (if it beats the stage's own) are tried too
-(``OrientConfig.again``). Between shapes far from isometric (their spectra differ by more
-than ``OrientConfig.starts_first_mismatch``) the first other start comes before the maps
-derived from the stage's own, which follow only if it fails the stop rule. The stop rule:
+(``OrientConfig.again``). When the map turns over or is flagged between shapes far from
+isometric (their spectra differ by more than ``OrientConfig.starts_first_mismatch``) the
+first other start comes before the maps derived from the stage's own, which follow only if
+it fails the stop rule. The stop rule:
 the stage stops at the first refined map that turns at most ``min_turned`` over, costs at
 least ``min_gain`` less than the stage's own and (``on_failed``) is not flagged by the
 confidence's rule.
@@ -414,6 +415,9 @@ class OrientStage(Stage):
         self._why = ""
         #: The hypotheses it tries.
         self._names: tuple[str, ...] = ()
+        #: Whether the turned-over share or the confidence's rule calls for the stage (not
+        #: only the topology or a torn-off region).
+        self._turned = False
 
     def skip_reason(self, state: MatchState):
         cfg = state.config.orient
@@ -485,7 +489,8 @@ class OrientStage(Stage):
                 self._why += f"; {torn_share:.0%} of A torn off"
                 self._names = cfg.torn_hypotheses
         state.timings["orient"] = time.perf_counter() - t
-        if share > cfg.min_turned or flagged or torn or differ:
+        self._turned = share > cfg.min_turned or flagged
+        if self._turned or torn or differ:
             return None
         return f"{share:.0%} of A's area turned over (at most {cfg.min_turned:.0%})" + (
             ", not flagged" if _judged_by_confidence(state) else ""
@@ -515,7 +520,9 @@ class OrientStage(Stage):
         """Whether the shapes' spectra differ by more than
         ``OrientConfig.starts_first_mismatch`` (whole shapes whose spectral pass ran only: a
         part's spectrum is not the whole's, and solving bases here costs more than the order
-        saves)."""
+        saves). Asked on the turned-over or flagged trigger only: a torn-off region placed
+        back from the core is one cheap refinement that often passes, and the topology's
+        re-placed map keeps its place too."""
         limit = state.config.orient.starts_first_mismatch
         a, b = state.a, state.b
         k = MISMATCH_EIGENVALUES + 1
@@ -556,7 +563,7 @@ class OrientStage(Stage):
         if hyp.start == "wks":
             # "wks" is the stage's own match again, "reverse_wks" the same as "reverse".
             starts = [h for h in starts if h not in ("wks", "reverse_wks")]
-        later = bool(starts) and self._starts_first(state)
+        later = bool(starts) and self._turned and self._starts_first(state)
         tried = [] if later else hyp.from_derived(f, share)
         for n, start in enumerate(starts):
             if later and n == 1 and not good_enough(tried):
