@@ -134,7 +134,7 @@ def test_perturb_set_cli(tmp_path, capsys):
         write_perturbed_sets(tmp_path, tmp_path / "out", conditions=["blur"])
 
 
-def test_a_reversed_set_swaps_the_shapes_and_their_ground_truth(tmp_path):
+def test_a_reversed_set_swaps_the_shapes_and_their_ground_truth(tmp_path, capsys):
     src = tmp_path / "src" / "pair"
     (src / "corres").mkdir(parents=True)
     s, t = hope_rs.Mesh(*bumpy_sphere(300, 1)), hope_rs.Mesh(*bumpy_sphere(400, 2))
@@ -145,6 +145,11 @@ def test_a_reversed_set_swaps_the_shapes_and_their_ground_truth(tmp_path):
     (src / "pairs.txt").write_text("s t\n")
     (d,) = write_perturbed_sets(src, tmp_path / "out", conditions=["reversed"])
     assert d.name == "pair_reversed"
+    # The command says how many pairs each set holds (a condition may leave some out).
+    out = tmp_path / "cli"
+    assert main(["perturb-set", str(out), "--from", str(src), "--conditions", "reversed"]) == 0
+    said = capsys.readouterr().out
+    assert f"1 data sets written to {out} (pair_reversed: 1 pair)" in said
     (pair,) = pairs_of(d)
     a, b = hope_rs.load_mesh(pair.a), hope_rs.load_mesh(pair.b)
     assert (a.n_vertices, b.n_vertices) == (400, 300)

@@ -165,6 +165,9 @@ def run_set_command(args, write: Callable[..., list[Path]], note: str = "", **op
         conditions=[c.strip() for c in args.conditions.split(",")], max_pairs=args.max_pairs,
         **options,
     )  # fmt: skip
-    print(f"{len(written)} data sets written to {args.out}; run: hope-rs bench {args.out} --out "
-          f"RESULTS{note}")  # fmt: skip
+    # Pairs per set: a condition can leave pairs out (a shortcut set keeps only B with 3 welds).
+    counts = {p.name: len(pairs_of(p)) for p in written}
+    sizes = ", ".join(f"{k}: {n} pair{'' if n == 1 else 's'}" for k, n in counts.items())
+    print(f"{len(written)} data sets written to {args.out} ({sizes}); run: hope-rs bench "
+          f"{args.out} --out RESULTS{note}")  # fmt: skip
     return 0
