@@ -292,6 +292,11 @@ def test_shapes_of_different_topology_run_the_stage_with_its_topology_hypotheses
     info = hope_rs.match(m, welded, config=cfg, max_passes=1).stage("orient")
     assert info.ran and "differ in topology (Euler characteristics 2 and 1)" in info.reason
     assert [t.label for t in info.trials] == ["kept", "B to A", "reverse"]
+    # Each trial's match is timed (the stage's own map is not matched again), within the
+    # stage's own wall time.
+    kept, *matched = info.trials
+    assert kept.seconds == 0.0 and all(t.seconds > 0.0 for t in matched)
+    assert sum(t.seconds for t in matched) <= info.seconds
     off = dataclasses.replace(cfg, orient=OrientConfig(on_topology=False, on_torn=False))
     info = hope_rs.match(m, welded, config=off, max_passes=1).stage("orient")
     assert not info.ran and "at most 20%" in info.reason

@@ -52,12 +52,14 @@ STAGES = (
 @dataclass
 class Tried:
     """One trial of a stage's choice among candidate matches
-    (:mod:`hope_rs.pipeline.trials`): its label, its score (``None``: not scored) and
-    whether it is the one kept."""
+    (:mod:`hope_rs.pipeline.trials`): its label, its score (``None``: not scored), whether
+    it is the one kept, and the wall time of its match in seconds (0 for the stage's own
+    map, which is not matched again)."""
 
     label: str
     score: float | None = None
     kept: bool = False
+    seconds: float = 0.0
 
 
 @dataclass

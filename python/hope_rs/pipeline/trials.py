@@ -32,6 +32,7 @@ a stage keeps it unless a candidate beats it.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Callable
@@ -130,6 +131,7 @@ def run_trial(
     def grab(s: MatchState, name: str) -> None:
         last["zoomout"] = s.zoomout
 
+    t = time.perf_counter()
     result = state.run(
         c.a,
         c.b,
@@ -140,7 +142,8 @@ def run_trial(
         landmarks=c.landmarks,
         on_stage=grab,
     )
-    trial = Trial(c, result, None, Tried(c.label), last.get("zoomout"))
+    record = Tried(c.label, seconds=time.perf_counter() - t)
+    trial = Trial(c, result, None, record, last.get("zoomout"))
     state.log.tried(stage, trial.record)
     _mark_kept(state, stage, trial)
     return trial
