@@ -4,8 +4,11 @@ thread that enters, restored by the last to leave to what the process had before
 import threading
 
 import threadpoolctl
+from meshes import bumpy_sphere
 
 from hope_rs._blas import single_threaded_blas
+from hope_rs.features import descriptors as d
+from hope_rs.geometry.mesh import Mesh
 
 
 def blas_threads() -> set[int]:
@@ -108,31 +111,30 @@ def test_other_threads_can_still_set_their_limits_afterwards():
 
 
 def test_spectral_descriptors_solve_on_one_blas_thread(monkeypatch):
-    # ARPACK's small dense steps on a pool of BLAS threads ran several times slower (a 5k
-    # shape's WKS 5.9 s against 0.5 s on AVX-512 OpenBLAS), and the thread count moved the
-    # descriptors' last bits: the eigensolve and the descriptors' product run on one thread.
-    import numpy as np
-    from meshes import bumpy_sphere
-
-    from hope_rs.features import descriptors as d
-    from hope_rs.geometry.mesh import Mesh
-
+    # ARPACK's small dense steps run several times slower on a pool of BLAS threads, and the
+    # thread count can move the last bits of the eigenpairs and of the descriptors' product:
+    # both run on one thread, whatever the caller's limit.
     seen = []
-    eigsh = d.sla.eigsh
 
-    def recording(*args, **kwargs):
-        seen.append(blas_threads())
-        return eigsh(*args, **kwargs)
+    def recording(name, fn):
+        def wrapper(*args, **kwargs):
+            seen.append((name, blas_threads()))
+            return fn(*args, **kwargs)
 
-    monkeypatch.setattr(d.sla, "eigsh", recording)
-    v, f = bumpy_sphere(600, seed=0)
-    mesh = Mesh(v, f)
+        return wrapper
+
+    monkeypatch.setattr(d.sla, "eigsh", recording("eigsh", d.sla.eigsh))
+    monkeypatch.setattr(d, "wks", recording("wks", d.wks))
+    monkeypatch.setattr(d, "hks", recording("hks", d.hks))
+    mesh = Mesh(*bumpy_sphere(600, seed=0))
     with threadpoolctl.threadpool_limits(limits=2, user_api="blas"):
-        out = {kind: d.descriptors(mesh, kind, n_eigen=20) for kind in ("wks", "hks")}
-        evals, _ = d.laplacian_eigenpairs(mesh, 20)
-        assert blas_threads() == {2}
-    assert seen == [{1}, {1}, {1}]
-    with threadpoolctl.threadpool_limits(limits=1, user_api="blas"):
         for kind in ("wks", "hks"):
-            assert np.array_equal(d.descriptors(mesh, kind, n_eigen=20), out[kind])
-        assert np.array_equal(d.laplacian_eigenpairs(mesh, 20)[0], evals)
+            d.descriptors(mesh, kind, n_eigen=20)
+        evals, evecs = d.laplacian_eigenpairs(mesh, 20)
+        for kind in ("wks", "hks"):  # the batch cache's path, from cached eigenpairs
+            d.spectral_descriptors(kind, evals, evecs, mesh)
+        assert blas_threads() == {2}
+    assert seen == [
+        ("eigsh", {1}), ("wks", {1}), ("eigsh", {1}), ("hks", {1}), ("eigsh", {1}),
+        ("wks", {1}), ("hks", {1}),
+    ]  # fmt: skip

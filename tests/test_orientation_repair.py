@@ -322,26 +322,33 @@ def test_a_start_the_match_itself_used_is_not_tried_again():
 
 def test_shapes_far_from_isometric_try_the_other_starts_before_the_derived_maps():
     # Two unrelated bumpy spheres: the map turns most of A over, and no hypothesis (B's
-    # symmetry, the reverse match) can pass the stop rule (``min_gain = 1``). With
+    # symmetry, the reverse match, WKS) can pass the stop rule (``min_gain = 1``). With
     # ``starts_first_mismatch = 0`` any spectra count as far apart: the reverse match comes
-    # first, and the derived maps follow as it fails. The topology's trigger keeps its order.
+    # first, the derived maps follow as it fails, then the other starts. The topology's
+    # trigger keeps its order.
     a, b = bumpy_sphere(400, 6), bumpy_sphere(500, 7)
 
-    def labels(first: float) -> tuple[list[str], str]:
-        orient = OrientConfig(
-            hypotheses=("mirror", "reverse"), min_gain=1.0, starts_first_mismatch=first
-        )
+    def labels(first: float, hypotheses: tuple[str, ...]) -> tuple[list[str], str]:
+        orient = OrientConfig(hypotheses=hypotheses, min_gain=1.0, starts_first_mismatch=first)
         cfg = dataclasses.replace(MatchConfig(), orient=orient)
         info = hope_rs.match(a, b, config=cfg, max_passes=1).stage("orient")
-        assert "% of A turned over" in info.reason.split(";")[0]
-        return [t.label for t in info.trials], info.reason
+        why = info.reason.split(":")[0]
+        assert float(why.split("% of A turned over")[0]) > 20.0
+        assert "differ in topology" not in why and "torn off" not in why
+        return [t.label.split("+")[0] for t in info.trials], info.reason
 
-    derived_first, reason = labels(float("inf"))
+    one, three = ("mirror", "reverse"), ("mirror", "reverse", "wks")
+    derived_first, reason = labels(float("inf"), one)
     assert derived_first[:2] == ["kept", "B's symmetry"] and "other starts first" not in reason
-    starts_first, reason = labels(0.0)
+    starts_first, reason = labels(0.0, one)
     assert starts_first[:3] == ["kept", "B to A", "reverse"] and "B's symmetry" in starts_first
     assert sorted(starts_first) == sorted(derived_first)
     assert "other starts first" in reason
+    derived_first, _ = labels(float("inf"), three)
+    starts_first, _ = labels(0.0, three)
+    assert sorted(starts_first) == sorted(derived_first)
+    assert starts_first.index("reverse") < starts_first.index("B's symmetry")
+    assert starts_first.index("B's symmetry") < starts_first.index("wks")
     m = hope_rs.Mesh(*a)
     far = int(np.argmax(np.linalg.norm(m.vertices - m.vertices[0], axis=1)))
     welded = Welded(m, np.array([[0, far]])).mesh

@@ -165,9 +165,11 @@ def run_set_command(args, write: Callable[..., list[Path]], note: str = "", **op
         conditions=[c.strip() for c in args.conditions.split(",")], max_pairs=args.max_pairs,
         **options,
     )  # fmt: skip
-    # Pairs per set: a condition can leave pairs out (a shortcut set keeps only B with 3 welds).
+    # Pairs per set: a condition can leave pairs out (a shortcut set keeps only the pairs
+    # whose B takes at least 3 welds).
     counts = {p.name: len(pairs_of(p)) for p in written}
     sizes = ", ".join(f"{k}: {n} pair{'' if n == 1 else 's'}" for k, n in counts.items())
-    print(f"{len(written)} data sets written to {args.out} ({sizes}); run: hope-rs bench "
+    sizes = f" ({sizes})" if sizes else ""
+    print(f"{len(written)} data sets written to {args.out}{sizes}; run: hope-rs bench "
           f"{args.out} --out RESULTS{note}")  # fmt: skip
     return 0

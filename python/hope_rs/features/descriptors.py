@@ -257,9 +257,9 @@ def spectral_basis_of(
 
     Solved on one BLAS thread, so that the bits do not depend on who asks: :func:`hope_rs.match`
     solves in a background thread while HOPE refines (see
-    :class:`~hope_rs.pipeline.spectral.BasisPrefetch`), the batch cache ahead of the pairs (alone, one
-    thread is slower). ``stop``: when set, the solve raises
-    :class:`~hope_rs._cancel.Cancelled` at its next step."""
+    :class:`~hope_rs.pipeline.spectral.BasisPrefetch`), the batch cache ahead of the pairs.
+    ``stop``: when set, the solve raises :class:`~hope_rs._cancel.Cancelled` at its next
+    step."""
     with single_threaded_blas():
         return _spectral_basis_of(mesh, k, coarse, config, coarsen, stop)
 

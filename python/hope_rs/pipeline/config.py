@@ -1070,8 +1070,9 @@ class OrientConfig:
         map, the one turning the least over refined; "torn": see ``torn_hypotheses``;
         "reverse": from the match of B to A
         inverted; "wks": the pipeline from WKS; "reverse_wks": from the match of B to A from
-        WKS, inverted, kept only when it passes the stop rule), the derived ones first, then
-        the others in the order given, until one turns at most ``min_turned`` over.
+        WKS, inverted, kept only when it passes the stop rule), the derived ones first (but
+        see ``starts_first_mismatch``), then the others in the order given, until one turns
+        at most ``min_turned`` over.
     on_topology : bool
         The stage also tries other maps when neither rule above calls for it but the two
         shapes differ in topology (their Euler characteristics: a topological shortcut, as
@@ -1120,10 +1121,11 @@ class OrientConfig:
         When the map turns more than ``min_turned`` over or is flagged, and the shapes'
         Laplace–Beltrami spectra differ by more than this
         (:func:`~hope_rs.pipeline.deform.spectral_mismatch` of their first 30 eigenvalues,
-        read off the spectral pass's bases), the first other start is tried before the maps
-        derived from the stage's own map, which it then tries only if that start does not
-        pass the stop rule: shapes that far from isometric are matched better the other way
-        more often than re-placed by their geodesic distances. ``inf``: derived maps first.
+        read off the bases this match's spectral pass made: not after a lift from a common
+        resolution), the first other start is tried before the maps derived from the stage's
+        own map, which it then tries only if no map tried so far passes the stop rule: shapes
+        that far from isometric are matched better the other way more often than re-placed
+        by their geodesic distances. ``inf``: derived maps first.
     """
 
     enabled: bool = True

@@ -41,10 +41,11 @@ turning the least over is refined, and "torn" is refined when the map tears a re
 other starts follow in the order of the hypotheses tried (a start the stage's own match
 used is not tried again); after each, while no refined map passes the stop rule, the maps
 derived from that start's refined map (if it beats the stage's own) are tried too
-(``OrientConfig.again``). When the map turns over or is flagged between shapes far from
-isometric (their spectra differ by more than ``OrientConfig.starts_first_mismatch``) the
-first other start comes before the maps derived from the stage's own, which follow only if
-it fails the stop rule. The stop rule:
+(``OrientConfig.again``). When the map turns more than ``min_turned`` over or is flagged,
+between shapes far from isometric (their spectra, from this match's spectral pass, differ by
+more than ``OrientConfig.starts_first_mismatch``), the first other start comes before the
+maps derived from the stage's own, which follow only if no map tried so far passes the stop
+rule. The stop rule:
 the stage stops at the first refined map that turns at most ``min_turned`` over, costs at
 least ``min_gain`` less than the stage's own and (``on_failed``) is not flagged by the
 confidence's rule.
@@ -77,6 +78,7 @@ from ..geometry.mesh import Mesh
 from ..shape import Shape
 from .anchors import anchor_step, firm_regions
 from .confidence import map_quality, match_quality
+from .config import DeformConfig
 from .deform import spectral_mismatch
 from .lmd import local_map_distortion
 from .partial import part_match_config
@@ -105,8 +107,8 @@ __all__ = [
 
 
 #: How many of the shapes' first non-zero eigenvalues ``OrientConfig.starts_first_mismatch``
-#: compares (the deform stage's default).
-MISMATCH_EIGENVALUES = 30
+#: compares: as many as the deform stage's gate does by default.
+_MISMATCH_EIGENVALUES = DeformConfig.n_eigenvalues
 
 #: The hypotheses tried on a part A (of ``OrientConfig.torn_hypotheses``): B's symmetry and
 #: the reverse match are whole-shape matches, which the part's settings do not make.
@@ -230,6 +232,12 @@ def _nested_config(state: MatchState, *, confidence: bool = False):
     )
 
 
+def _start_kind(state: MatchState) -> str:
+    """The descriptor kind the stage's own match started from (the settings' when the caller
+    passed a map)."""
+    return state.init if isinstance(state.init, str) else state.config.initial.descriptor
+
+
 def _symmetry_config(state: MatchState):
     """The settings of B's symmetry match: one triangulation on both sides, so the
     refinement alone finds the map (as on FAUST registrations); without the spectral pass
@@ -271,7 +279,7 @@ class _Hypotheses:
         self.sym: np.ndarray | None = None
         #: The descriptor kind the stage's own match started from (the settings' when the
         #: caller passed a map): "reverse" matches B to A from it too.
-        self.start = state.init if isinstance(state.init, str) else state.config.initial.descriptor
+        self.start = _start_kind(state)
 
     def internal(self, t: Trial) -> np.ndarray:
         c = t.candidate
@@ -516,30 +524,25 @@ class OrientStage(Stage):
         self._names = names
         return None
 
-    def _starts_first(self, state: MatchState) -> bool:
-        """Whether the shapes' spectra differ by more than
-        ``OrientConfig.starts_first_mismatch`` (whole shapes whose spectral pass ran only: a
-        part's spectrum is not the whole's, and solving bases here costs more than the order
-        saves). Asked on the turned-over or flagged trigger only: a torn-off region placed
-        back from the core is one cheap refinement that often passes, and the topology's
-        re-placed map keeps its place too."""
-        limit = state.config.orient.starts_first_mismatch
+    def _mismatch(self, state: MatchState) -> float | None:
+        """The shapes' spectral mismatch (:func:`~hope_rs.pipeline.deform.spectral_mismatch`),
+        which ``OrientConfig.starts_first_mismatch`` compares; ``None`` for a part (its
+        spectrum is not the whole's) and when this match's spectral pass made no bases (as
+        the deform stage: a basis an earlier match left on the shapes would make the order
+        depend on it; solving bases here would cost more than the order saves). Asked on
+        the turned-over or flagged trigger only: a torn-off region placed back from the core
+        is one cheap refinement that often passes, and the topology's re-placed map keeps
+        its place too."""
         a, b = state.a, state.b
-        k = MISMATCH_EIGENVALUES + 1
-        if state.partial is not None or not np.isfinite(limit):
-            return False
-        if state.zoomout is None or not (a.has_spectral_basis(k) and b.has_spectral_basis(k)):
-            # As the deform stage: only the bases this match's spectral pass made (a basis an
-            # earlier match left on the shapes would make the order depend on it).
-            return False
+        k = _MISMATCH_EIGENVALUES + 1
+        if state.partial is not None or state.zoomout is None:
+            return None
+        if not (a.has_spectral_basis(k) and b.has_spectral_basis(k)):
+            return None
         try:
-            mismatch = spectral_mismatch(a, b, MISMATCH_EIGENVALUES)
+            return spectral_mismatch(a, b, _MISMATCH_EIGENVALUES)
         except RuntimeError:  # an eigenbasis the spectral pass could not read either
-            return False
-        if mismatch <= limit:
-            return False
-        self._why += f"; spectra differ by {mismatch:.3f}, other starts first"
-        return True
+            return None
 
     def run(self, state: MatchState) -> None:
         cfg = state.config.orient
@@ -547,6 +550,17 @@ class OrientStage(Stage):
         judge, f = self._judge, state.f
         assert judge is not None and f is not None  # skip_reason measured the final map
         share = judge.share(f)
+        # The maps derived from the stage's own first; then other starts (a swapped pair of
+        # limbs comes back neither mirrored nor re-seeded), in the order of the hypotheses.
+        # Between shapes far from isometric the derived maps come after the first start.
+        starts = [h for h in self._names if h in ("wks", "reverse", "reverse_wks")]
+        if _start_kind(state) == "wks":
+            # "wks" is the stage's own match again, "reverse_wks" the same as "reverse".
+            starts = [h for h in starts if h not in ("wks", "reverse_wks")]
+        mismatch = self._mismatch(state) if starts and self._turned else None
+        later = mismatch is not None and mismatch > cfg.starts_first_mismatch
+        if later:
+            self._why += f"; spectra differ by {mismatch:.3f}, other starts first"
         state.log.start("orient", detail=f"{self._why}: trying other maps")
         hyp = _Hypotheses(state, judge, self._names)
         own = current(state, "orient", "kept")
@@ -556,14 +570,6 @@ class OrientStage(Stage):
         def good_enough(tried: list[Trial]) -> bool:
             return any(hyp.good_enough(x, min_score) for x in tried)
 
-        # The maps derived from the stage's own first; then other starts (a swapped pair of
-        # limbs comes back neither mirrored nor re-seeded), in the order of the hypotheses.
-        # Between shapes far from isometric the derived maps come after the first start.
-        starts = [h for h in self._names if h in ("wks", "reverse", "reverse_wks")]
-        if hyp.start == "wks":
-            # "wks" is the stage's own match again, "reverse_wks" the same as "reverse".
-            starts = [h for h in starts if h not in ("wks", "reverse_wks")]
-        later = bool(starts) and self._turned and self._starts_first(state)
         tried = [] if later else hyp.from_derived(f, share)
         for n, start in enumerate(starts):
             if later and n == 1 and not good_enough(tried):
