@@ -45,10 +45,9 @@ derived from that start's refined map (if it beats the stage's own) are tried to
 between shapes far from isometric (their spectra, from this match's spectral pass, differ by
 more than ``OrientConfig.starts_first_mismatch``), the first other start comes before the
 maps derived from the stage's own, which follow only if no map tried so far passes the stop
-rule. The stop rule:
-the stage stops at the first refined map that turns at most ``min_turned`` over, costs at
-least ``min_gain`` less than the stage's own and (``on_failed``) is not flagged by the
-confidence's rule.
+rule. The stop rule: the stage stops at the first refined map that turns at most
+``min_turned`` over, costs at least ``min_gain`` less than the stage's own and
+(``on_failed``) is not flagged by the confidence's rule.
 
 After a lift from a common resolution (:mod:`hope_rs.pipeline.resolution`) every refined
 hypothesis is matched at that resolution too, from its map carried to the copy, and carries
@@ -570,10 +569,15 @@ class OrientStage(Stage):
         def good_enough(tried: list[Trial]) -> bool:
             return any(hyp.good_enough(x, min_score) for x in tried)
 
-        tried = [] if later else hyp.from_derived(f, share)
+        def own_derived() -> list[Trial]:
+            """The maps derived from the stage's own, unless a map tried passes already."""
+            return [] if good_enough(tried) else hyp.from_derived(f, share)
+
+        tried: list[Trial] = []
+        tried += [] if later else own_derived()
         for n, start in enumerate(starts):
-            if later and n == 1 and not good_enough(tried):
-                tried += hyp.from_derived(f, share)
+            if later and n == 1:  # after the first start, before the second
+                tried += own_derived()
             if good_enough(tried):
                 break
             if start == "wks":
@@ -607,8 +611,8 @@ class OrientStage(Stage):
                 # The best refined map can still turn a region over that the derived maps
                 # set right (a start that came back nearer, with a limb swapped).
                 tried += hyp.from_derived(hyp.internal(best), hyp.turned[label], label)
-        if later and len(starts) == 1 and not good_enough(tried):
-            tried += hyp.from_derived(f, share)
+        if later and len(starts) == 1:  # after the only start
+            tried += own_derived()
         kept = choose(state, "orient", tried, against=own, margin=cfg.min_gain)
         if kept is not own:
             # The refinement the caller's callback saw stays the state's history.
