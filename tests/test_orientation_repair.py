@@ -1,6 +1,7 @@
 """The "orient" stage: a map that turns A over is replaced by an orientation-keeping one."""
 
 import dataclasses
+import re
 
 import numpy as np
 import pytest
@@ -13,7 +14,7 @@ import hope_rs
 from hope_rs.evaluation.datasets import pairs_of
 from hope_rs.evaluation.evaluate import geodesic_errors
 from hope_rs.evaluation.partial import cut_by_plane, plane_normal
-from hope_rs.evaluation.perturbed import Welded, clean_errors, weld_shortcuts
+from hope_rs.evaluation.perturbed import Welded, add_noise, clean_errors, weld_shortcuts
 from hope_rs.geometry.mesh import load_mesh
 from hope_rs.pipeline.confidence import turned_factor
 from hope_rs.pipeline.config import ConfidenceConfig, InitialConfig, MatchConfig, OrientConfig
@@ -374,6 +375,26 @@ def test_a_human_to_gorilla_map_is_repaired_by_the_reverse_match_alone():
     assert [t.label for t in info.trials if t.kept] == ["reverse"]
     assert not res.quality.likely_failed and res.quality.flipped_share < 0.2
     assert geodesic_errors(mg, res.map, a_idx=wi, b_idx=gi).mean() < 0.15
+
+
+@pytest.mark.slow
+def test_a_whole_mirror_image_onto_a_noisy_human_is_repaired_by_b_s_symmetry():
+    # TOSCA gorilla -> man with Gaussian noise of 0.5% of sqrt(area) on the man (the noise05
+    # set's rule, this pair's seed): the match is a whole mirror image. The first match of
+    # the man's mirror image to the man keeps the identity over about half the body (it
+    # keeps every distance); re-placed from the other half it becomes the symmetry, and a
+    # map composed with it is kept.
+    mg, mm, gi, mi = shared_pair("tosca_nonisometric_r", "8_gorilla_02->8_man_02")
+    res = hope_rs.match(mg, add_noise(mm, 0.005, 5))
+    info = res.stage("orient")
+    labels = [t.label for t in info.trials]
+    assert "B's symmetry re-placed 1" in labels
+    shares = re.search(r"B's symmetry ([0-9% →]+) turned", info.reason).group(1).split(" → ")
+    assert float(shares[0].rstrip("%")) > 30 and float(shares[-1].rstrip("%")) <= 5
+    (kept,) = [t.label for t in info.trials if t.kept]
+    assert kept.split("+")[-1] in ("mirror", "mirror_turned")  # composed with B's symmetry
+    assert not res.quality.likely_failed and res.quality.flipped_share < 0.2
+    assert geodesic_errors(mm, res.map, a_idx=gi, b_idx=mi).mean() < 0.15
 
 
 @pytest.mark.slow

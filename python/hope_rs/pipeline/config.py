@@ -1126,6 +1126,13 @@ class OrientConfig:
         own map, which it then tries only if no map tried so far passes the stop rule: shapes
         that far from isometric are matched better the other way more often than re-placed
         by their geodesic distances. ``inf``: derived maps first.
+    symmetry_rounds : int
+        B's symmetry (the match of B's mirror image to B, for "mirror" and "mirror_turned")
+        is matched again at most this many times, each time with its turned-over regions
+        placed by their geodesic distances to the rest, while it turns more than
+        ``symmetry_turned`` of the area over and less than before: the identity keeps every
+        distance, and from the midline it can take over a whole side.
+    symmetry_turned : float
     """
 
     enabled: bool = True
@@ -1151,6 +1158,8 @@ class OrientConfig:
     min_gain: float = field(default=0.02, metadata={"finite": True})
     again: bool = True
     starts_first_mismatch: float = field(default=0.15, metadata={"range": (0.0, None)})
+    symmetry_rounds: int = field(default=4, metadata={"range": (0, 1000)})
+    symmetry_turned: float = field(default=0.05, metadata={"range": (0.0, 1.0)})
 
     def __post_init__(self):
         known = ("mirror", "mirror_turned", "reseed", "torn", "wks", "reverse", "reverse_wks")

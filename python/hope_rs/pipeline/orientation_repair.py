@@ -61,7 +61,11 @@ triangles scatter, on a noisy scan at random.
 
 B's symmetry is the match of B's mirror image (coordinates reflected in a plane through its
 centroid) to B itself: vertex ``i`` of the mirror image is vertex ``i`` of B reflected, so the
-orientation-keeping match of the two sends each vertex to its mirror partner.
+orientation-keeping match of the two sends each vertex to its mirror partner. The identity
+(vertex ``i`` onto vertex ``i``) keeps every distance too, and from the midline, where the
+two agree, it can take over a whole side of a posed body, which it turns over; such regions
+are placed again by their geodesic distances to anchors in the rest, and the match repeated
+(``OrientConfig.symmetry_rounds``).
 """
 
 from __future__ import annotations
@@ -77,7 +81,7 @@ from ..geometry.mesh import Mesh
 from ..shape import Shape
 from .anchors import anchor_step, firm_regions
 from .confidence import map_quality, match_quality
-from .config import DeformConfig
+from .config import DeformConfig, RepairConfig
 from .deform import spectral_mismatch
 from .lmd import local_map_distortion
 from .partial import part_match_config
@@ -101,6 +105,7 @@ __all__ = [
     "OrientStage",
     "map_cost",
     "mirror_image",
+    "reseeded",
     "turned_regions",
 ]
 
@@ -133,6 +138,19 @@ def turned_regions(a: Shape, turned: np.ndarray, rings: int) -> np.ndarray:
         grow[e[out[e[:, 1]], 0]] = True
         out = grow
     return out
+
+
+def reseeded(
+    a: Shape, b: Shape, f: np.ndarray, region: np.ndarray, repair: RepairConfig
+) -> np.ndarray | None:
+    """``f`` (internal numbering) with the vertices of ``region`` (bool per vertex of A, a
+    map's turned-over regions) placed by their geodesic distances to anchors in the largest
+    connected region outside it (:func:`~hope_rs.pipeline.anchors.anchor_step`); None when
+    that region has fewer than 4 vertices."""
+    label, sizes = firm_regions(a, ~region)
+    if not sizes.size or sizes.max() < 4:
+        return None
+    return anchor_step(a, b, f, label == int(np.argmax(sizes)), config=repair)
 
 
 class _Judge:
@@ -327,16 +345,41 @@ class _Hypotheses:
 
     def symmetry(self) -> np.ndarray:
         """B's intrinsic left/right symmetry, (n_b,) in B's internal numbering: the match
-        of its mirror image to B (unscored trial)."""
+        of its mirror image to B (unscored trials). Where that match turns a region over
+        (the identity, which keeps every distance, grows from the midline), the region is
+        re-placed from the rest and matched again while the share turned over falls
+        (``OrientConfig.symmetry_rounds``, ``symmetry_turned``)."""
         if self.sym is None:
-            b = self.state.b
+            b, cfg = self.state.b, self.cfg
             mirror = mirror_image(b)
+            settings = _symmetry_config(self.state)
+            turned = TurnedFaces(mirror, b)
+
+            def matched(label: str, init) -> tuple[np.ndarray, float]:
+                c = Candidate(label, mirror, b, init, settings)
+                t = run_trial(self.state, "orient", c, self.progress)
+                g = mirror.map_in(b, t.result.map)
+                return g, turned.share(g)
+
             # From SHOT whatever the match's start: WKS and HKS are intrinsic, the same on a
             # mirror image, so from them the "symmetry" comes out as the identity.
-            c = Candidate("B's symmetry", mirror, b, "shot", _symmetry_config(self.state))
-            t = run_trial(self.state, "orient", c, self.progress)
+            f, share = matched("B's symmetry", "shot")
+            shares = [share]
+            for n in range(cfg.symmetry_rounds):
+                if share <= cfg.symmetry_turned:
+                    break
+                region = turned_regions(mirror, turned.vertices(f, 0.5), cfg.seam_rings)
+                g = reseeded(mirror, b, f, region, self.state.config.refine.repair)
+                if g is None:
+                    break
+                g, now = matched(f"B's symmetry re-placed {n + 1}", mirror.map_out(b, g))
+                shares.append(now)
+                if now >= share:
+                    break
+                f, share = g, now
+            self.notes.append("B's symmetry " + " → ".join(f"{x:.0%}" for x in shares) + " turned")
             # Input vertex v of the mirror image is input vertex v of B.
-            self.sym = b.rank[np.asarray(t.result.map)[b.order]]
+            self.sym = f[mirror.rank[b.order]]
         return self.sym
 
     def derived(self, f: np.ndarray) -> dict[str, np.ndarray]:
@@ -355,12 +398,10 @@ class _Hypotheses:
                     assert region is not None  # computed for the regional hypotheses
                     out[name] = np.where(region, sym[f], f)
             elif name == "reseed":
-                # The largest orientation-keeping region holds the anchors.
                 assert region is not None  # computed for the regional hypotheses
-                label, sizes = firm_regions(a, ~region)
-                if sizes.size and sizes.max() >= 4:
-                    core = label == int(np.argmax(sizes))
-                    out[name] = anchor_step(a, b, f, core, config=self.state.config.refine.repair)
+                g = reseeded(a, b, f, region, self.state.config.refine.repair)
+                if g is not None:
+                    out[name] = g
             elif name == "torn":
                 g = replaced(a, b, f, self.judge.torn, self.state.config.refine.repair)
                 if g is not None:
