@@ -86,7 +86,7 @@ PERTURBED = {
     "shortcuts": "B with 3-10 topological shortcuts (welds), scored on the clean B, a welded "
     "vertex counting as either of its two",
 }
-PERTURBED_SOURCES = ("faust_r", "tosca_r")
+PERTURBED_SOURCES = ("faust_r", "tosca_r", "tosca_nonisometric_r")
 #: Sets whose pairs are also matched the other way (``perturb-set --conditions reversed``):
 #: pairs of the same shapes that no setting was chosen on.
 REVERSED_SOURCES = ("tosca_nonisometric_r",)
