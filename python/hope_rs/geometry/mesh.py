@@ -31,6 +31,7 @@ __all__ = [
     "SUPPORTED_FORMATS",
     "Mesh",
     "as_mesh",
+    "boundary_edge_lengths",
     "boundary_edges",
     "face_pieces",
     "load_mesh",
@@ -283,6 +284,12 @@ def boundary_edges(faces: np.ndarray) -> np.ndarray:
     """The edges of one face only (a surface's boundary), each once as ``(low, high)``, sorted."""
     u, count = _edge_counts(faces)
     return u[count == 1]
+
+
+def boundary_edge_lengths(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(edges, lengths)``: :func:`boundary_edges` of ``faces`` and their lengths."""
+    b = boundary_edges(faces)
+    return b, np.linalg.norm(vertices[b[:, 0]] - vertices[b[:, 1]], axis=1)
 
 
 def scale_exponent(vertices: np.ndarray, *, safe: tuple[float, float] = SAFE_COORDINATES) -> int:

@@ -41,7 +41,7 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..geometry.mesh import boundary_edges
+from ..geometry.mesh import boundary_edge_lengths
 from ..geometry.roughness import umbrella_smoothed
 from ..geometry.sites import nearest_members, owner_means
 from ..shape import Shape
@@ -79,9 +79,8 @@ __all__ = [
 
 def boundary_length(shape: Shape) -> float:
     """Total length of the edges of one face only, in units of the shape's own sqrt(area)."""
-    b = boundary_edges(shape.internal.faces)
-    p = shape.internal.vertices
-    return float(np.linalg.norm(p[b[:, 0]] - p[b[:, 1]], axis=1).sum() / shape.internal.scale)
+    _, lengths = boundary_edge_lengths(shape.internal.vertices, shape.internal.faces)
+    return float(lengths.sum() / shape.internal.scale)
 
 
 def mean_edge(shape: Shape) -> float:

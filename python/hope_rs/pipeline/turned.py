@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry.mesh import boundary_edges, vertex_components
+from ..geometry.mesh import boundary_edge_lengths, vertex_components
 from ..geometry.normals import face_normals, vertex_normal_sums
 from ..shape import Shape
 from .config import PartialConfig
@@ -53,13 +53,8 @@ def open_components(s: Shape) -> tuple[np.ndarray, np.ndarray]:
     face longer than :data:`OPEN_BOUNDARY` in all, in units of the shape's own sqrt(area))
     of the internal mesh, components linked through its edges."""
     comp = vertex_components(s.n_vertices, s.edges)
-    b = boundary_edges(s.internal.faces)
-    p = s.internal.vertices
-    length = np.bincount(
-        comp[b[:, 0]],
-        weights=np.linalg.norm(p[b[:, 0]] - p[b[:, 1]], axis=1),
-        minlength=int(comp.max()) + 1,
-    )
+    b, lengths = boundary_edge_lengths(s.internal.vertices, s.internal.faces)
+    length = np.bincount(comp[b[:, 0]], weights=lengths, minlength=int(comp.max()) + 1)
     return comp, length > OPEN_BOUNDARY * s.internal.scale
 
 
