@@ -1133,6 +1133,7 @@ class OrientConfig:
         ``symmetry_turned`` of the area over and less than before: the identity keeps every
         distance, and from the midline it can take over a whole side.
     symmetry_turned : float
+        The share of the mirror image's area B's symmetry may turn over without another round.
     """
 
     enabled: bool = True

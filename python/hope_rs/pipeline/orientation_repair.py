@@ -377,7 +377,9 @@ class _Hypotheses:
                 if now >= share:
                     break
                 f, share = g, now
-            self.notes.append("B's symmetry " + " → ".join(f"{x:.0%}" for x in shares) + " turned")
+            last = " (the last not kept)" if shares[-1] != share else ""
+            shown = " → ".join(f"{x:.0%}" for x in shares)
+            self.notes.append(f"B's symmetry {shown} turned{last}")
             # Input vertex v of the mirror image is input vertex v of B.
             self.sym = f[mirror.rank[b.order]]
         return self.sym
