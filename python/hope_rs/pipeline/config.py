@@ -1116,7 +1116,12 @@ class OrientConfig:
         After each other start, while no refined hypothesis passes the stop rule (at most
         ``min_turned`` turned over, ``min_gain`` cheaper, not flagged), derive the maps from
         the best one too (when it beats the map the stage started
-        from and was not derived from yet) and refine the least turned-over.
+        from, or turns more than ``again_turned`` of A over, and was not derived from yet) and
+        refine the least turned-over.
+    again_turned : float
+        A start's map turning more than this share of A over is a mirror image as a whole:
+        composed with B's symmetry it turns back, so its derived maps are tried even though
+        it costs more than the stage's own.
     starts_first_mismatch : float
         When the map turns more than ``min_turned`` over or is flagged, and the shapes'
         Laplace–Beltrami spectra differ by more than this
@@ -1158,6 +1163,7 @@ class OrientConfig:
     distortion_weight: float = field(default=1.0, metadata={"finite": True})
     min_gain: float = field(default=0.02, metadata={"finite": True})
     again: bool = True
+    again_turned: float = field(default=0.5, metadata={"range": (0.0, 1.0)})
     starts_first_mismatch: float = field(default=0.15, metadata={"range": (0.0, None)})
     symmetry_rounds: int = field(default=4, metadata={"range": (0, 1000)})
     symmetry_turned: float = field(default=0.05, metadata={"range": (0.0, 1.0)})

@@ -40,7 +40,8 @@ The derived hypotheses are unrefined maps; of "mirror", "mirror_turned" and "res
 turning the least over is refined, and "torn" is refined when the map tears a region off. The
 other starts follow in the order of the hypotheses tried (a start the stage's own match
 used is not tried again); after each, while no refined map passes the stop rule, the maps
-derived from that start's refined map (if it beats the stage's own) are tried too
+derived from that start's refined map (if it beats the stage's own, or turns more than
+``OrientConfig.again_turned`` of A over: a whole mirror image) are tried too
 (``OrientConfig.again``). When the map turns more than ``min_turned`` over or is flagged,
 between shapes far from isometric (their spectra, from this match's spectral pass, differ by
 more than ``OrientConfig.starts_first_mismatch``), the first other start comes before the
@@ -649,10 +650,11 @@ class OrientStage(Stage):
                 cfg.again
                 and not good_enough(tried)
                 and best.score is not None
-                and best.score > own.score
+                and (best.score > own.score or hyp.turned[label] > cfg.again_turned)
             ):
                 # The best refined map can still turn a region over that the derived maps
-                # set right (a start that came back nearer, with a limb swapped).
+                # set right (a start that came back nearer, with a limb swapped, or a whole
+                # mirror image, which B's symmetry turns back).
                 tried += hyp.from_derived(hyp.internal(best), hyp.turned[label], label)
         if later and len(starts) == 1:  # after the only start
             tried += own_derived()
